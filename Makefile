@@ -1,0 +1,43 @@
+# Developer tasks for rehabbot. `make test` works on a fresh machine with Python 3.11
+# and the system packages installed by .ci/run (EGL/OSMesa for offscreen rendering,
+# Xvfb for the interactive viewer test).
+
+PYTHON_BOOTSTRAP ?= $(shell command -v python3.11 >/dev/null 2>&1 && echo python3.11 || echo python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+export MUJOCO_GL ?= egl
+
+.PHONY: venv test demo lint bench clean distclean
+
+venv: $(STAMP)
+
+$(VENV): $(STAMP)
+
+# Re-install whenever the package metadata changes.
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON_BOOTSTRAP) -m venv $(VENV)
+	$(PY) -m pip install --upgrade pip
+	$(PY) -m pip install -e ".[dev,video]"
+	touch $(STAMP)
+
+test: $(STAMP)
+	MUJOCO_GL=$(MUJOCO_GL) $(PY) -m pytest -q
+
+demo: $(STAMP)
+	MUJOCO_GL=$(MUJOCO_GL) $(PY) -m rehabbot.demo --out runs/demo
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+
+bench: $(STAMP)
+	$(PY) benchmarks/physics_throughput.py
+
+# Build outputs and caches; keeps the virtual environment and runs/ (experiment results).
+clean:
+	rm -rf build dist *.egg-info .pytest_cache .ruff_cache .hypothesis
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +
+
+# Everything `clean` removes, plus the virtual environment.
+distclean: clean
+	rm -rf $(VENV)

@@ -1,0 +1,203 @@
+"""Raw physics throughput of every scene preset, against a robot-only baseline.
+
+For each preset the scene is built at its home pose with the robot holding its home
+setpoints, warmed up, and then ``mujoco.mj_step`` is timed with ``time.perf_counter``.
+The baseline is the bare UR5e (``rehabbot.models.robot.build_ur5e_spec``) holding the same
+joint angles, so the ``x baseline`` column shows what the patient, the straps and the
+contacts cost relative to the robot alone, measured in the same run on the same machine.
+
+Usage::
+
+    python benchmarks/physics_throughput.py [--steps 5000] [--warmup 500] [--repeats 3]
+                                            [--presets NAME ...] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+BASELINE_NAME = "robot_only"
+
+
+@dataclass
+class ThroughputRow:
+    """One line of the benchmark table."""
+
+    name: str
+    nq: int
+    nv: int
+    ncon_at_rest: int
+    timestep_s: float
+    steps_per_s: float
+    realtime_factor: float
+    ratio_to_baseline: float = float("nan")
+
+
+def measure_steps_per_s(
+    model: mujoco.MjModel, data: mujoco.MjData, steps: int, warmup: int, repeats: int
+) -> float:
+    """Best-of-``repeats`` ``mj_step`` rate over ``steps`` steps, after ``warmup`` steps.
+
+    The controls in ``data.ctrl`` are left untouched, so the robot keeps its setpoints.
+    """
+    for _ in range(warmup):
+        mujoco.mj_step(model, data)
+    best_s = float("inf")
+    for _ in range(repeats):
+        start_s = time.perf_counter()
+        for _ in range(steps):
+            mujoco.mj_step(model, data)
+        best_s = min(best_s, time.perf_counter() - start_s)
+    if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
+        raise RuntimeError(f"simulation diverged (non-finite state) at t={data.time:.3f} s")
+    return steps / best_s
+
+
+def make_row(
+    name: str, model: mujoco.MjModel, data: mujoco.MjData, steps: int, warmup: int, repeats: int
+) -> ThroughputRow:
+    """Measure one model whose ``data`` is at rest at its home pose (``mj_forward`` done)."""
+    ncon_at_rest = int(data.ncon)
+    steps_per_s = measure_steps_per_s(model, data, steps, warmup, repeats)
+    timestep_s = float(model.opt.timestep)
+    return ThroughputRow(
+        name=name,
+        nq=int(model.nq),
+        nv=int(model.nv),
+        ncon_at_rest=ncon_at_rest,
+        timestep_s=timestep_s,
+        steps_per_s=steps_per_s,
+        realtime_factor=steps_per_s * timestep_s,
+    )
+
+
+def joint_angles_by_name(model: mujoco.MjModel, data: mujoco.MjData) -> dict[str, float]:
+    """Angles of all hinge/slide joints, keyed by joint name."""
+    angles = {}
+    for joint_id in range(model.njnt):
+        joint = model.joint(joint_id)
+        if joint.type[0] in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+            angles[joint.name] = float(data.qpos[joint.qposadr[0]])
+    return angles
+
+
+def robot_only_model(home_angles_rad: dict[str, float]) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The bare UR5e at the given joint angles, its servos holding them.
+
+    Robot joints are matched to ``home_angles_rad`` by name, allowing for a prefix the
+    scene may have added (e.g. ``robot/elbow``); unmatched joints stay at 0.
+    """
+    from rehabbot.models.robot import JOINT_NAMES, build_ur5e_spec
+
+    model = build_ur5e_spec().compile()
+    data = mujoco.MjData(model)
+    for joint_name in JOINT_NAMES:
+        matches = [v for k, v in home_angles_rad.items() if k.endswith(joint_name)]
+        angle_rad = matches[0] if len(matches) == 1 else 0.0
+        joint = model.joint(joint_name)
+        data.qpos[joint.qposadr[0]] = angle_rad
+        servo_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{joint_name}_servo")
+        if servo_id >= 0:
+            data.ctrl[servo_id] = angle_rad
+    mujoco.mj_forward(model, data)
+    return model, data
+
+
+def run_benchmark(
+    presets: Sequence[str], steps: int, warmup: int, repeats: int
+) -> list[ThroughputRow]:
+    """Benchmark the presets and the robot-only baseline; baseline row first."""
+    from rehabbot.models import build_scene
+
+    scene_rows = []
+    home_angles_rad: dict[str, float] = {}
+    for preset in presets:
+        scene = build_scene(preset)
+        data = scene.make_data()
+        if not home_angles_rad:
+            home_angles_rad = joint_angles_by_name(scene.model, data)
+        scene_rows.append(make_row(preset, scene.model, data, steps, warmup, repeats))
+    model, data = robot_only_model(home_angles_rad)
+    baseline = make_row(BASELINE_NAME, model, data, steps, warmup, repeats)
+    rows = [baseline, *scene_rows]
+    for row in rows:
+        row.ratio_to_baseline = row.steps_per_s / baseline.steps_per_s
+    return rows
+
+
+def format_table(rows: Sequence[ThroughputRow]) -> str:
+    """Fixed-width text table of the rows."""
+    header = (
+        f"{'preset':<16} {'nq':>4} {'nv':>4} {'ncon@rest':>9} {'dt [ms]':>7} "
+        f"{'steps/s':>10} {'x realtime':>10} {'x baseline':>10}"
+    )
+    lines = [header, "-" * len(header)]
+    for row in rows:
+        lines.append(
+            f"{row.name:<16} {row.nq:>4} {row.nv:>4} {row.ncon_at_rest:>9} "
+            f"{row.timestep_s * 1e3:>7.2f} {row.steps_per_s:>10.0f} "
+            f"{row.realtime_factor:>10.1f} {row.ratio_to_baseline:>10.2f}"
+        )
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Command-line options of the benchmark."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=5000, help="timed steps per repeat")
+    parser.add_argument("--warmup", type=int, default=500, help="untimed steps first")
+    parser.add_argument("--repeats", type=int, default=3, help="timed repeats; best is kept")
+    parser.add_argument("--presets", nargs="+", metavar="NAME", help="default: all presets")
+    parser.add_argument("--json", type=Path, metavar="FILE", help="also write results as JSON")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the benchmark and print the table; returns the exit code."""
+    args = build_parser().parse_args(argv)
+    if args.steps < 1 or args.warmup < 0 or args.repeats < 1:
+        print("--steps and --repeats must be >= 1, --warmup >= 0", file=sys.stderr)
+        return 2
+    from rehabbot.models import PRESETS
+
+    presets = list(args.presets or PRESETS)
+    unknown = [name for name in presets if name not in PRESETS]
+    if unknown:
+        print(f"unknown preset(s) {', '.join(unknown)}; valid: {', '.join(PRESETS)}",
+              file=sys.stderr)
+        return 2
+    rows = run_benchmark(presets, args.steps, args.warmup, args.repeats)
+    print(
+        f"mujoco {mujoco.__version__}, python {platform.python_version()}, "
+        f"{platform.machine()}; {args.steps} steps x best of {args.repeats} "
+        f"after {args.warmup} warm-up steps"
+    )
+    print(format_table(rows))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        payload = {
+            "mujoco_version": mujoco.__version__,
+            "python_version": platform.python_version(),
+            "machine": platform.machine(),
+            "steps": args.steps,
+            "warmup": args.warmup,
+            "repeats": args.repeats,
+            "rows": [asdict(row) for row in rows],
+        }
+        args.json.write_text(json.dumps(payload, indent=2) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,219 @@
+"""Tests for the ``rehabbot`` command line (``rehabbot.cli``)."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rehabbot.cli import main
+
+imageio = pytest.importorskip("imageio.v3", reason='snapshot tests need "rehabbot[video]"')
+
+SCENE = "upper_right"
+WIDTH_PX, HEIGHT_PX = 200, 150
+
+
+@pytest.fixture(scope="module")
+def presets() -> dict[str, str]:
+    from rehabbot.models import PRESETS
+
+    return dict(PRESETS)
+
+
+def _snapshot(tmp_path: Path, name: str, *extra: str) -> Path:
+    out = tmp_path / name
+    code = main(
+        ["snapshot", SCENE, "--out", str(out), "--width", str(WIDTH_PX),
+         "--height", str(HEIGHT_PX), *extra]
+    )
+    assert code == 0
+    return out
+
+
+# --------------------------------------------------------------------------- help / scenes
+
+
+def test_help_does_not_import_scene_builders() -> None:
+    code = (
+        "import sys\n"
+        "from rehabbot.cli import main\n"
+        "try:\n"
+        "    main(['--help'])\n"
+        "except SystemExit as exc:\n"
+        "    assert exc.code == 0\n"
+        "heavy = [m for m in ('rehabbot.models.scene', 'rehabbot.rendering') if m in sys.modules]\n"
+        "print('HEAVY', heavy)\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert "snapshot" in result.stdout and "view" in result.stdout
+    assert "HEAVY []" in result.stdout
+
+
+def test_scenes_lists_every_preset_with_description(capsys, presets) -> None:
+    assert main(["scenes"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == len(presets)
+    for line, (name, description) in zip(lines, presets.items(), strict=True):
+        assert line.split()[0] == name
+        assert line.rstrip().endswith(description)
+
+
+def test_missing_command_is_a_usage_error(capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([])
+    assert exc.value.code == 2
+
+
+# --------------------------------------------------------------------------- snapshot
+
+
+def test_snapshot_writes_png_of_requested_size(tmp_path: Path, capsys) -> None:
+    out = _snapshot(tmp_path, "shot.png")
+    assert capsys.readouterr().out.strip() == str(out)
+    image = imageio.imread(out)
+    assert image.shape[:2] == (HEIGHT_PX, WIDTH_PX)
+    assert image.dtype == np.uint8
+    # Not uniform: many distinct colours and real contrast.
+    assert image[..., :3].std() > 10.0
+    assert len(np.unique(image[..., :3].reshape(-1, 3), axis=0)) > 50
+
+
+def test_snapshot_cameras_differ(tmp_path: Path) -> None:
+    from rehabbot.models import build_scene
+
+    cameras = build_scene(SCENE).camera_names
+    assert cameras, "scene must define at least one camera"
+    default = imageio.imread(_snapshot(tmp_path, "default.png"))
+    first = imageio.imread(_snapshot(tmp_path, "first.png", "--camera", cameras[0]))
+    np.testing.assert_array_equal(default, first)  # the first camera is the default
+    if len(cameras) > 1:
+        other = imageio.imread(_snapshot(tmp_path, "other.png", "--camera", cameras[1]))
+        assert np.abs(other.astype(int) - default.astype(int)).mean() > 5.0
+
+
+def test_snapshot_profile_flags_change_the_patient(tmp_path: Path) -> None:
+    default = imageio.imread(_snapshot(tmp_path, "default.png"))
+    tall = imageio.imread(
+        _snapshot(tmp_path, "tall.png", "--profile-height", "1.95", "--profile-mass", "100")
+    )
+    changed = np.any(default != tall, axis=-1).mean()
+    assert changed > 0.01, "a much bigger patient must look different"
+
+
+def test_unknown_scene_exits_2_and_lists_presets(tmp_path: Path, capsys, presets) -> None:
+    code = main(["snapshot", "no_such_scene", "--out", str(tmp_path / "x.png")])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert "no_such_scene" in err
+    for name in presets:
+        assert name in err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_unknown_camera_exits_2_and_lists_cameras(tmp_path: Path, capsys) -> None:
+    code = main(["snapshot", SCENE, "--out", str(tmp_path / "x.png"), "--camera", "nope"])
+    assert code == 2
+    err = capsys.readouterr().err
+    from rehabbot.models import build_scene
+
+    for camera in build_scene(SCENE).camera_names:
+        assert camera in err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_image_larger_than_offscreen_buffer_is_a_usage_error(tmp_path: Path, capsys) -> None:
+    code = main(["snapshot", SCENE, "--out", str(tmp_path / "x.png"), "--width", "100000"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "offwidth" in err and len(err.strip().splitlines()) == 1
+
+
+def test_invalid_profile_is_a_usage_error(tmp_path: Path, capsys) -> None:
+    code = main(["snapshot", SCENE, "--out", str(tmp_path / "x.png"), "--profile-height", "9"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "height" in err and len(err.strip().splitlines()) == 1
+
+
+def test_unwritable_output_path_fails_with_one_line(tmp_path: Path, capsys) -> None:
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory")
+    code = main(["snapshot", SCENE, "--out", str(blocker / "shot.png"), "--width", "64",
+                 "--height", "48"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert str(blocker / "shot.png") in err
+    assert len(err.strip().splitlines()) == 1
+
+
+# --------------------------------------------------------------------------- view
+
+
+def test_view_without_display_fails_fast(monkeypatch, capsys) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(sys, "platform", "linux")
+    assert main(["view", SCENE, "--seconds", "1"]) == 1
+    assert "xvfb-run" in capsys.readouterr().err
+
+
+def test_view_rejects_non_positive_seconds(capsys) -> None:
+    assert main(["view", SCENE, "--seconds", "0"]) == 2
+    assert "--seconds" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def xvfb_display() -> Iterator[str]:
+    """Start a private Xvfb server; yields its DISPLAY value (e.g. ``":99"``)."""
+    if shutil.which("Xvfb") is None:
+        pytest.skip("Xvfb not on PATH (apt-get install xvfb) - cannot test the viewer")
+    read_fd, write_fd = os.pipe()
+    # -displayfd: Xvfb picks a free display number and writes it to the pipe when ready.
+    server = subprocess.Popen(
+        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+        pass_fds=(write_fd,),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    os.close(write_fd)
+    try:
+        with os.fdopen(read_fd) as pipe:
+            number = pipe.readline().strip()
+        if not number.isdigit():
+            pytest.skip("Xvfb failed to start")
+        yield f":{number}"
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            server.kill()
+
+
+def test_view_steps_physics_in_the_viewer(xvfb_display: str) -> None:
+    env = {**os.environ, "DISPLAY": xvfb_display}
+    env.pop("WAYLAND_DISPLAY", None)
+    result = subprocess.run(
+        [sys.executable, "-m", "rehabbot.cli", "view", SCENE, "--seconds", "1"],
+        capture_output=True, text=True, timeout=60, env=env,
+    )
+    assert result.returncode == 0, result.stderr
+    match = re.search(
+        rf"viewed {SCENE}: simulated (\d+\.\d+) s, (\d+) viewer frames", result.stdout
+    )
+    assert match, result.stdout
+    simulated_s, frames = float(match.group(1)), int(match.group(2))
+    assert simulated_s >= 0.99
+    assert simulated_s < 1.1
+    assert frames > 0
