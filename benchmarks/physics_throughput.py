@@ -2,6 +2,7 @@
 
 For each preset the scene is built at its home pose with the robot holding its home
 setpoints, warmed up, and then ``mujoco.mj_step`` is timed with ``time.perf_counter``.
+``ncon``/``nefc`` are the contact count and constraint rows at the home pose.
 The baseline is the bare UR5e (``rehabbot.models.robot.build_ur5e_spec``) holding the same
 joint angles, so the ``x baseline`` column shows what the patient, the straps and the
 contacts cost relative to the robot alone, measured in the same run on the same machine.
@@ -37,6 +38,7 @@ class ThroughputRow:
     nq: int
     nv: int
     ncon_at_rest: int
+    nefc_at_rest: int
     timestep_s: float
     steps_per_s: float
     realtime_factor: float
@@ -67,7 +69,7 @@ def make_row(
     name: str, model: mujoco.MjModel, data: mujoco.MjData, steps: int, warmup: int, repeats: int
 ) -> ThroughputRow:
     """Measure one model whose ``data`` is at rest at its home pose (``mj_forward`` done)."""
-    ncon_at_rest = int(data.ncon)
+    ncon_at_rest, nefc_at_rest = int(data.ncon), int(data.nefc)
     steps_per_s = measure_steps_per_s(model, data, steps, warmup, repeats)
     timestep_s = float(model.opt.timestep)
     return ThroughputRow(
@@ -75,6 +77,7 @@ def make_row(
         nq=int(model.nq),
         nv=int(model.nv),
         ncon_at_rest=ncon_at_rest,
+        nefc_at_rest=nefc_at_rest,
         timestep_s=timestep_s,
         steps_per_s=steps_per_s,
         realtime_factor=steps_per_s * timestep_s,
@@ -138,13 +141,13 @@ def run_benchmark(
 def format_table(rows: Sequence[ThroughputRow]) -> str:
     """Fixed-width text table of the rows."""
     header = (
-        f"{'preset':<16} {'nq':>4} {'nv':>4} {'ncon@rest':>9} {'dt [ms]':>7} "
+        f"{'preset':<16} {'nq':>4} {'nv':>4} {'ncon@rest':>9} {'nefc@rest':>9} {'dt [ms]':>7} "
         f"{'steps/s':>10} {'x realtime':>10} {'x baseline':>10}"
     )
     lines = [header, "-" * len(header)]
     for row in rows:
         lines.append(
-            f"{row.name:<16} {row.nq:>4} {row.nv:>4} {row.ncon_at_rest:>9} "
+            f"{row.name:<16} {row.nq:>4} {row.nv:>4} {row.ncon_at_rest:>9} {row.nefc_at_rest:>9} "
             f"{row.timestep_s * 1e3:>7.2f} {row.steps_per_s:>10.0f} "
             f"{row.realtime_factor:>10.1f} {row.ratio_to_baseline:>10.2f}"
         )

@@ -33,7 +33,9 @@ if TYPE_CHECKING:
 
 DEFAULT_DURATION_S = 10.0
 MIN_REPORTED_MOTION_DEG = 1.0
-MAX_REPORTED_JOINTS = 4
+MAX_REPORTED_JOINTS = 6
+# Scalar fields of the sweep result recorded in summary.json when the result has them.
+OPTIONAL_RESULT_FIELDS = ("max_rom_excess_deg", "max_robot_torque_nm")
 
 
 @dataclass
@@ -46,6 +48,7 @@ class PresetReport:
     max_cuff_error_m: float = math.nan
     within_rom: bool = False
     finite: bool = False
+    extras: dict[str, float] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -89,6 +92,8 @@ class PresetReport:
             "max_cuff_error_m": float(error_m) if math.isfinite(error_m) else None,
             "within_rom": bool(self.within_rom),
             "finite": bool(self.finite),
+            **{name: (value if math.isfinite(value) else None)
+               for name, value in self.extras.items()},
         }
 
 
@@ -124,6 +129,10 @@ def run_preset(
     report.max_cuff_error_m = float(result.max_cuff_error_m)
     report.within_rom = bool(result.within_rom)
     report.finite = bool(result.finite)
+    for name in OPTIONAL_RESULT_FIELDS:
+        value = getattr(result, name, None)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            report.extras[name] = float(value)
     return report
 
 

@@ -86,7 +86,8 @@ class CoupledPath:
 
     dt_s: float
     patient_deg: np.ndarray  # (T, n_exercised) exercised joint angles [deg]
-    robot_rad: np.ndarray  # (T, n_robots, 6) robot joint setpoints [rad]
+    robot_rad: np.ndarray  # (T, n_robots, 6) robot joint angles on the path [rad]
+    servo_setpoint_rad: np.ndarray  # (T, n_robots, 6) setpoints that hold the limb there [rad]
     ik_error_m: np.ndarray  # (T,)
 
 
@@ -94,14 +95,18 @@ def coupled_path(scene: Scene, patient_deg: np.ndarray, dt_s: float) -> CoupledP
     """Robot joint targets for a sequence of exercised-joint angles (other joints at home).
 
     Each waypoint is solved by IK warm-started from the previous one, so the robot stays on
-    one continuous branch.
+    one continuous branch; the servo setpoints add the static preload that carries the limb
+    there (:mod:`rehabbot.statics`).
     """
+    from rehabbot import statics
+
     model = scene.model
     data = mujoco.MjData(model)
     data.qpos[:] = scene.home_qpos
     ik = RobotIK(model)
     patient_deg = np.atleast_2d(np.asarray(patient_deg, dtype=float))
     robot = np.zeros((len(patient_deg), len(scene.robots), 6))
+    setpoints = np.zeros_like(robot)
     errors = np.zeros(len(patient_deg))
     seeds = [scene.home_qpos[h.qpos_adr].copy() for h in scene.robots]
     for t, row in enumerate(patient_deg):
@@ -114,25 +119,28 @@ def coupled_path(scene: Scene, patient_deg: np.ndarray, dt_s: float) -> CoupledP
             robot[t, k] = q
             seeds[k] = q
             errors[t] = max(errors[t], err)
-    return CoupledPath(dt_s=dt_s, patient_deg=patient_deg, robot_rad=robot, ik_error_m=errors)
+        mujoco.mj_forward(model, data)
+        setpoints[t] = statics.servo_setpoints(scene, data, statics.cuff_load_torque(scene, data))
+    return CoupledPath(dt_s=dt_s, patient_deg=patient_deg, robot_rad=robot,
+                       servo_setpoint_rad=setpoints, ik_error_m=errors)
 
 
-# Sweep end points per preset and posture [deg], for the exercised joints in order.
-SWEEP_TARGETS_DEG: dict[str, dict[str, float]] = {
-    "arm": {"shoulder_flexion": 85.0, "shoulder_abduction": 12.0, "elbow_flexion": 140.0},
-    "leg_supine": {"hip_flexion": 60.0, "hip_abduction": 5.0, "knee_flexion": 10.0},
-    "leg_seated": {"hip_flexion": 90.0, "hip_abduction": 4.0, "knee_flexion": 15.0},
+# Sweep end points [deg] per limb kind (preset, posture), for the exercised joints.
+SWEEP_TARGETS_DEG: dict[tuple[str, str], dict[str, float]] = {
+    ("arm", "seated"): {"shoulder_flexion": 85.0, "shoulder_abduction": 12.0,
+                        "elbow_flexion": 140.0},
+    ("hip", "supine"): {"hip_flexion": 60.0, "hip_abduction": 5.0, "knee_flexion": 10.0},
+    ("hip", "seated"): {"hip_flexion": 118.0, "hip_abduction": 4.0, "knee_flexion": 90.0},
+    ("knee", "seated"): {"hip_flexion": 90.0, "hip_abduction": 4.0, "knee_flexion": 15.0},
 }
 
 
 def sweep_path(scene: Scene, duration_s: float = 10.0, dt_s: float = 0.02) -> CoupledPath:
     """Home -> far end of the exercise -> home, minimum-jerk in the patient's joint space."""
     start = np.degrees(scene.home_qpos[scene.exercised_qpos_adr])
-    end = np.empty_like(start)
-    for i, name in enumerate(scene.exercised_joints):
-        base, _side = name.rsplit("_", 1)
-        key = "arm" if name.startswith(("shoulder", "elbow")) else f"leg_{scene.posture}"
-        end[i] = SWEEP_TARGETS_DEG[key][base]
+    kind = "arm" if scene.preset.startswith("upper") else scene.preset
+    targets = SWEEP_TARGETS_DEG[(kind, scene.posture)]
+    end = np.array([targets[name.rsplit("_", 1)[0]] for name in scene.exercised_joints])
     n = int(round(duration_s / dt_s))
     t = np.arange(n + 1) * dt_s
     half = duration_s / 2
@@ -169,11 +177,9 @@ def run_sweep(scene: Scene, duration_s: float = 10.0, dt_s: float = 0.02,
     rom_excess = 0.0
     torque = 0.0
     finite = True
-    # Servo setpoints move from the pre-loaded home values by the path's increments.
-    offsets = np.array(scene.home_setpoints) - path.robot_rad[0]
-    for t, setpoint in enumerate(path.robot_rad):
+    for t, setpoint in enumerate(path.servo_setpoint_rad):
         for k, handle in enumerate(scene.robots):
-            data.ctrl[handle.servo_ids] = setpoint[k] + offsets[k]
+            data.ctrl[handle.servo_ids] = setpoint[k]
         mujoco.mj_step(model, data, nstep=substeps)
         if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
             finite = False

@@ -202,3 +202,26 @@ def test_headless_glfw_backend_gives_actionable_error(box_world, monkeypatch) ->
     assert rendering.gl_backend() == "glfw"
     with pytest.raises(RuntimeError, match="MUJOCO_GL=egl"):
         render_rgb(model, data, "front", width_px=WIDTH_PX, height_px=HEIGHT_PX)
+
+
+# --------------------------------------------------------------------------- scene presets
+
+MIN_PIXELS = 500
+
+
+def test_default_camera_of_every_preset_sees_robot_and_patient() -> None:
+    from rehabbot.models import PRESETS, build_scene
+
+    pixel_counts = {}
+    for preset in PRESETS:
+        scene = build_scene(preset)
+        data = scene.make_data()
+        seg = render_segmentation(scene.model, data, scene.camera_names[0], 320, 240)
+        pixel_counts[preset] = (
+            int(np.isin(seg, scene.robot_geom_ids).sum()),
+            int(np.isin(seg, scene.patient_geom_ids).sum()),
+        )
+    too_few = {
+        preset: counts for preset, counts in pixel_counts.items() if min(counts) < MIN_PIXELS
+    }
+    assert not too_few, f"(robot, patient) pixels below {MIN_PIXELS}: {too_few}"

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from rehabbot import statics
 from rehabbot.kinematics import RobotIK, quat_from_mat
 from rehabbot.models import patient as pt
 from rehabbot.models import robot as ur
@@ -37,7 +38,7 @@ PRESETS: dict[str, str] = {
     "upper_left": "one UR5e on a stand, strapped to the seated patient's left hand",
     "upper_bilateral": "two UR5e, one strapped to each hand of the seated patient",
     "hip": "one UR5e strapped above the ankle; supine straight-leg raise (or seated)",
-    "knee": "one UR5e strapped above the ankle; seated knee flexion/extension (or supine)",
+    "knee": "one UR5e strapped above the ankle; seated knee flexion/extension",
 }
 POSTURES = ("seated", "supine")
 CUFF_TYPES = ("connect", "weld")
@@ -65,8 +66,8 @@ class SceneOptions:
 
     ============================ =========================================================
     ``cuff``                     ``"connect"`` (position only, default) or ``"weld"``
-    ``side``                     ``"right"``/``"left"``: exercised leg of ``hip``/``knee``
-    ``posture``                  ``"seated"``/``"supine"``; ``None`` = preset default
+    ``side``                     ``"right"`` (default)/``"left"``: leg of ``hip``/``knee``
+    ``posture``                  ``"seated"``/``"supine"`` (``hip`` only); ``None`` = default
     ``base_reorientation_deg``   rotation of the robot base about its vertical axis
                                  (paper §2.1: 90 puts the pan axis' zero across the limb)
     ``timestep_s``               physics step (default 0.002 s)
@@ -78,7 +79,7 @@ class SceneOptions:
     """
 
     cuff: str = "connect"
-    side: str = "right"
+    side: str | None = None
     posture: str | None = None
     base_reorientation_deg: float = 0.0
     timestep_s: float = 0.002
@@ -89,7 +90,8 @@ class SceneOptions:
 
     def __post_init__(self) -> None:
         _check_choice("cuff", self.cuff, CUFF_TYPES)
-        _check_choice("side", self.side, SIDES)
+        if self.side is not None:
+            _check_choice("side", self.side, SIDES)
         if self.posture is not None:
             _check_choice("posture", self.posture, POSTURES)
         _check_finite_range("base_reorientation_deg", self.base_reorientation_deg, -180.0, 180.0)
@@ -220,8 +222,8 @@ class Scene:
 # ----------------------------------------------------------------------------------------------
 # Building
 # ----------------------------------------------------------------------------------------------
-def _limbs_for(preset: str, side: str) -> tuple[str, ...]:
-    s = "r" if side == "right" else "l"
+def _limbs_for(preset: str, side: str | None) -> tuple[str, ...]:
+    s = "l" if side == "left" else "r"
     return {
         "upper_right": ("arm_r",),
         "upper_left": ("arm_l",),
@@ -263,8 +265,12 @@ def _add_cylinder(body, name, p0, p1, radius, rgba) -> None:
 
 
 # Exercised joints that the patient holds stiff (posture springs) in a preset: a straight-leg
-# raise is done with the knee held extended.
-_HELD_BY_PATIENT: dict[str, tuple[str, ...]] = {"hip": ("knee_flexion",)}
+# raise is done with the knee held extended; in seated knee exercises the thigh rests.
+_HELD_BY_PATIENT: dict[tuple[str, str], tuple[str, ...]] = {
+    ("hip", "supine"): ("knee_flexion",),
+    ("hip", "seated"): ("knee_flexion",),
+    ("knee", "seated"): ("hip_flexion", "hip_abduction"),
+}
 _WOOD = (0.55, 0.42, 0.30, 1.0)
 _UPHOLSTERY = (0.30, 0.45, 0.50, 1.0)
 _METAL = (0.45, 0.47, 0.50, 1.0)
@@ -320,8 +326,12 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
     opts = SceneOptions(**options)
     level = check_weight_level(weight_level)
     posture = opts.posture or _default_posture(preset)
-    if preset.startswith("upper") and posture != "seated":
-        raise ValueError(f"posture={posture!r}: upper-limb presets are seated only")
+    if preset != "hip" and posture != _default_posture(preset):
+        raise ValueError(f"posture={posture!r}: preset {preset!r} is "
+                         f"{_default_posture(preset)} only; 'hip' offers {list(POSTURES)}")
+    if preset.startswith("upper") and opts.side is not None:
+        raise ValueError(f"side={opts.side!r} applies to 'hip' and 'knee' only; for the arms "
+                         "choose the preset upper_right, upper_left or upper_bilateral")
     limbs = _limbs_for(preset, opts.side)
     pose_deg = _home_pose_deg(posture, limbs, opts)
 
@@ -470,7 +480,7 @@ def _robot_base_pose(limb, posture, profile, seg, geometry, torso_pos, torso_qua
     hip = torso_pos + rot.reshape(3, 3) @ (geometry.hip_r if side < 0 else geometry.hip_l)
     if posture == "seated":
         knee_x = hip[0] + seg["thigh"].length_m
-        pos = np.array([knee_x + 0.55 * h_scale, hip[1] + side * 0.30 * h_scale,
+        pos = np.array([knee_x + 0.55 * h_scale, hip[1] + side * 0.40 * h_scale,
                         hip[2] - 0.25 * h_scale])
         return pos, math.pi
     leg = seg["thigh"].length_m + seg["shank"].length_m
@@ -518,7 +528,7 @@ def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
     exercised = tuple(j for limb in limbs for j in pt.LIMB_EXERCISE_JOINTS[limb])
     patient_joints = [model.joint(n) for n in pt.JOINT_NAMES]
     compliant = tuple(j for j in exercised if j.rsplit("_", 1)[0]
-                      not in _HELD_BY_PATIENT.get(preset, ()))
+                      not in _HELD_BY_PATIENT.get((preset, posture), ()))
     posture_dofs = np.array([j.dofadr[0] for j in patient_joints if j.name not in compliant])
     limb_bodies = np.array([model.body(b).id for limb in limbs for b in pt.LIMB_BODIES[limb]])
 
@@ -611,11 +621,9 @@ def _set_posture_springs(scene: Scene, data: mujoco.MjData) -> None:
 def balance_home(scene: Scene) -> np.ndarray:
     """Make the home state a static equilibrium; return the robots' servo setpoints (n, 6).
 
-    The cuff force ``f`` that carries the limb follows from the compliant exercised joints
-    (whose passive springs rest at home): ``J_ex^T f = g_ex`` (minimum-norm ``f`` when the
-    limb has fewer compliant joints than the cuff has constraints). The robot's setpoints are pre-loaded so the servo
-    produces ``-J_robot^T f``, and each posture spring's reference is shifted to cancel the
-    gravity and cuff torque on its joint.
+    Compliant joints rest at home (spring reference = home angle), so the cuffs carry the limb
+    (:mod:`rehabbot.statics`); the robot setpoints are pre-loaded with that load and each
+    posture spring's reference is shifted to cancel the gravity and cuff torque on its joint.
     """
     model = scene.model
     data = scene._scratch_data()
@@ -623,26 +631,10 @@ def balance_home(scene: Scene) -> np.ndarray:
     data.qpos[:] = scene.home_qpos
     model.qpos_spring[scene.patient_qpos_adr] = scene.home_qpos[scene.patient_qpos_adr]
     mujoco.mj_forward(model, data)
-    bias = data.qfrc_bias.copy()  # gravity only (qvel = 0); robot links are gravity compensated
-    rows = []
-    for handle in scene.robots:
-        jac_robot = np.zeros((3, model.nv))
-        jac_patient = np.zeros((3, model.nv))
-        mujoco.mj_jacSite(model, data, jac_robot, None, handle.cuff_site_id)
-        mujoco.mj_jacSite(model, data, jac_patient, None, handle.patient_cuff_site_id)
-        rows.append(jac_robot - jac_patient)
-    jac = np.vstack(rows)  # (3 n_robots, nv)
-    ex = scene.compliant_dof_adr
-    force, *_ = np.linalg.lstsq(jac[:, ex].T, bias[ex], rcond=None)
-    generalized = jac.T @ force  # constraint torque on every dof
-    setpoints = np.zeros((len(scene.robots), 6))
-    for k, handle in enumerate(scene.robots):
-        servo_torque = bias[handle.dof_adr] - data.qfrc_gravcomp[handle.dof_adr] \
-            - generalized[handle.dof_adr]
-        kp = model.actuator_gainprm[handle.servo_ids, 0]
-        setpoints[k] = scene.home_qpos[handle.qpos_adr] + servo_torque / kp
-    stiffness = model.jnt_stiffness[model.dof_jntid[scene.posture_dof_adr]]
-    offset = (bias[scene.posture_dof_adr] - generalized[scene.posture_dof_adr]) / stiffness
-    qadr = model.jnt_qposadr[model.dof_jntid[scene.posture_dof_adr]]
-    model.qpos_spring[qadr] = scene.home_qpos[qadr] + offset
-    return setpoints
+    load = statics.cuff_load_torque(scene, data)
+    posture = scene.posture_dof_adr
+    stiffness = model.jnt_stiffness[model.dof_jntid[posture]]
+    qadr = model.jnt_qposadr[model.dof_jntid[posture]]
+    model.qpos_spring[qadr] = scene.home_qpos[qadr] + (data.qfrc_bias[posture]
+                                                       - load[posture]) / stiffness
+    return statics.servo_setpoints(scene, data, load)
