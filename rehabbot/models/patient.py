@@ -42,7 +42,8 @@ class PatientProfile:
         for name, (low, high) in (("height_m", HEIGHT_RANGE_M), ("mass_kg", MASS_RANGE_KG)):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or isinstance(value, bool):
-                raise ValueError(f"PatientProfile.{name} must be a number, got {value!r}")
+                raise ValueError(f"PatientProfile.{name} must be a number in [{low}, {high}], "
+                                 f"got {value!r}")
             if not math.isfinite(value) or not low <= value <= high:
                 raise ValueError(
                     f"PatientProfile.{name}={value!r} is outside the allowed range [{low}, {high}]"
