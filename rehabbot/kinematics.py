@@ -141,7 +141,7 @@ def sweep_path(scene: Scene, duration_s: float = 10.0, dt_s: float = 0.02) -> Co
     kind = "arm" if scene.preset.startswith("upper") else scene.preset
     targets = SWEEP_TARGETS_DEG[(kind, scene.posture)]
     end = np.array([targets[name.rsplit("_", 1)[0]] for name in scene.exercised_joints])
-    n = int(round(duration_s / dt_s))
+    n = round(duration_s / dt_s)
     t = np.arange(n + 1) * dt_s
     half = duration_s / 2
     s = np.where(t <= half, minimum_jerk(t / half), minimum_jerk(2.0 - t / half))
@@ -168,7 +168,7 @@ def run_sweep(scene: Scene, duration_s: float = 10.0, dt_s: float = 0.02,
     path = sweep_path(scene, duration_s, dt_s)
     data = data if data is not None else scene.make_data()
     scene.reset_data(data)
-    substeps = max(1, int(round(dt_s / model.opt.timestep)))
+    substeps = max(1, round(dt_s / model.opt.timestep))
     jnt_ids = [model.joint(n).id for n in scene.patient_joint_names]
     low = model.jnt_range[jnt_ids, 0]
     high = model.jnt_range[jnt_ids, 1]

@@ -1,5 +1,6 @@
 """Scene presets: degrees of freedom, cuff, weight levels, statics, sweeps, contacts, options."""
 
+import itertools
 import math
 
 import mujoco
@@ -75,7 +76,7 @@ def test_weight_levels_scale_exactly_the_exercised_limb(preset):
                             {h.limb for h in scene.robots}
                             for b in pt.LIMB_BODIES[limb_name]}
     assert limb == expected_limb_bodies
-    for level, factor in zip(sc.WEIGHT_LEVELS, sc.WEIGHT_FACTORS):
+    for level, factor in zip(sc.WEIGHT_LEVELS, sc.WEIGHT_FACTORS, strict=False):
         scene.set_weight_level(level)
         for body in range(model.nbody):
             if body in limb:
@@ -103,7 +104,7 @@ def test_heavier_limb_needs_more_robot_preload():
         scene.set_weight_level(level)
         home = scene.home_qpos[scene.robots[0].qpos_adr]
         preload.append(np.linalg.norm(scene.home_setpoints[0] - home))
-    assert all(b > a for a, b in zip(preload, preload[1:]))
+    assert all(b > a for a, b in itertools.pairwise(preload))
 
 
 @pytest.mark.parametrize("preset", ALL_PRESETS)
@@ -112,7 +113,7 @@ def test_holding_still_nothing_drifts(preset, level):
     scene = build_scene(preset, weight_level=level)
     data = scene.make_data()
     q0 = data.qpos.copy()
-    mujoco.mj_step(scene.model, data, nstep=int(round(2.0 / scene.model.opt.timestep)))
+    mujoco.mj_step(scene.model, data, nstep=round(2.0 / scene.model.opt.timestep))
     assert np.max(np.abs(data.qpos - q0)) < math.radians(1.0)
     assert np.all(scene.cuff_errors_m(data) < 1e-3)
 

@@ -372,7 +372,8 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
         _capsule(shank, f"shank_{side}", (0, 0, -r * 0.5), (0, 0, -shank_s.length_m + r * 0.5), r,
                  _CLOTH)
         if f"leg_{side}" in cuff_limbs:
-            shank.add_site(name=f"cuff_leg_{side}", pos=[0, 0, -LEG_CUFF_FRACTION * shank_s.length_m],
+            cuff_z = -LEG_CUFF_FRACTION * shank_s.length_m
+            shank.add_site(name=f"cuff_leg_{side}", pos=[0, 0, cuff_z],
                            quat=list(_cuff_quat(s, "leg")), size=[0.015, 0, 0],
                            rgba=(0.2, 0.8, 0.4, 1))
         # Foot: ankle joint centre at the end of the shank; the foot points forward (+x) with

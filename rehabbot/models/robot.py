@@ -90,7 +90,8 @@ class ImpedanceGains:
         for name in ("kp_nm_per_rad", "kv_nms_per_rad"):
             values = np.asarray(getattr(self, name), dtype=float)
             if values.shape != (6,) or not np.all(np.isfinite(values)) or np.any(values < 0):
-                raise ValueError(f"ImpedanceGains.{name} must be 6 finite values >= 0, got {values}")
+                raise ValueError(
+                    f"ImpedanceGains.{name} must be 6 finite values >= 0, got {values}")
 
 
 @dataclass(frozen=True)
@@ -149,10 +150,11 @@ def _cylinder(body: mujoco.MjsBody, name: str, p0, p1, radius: float, rgba, pref
 # Link shapes in each DH frame (points in metres). Tubes are grey, joint housings blue.
 def _add_link_geometry(body: mujoco.MjsBody, i: int, prefix: str, opts: UR5eOptions) -> None:
     if i == 0:  # shoulder: column up from the base, housing around the lift axis (z1)
-        _cylinder(body, "shoulder_column", (0, -0.1625 + 0.04, 0), (0, -0.02, 0), 0.06, _BLUE, prefix)
+        _cylinder(body, "shoulder_column", (0, -0.1225, 0), (0, -0.02, 0), 0.06, _BLUE, prefix)
         _cylinder(body, "shoulder_housing", (0, 0, -0.065), (0, 0, 0.075), 0.06, _BLUE, prefix)
     elif i == 1:  # upper arm: tube at the shoulder offset, housings at both ends
-        _cylinder(body, "upper_arm_shoulder", (0.425, 0, 0.065), (0.425, 0, 0.19), 0.06, _BLUE, prefix)
+        _cylinder(body, "upper_arm_shoulder", (0.425, 0, 0.065), (0.425, 0, 0.19), 0.06, _BLUE,
+                  prefix)
         _capsule(body, "upper_arm_tube", (0.37, 0, 0.138), (0.06, 0, 0.138), 0.045, _GREY, prefix)
         _cylinder(body, "upper_arm_elbow", (0, 0, 0.07), (0, 0, 0.19), 0.055, _BLUE, prefix)
     elif i == 2:  # forearm: tube at the elbow offset, ending at the wrist-1 housing

@@ -375,8 +375,8 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
         # Lower the body so its lowest point rests `gap` above the bed top.
         low = min(_lowest_z(model0, data0, g) for g in patient_geoms)
         shift = bed_top + gap - low
-        spec.body("torso").pos = list(torso_pos + [0, 0, shift])
-        torso_pos = torso_pos + [0, 0, shift]
+        torso_pos = torso_pos + np.array([0.0, 0.0, shift])
+        spec.body("torso").pos = list(torso_pos)
     _add_furniture(spec, posture, profile, geometry, seg, torso_pos, lowest, gap,
                    hip_top=bed_top if posture == "supine" else None)
 
