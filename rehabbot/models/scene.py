@@ -416,7 +416,17 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
             effort.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             effort.forcerange = [-limit, limit]
 
-    _add_cameras(spec, preset, posture, torso_pos)
+    # Cameras look at the middle of the exercise: the shoulders, the hip or the knee.
+    mujoco.mj_kinematics(model0, data0)
+    side = -1.0 if limbs[0].endswith("_r") and len(limbs) == 1 else 1.0
+    side = -1.0 if len(limbs) > 1 else side
+    if preset.startswith("upper"):
+        focus = torso_pos + np.array([0.25, 0.0, -0.2])
+    elif posture == "supine":
+        focus = data0.xpos[model0.body(f"thigh_{limbs[0][-1]}").id] + np.array([0.3, 0, 0.15])
+    else:
+        focus = data0.xpos[model0.body(f"shank_{limbs[0][-1]}").id] + np.array([0.1, 0, 0.1])
+    _add_cameras(spec, focus, side)
     model = spec.compile()
     return _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
 
@@ -488,19 +498,22 @@ def _robot_base_pose(limb, posture, profile, seg, geometry, torso_pos, torso_qua
     return pos, math.pi / 2 * (1 if side < 0 else -1)
 
 
-def _add_cameras(spec, preset, posture, torso_pos) -> None:
-    target = "torso" if preset.startswith("upper") or posture == "seated" else "pelvis"
+def _add_cameras(spec: mujoco.MjSpec, target: np.ndarray, side: float) -> None:
+    """Three fixed cameras looking at ``target`` (world point): ``overview`` from the front on the
+    exercised side and above, ``front``, and ``side`` (from the exercised side)."""
     views = {
-        "overview": (2.3, -1.6, 1.6),
-        "front": (2.6, 0.0, 1.0),
-        "side": (0.3, -2.6, 1.0),
+        "overview": np.array([1.5, 1.25 * side, 0.9]),
+        "front": np.array([2.0, 0.0, 0.35]),
+        "side": np.array([0.15, 2.0 * side, 0.3]),
     }
+    up = np.array([0.0, 0.0, 1.0])
     for name, offset in views.items():
-        cam = spec.worldbody.add_camera(name=name, pos=list(torso_pos + np.array(offset)
-                                                              - [0, 0, torso_pos[2] - 0.9]))
-        cam.mode = mujoco.mjtCamLight.mjCAMLIGHT_TARGETBODY
-        cam.targetbody = target
-        cam.fovy = 45.0
+        forward = -offset / np.linalg.norm(offset)
+        x_axis = np.cross(forward, up)
+        x_axis /= np.linalg.norm(x_axis)
+        y_axis = np.cross(x_axis, forward)
+        spec.worldbody.add_camera(name=name, pos=list(target + offset),
+                                  xyaxes=[*x_axis, *y_axis], fovy=50.0)
 
 
 def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level) -> Scene:
