@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 
-.PHONY: venv test demo lint bench clean distclean
+.PHONY: venv test demo lint bench images clean distclean
 
 venv: $(STAMP)
 
@@ -32,6 +32,13 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/physics_throughput.py
+
+# The README's scene pictures, rendered by our own code.
+images: $(STAMP)
+	for preset in upper_right upper_left upper_bilateral hip knee; do \
+	  MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot snapshot $$preset --out docs/images/$$preset.png \
+	    --width 640 --height 480 || exit 1; \
+	done
 
 # Build outputs and caches; keeps the virtual environment and runs/ (experiment results).
 clean:
