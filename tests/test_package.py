@@ -10,7 +10,8 @@ def refuse(*args, **kwargs):
 socket.socket.connect = refuse
 socket.create_connection = refuse
 import rehabbot, rehabbot.models, rehabbot.kinematics, rehabbot.statics
-heavy = sorted(m for m in ("torch", "stable_baselines3", "matplotlib", "imageio") if m in sys.modules)
+HEAVY = ("torch", "stable_baselines3", "matplotlib", "imageio")
+heavy = sorted(m for m in HEAVY if m in sys.modules)
 print("HEAVY:" + ",".join(heavy), file=sys.stderr)
 """
 

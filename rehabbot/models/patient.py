@@ -284,6 +284,13 @@ def _cuff_quat(side_sign: float, limb: str) -> np.ndarray:
     return quat
 
 
+def _ellipsoid(body, name, pos, half_sizes, rgba=_CLOTH):
+    geom = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, pos=list(pos),
+                         size=list(half_sizes), rgba=rgba)
+    geom.contype, geom.conaffinity = CONTYPE_PATIENT, CONAFFINITY_PATIENT
+    return geom
+
+
 @dataclass(frozen=True)
 class PatientGeometry:
     """Landmarks of the built body in the patient's root (torso) frame [m]."""
@@ -331,8 +338,8 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
     ])
     _set_inertial(torso, mass, com, inertia)
     top = z_cerv - z_xyph
-    _capsule(torso, "torso_chest", (0, -trunk_width + torso_depth, top * 0.45),
-             (0, trunk_width - torso_depth, top * 0.45), torso_depth * 1.05, _CLOTH)
+    chest_depth = 0.8 * torso_depth
+    _ellipsoid(torso, "torso_chest", (0, 0, top * 0.5), (chest_depth, trunk_width, top * 0.6))
     _capsule(torso, "torso_shoulders", (0, -(shoulder_y - 0.04), z_shoulder - z_xyph),
              (0, shoulder_y - 0.04, z_shoulder - z_xyph), 0.055, _CLOTH)
     _capsule(torso, "neck", (0, 0, top), (0, 0, top + 0.05), 0.05)
@@ -345,8 +352,8 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
     # --- lower waist (middle trunk): abdomen rotation + flexion at XYPH.
     waist = torso.add_body(name="lower_waist", pos=[0, 0, 0])
     _set_inertial(waist, mpt.mass_kg, [0, 0, -mpt.com_from_proximal_m], _inertia_diag(mpt, 2))
-    _capsule(waist, "waist", (0, -trunk_width * 0.8 + torso_depth, -mpt.length_m * 0.5),
-             (0, trunk_width * 0.8 - torso_depth, -mpt.length_m * 0.5), torso_depth, _CLOTH)
+    _ellipsoid(waist, "waist", (0, 0, -mpt.length_m * 0.5),
+               (0.75 * torso_depth, 0.8 * trunk_width, 0.6 * mpt.length_m))
 
     # --- pelvis (lower trunk): abdomen lateral flexion at OMPH.
     pelvis = waist.add_body(name="pelvis", pos=[0, 0, -mpt.length_m])
@@ -429,5 +436,5 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
         hip_l=np.array([0, hip_y, -mpt.length_m - lpt.length_m]),
         pelvis_radius_m=pelvis_r,
         thigh_radius_m=seg["thigh"].capsule_radius_m,
-        torso_half_depth_m=torso_depth * 1.05,
+        torso_half_depth_m=chest_depth,
     )

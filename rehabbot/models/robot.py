@@ -125,26 +125,19 @@ def _dh_child_frame(i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     return trans, quat, axis, anchor
 
 
+def _tube(body: mujoco.MjsBody, name: str, p0, p1, radius: float, rgba, prefix: str,
+          kind: mujoco.mjtGeom = mujoco.mjtGeom.mjGEOM_CYLINDER) -> None:
+    """A cylinder (joint housing) or capsule (link tube) from ``p0`` to ``p1`` in the body frame."""
+    geom = body.add_geom(name=f"{prefix}{name}", type=kind, fromto=[*p0, *p1],
+                         size=[radius, 0.0, 0.0], rgba=rgba)
+    geom.contype, geom.conaffinity = CONTYPE_ROBOT, CONAFFINITY_ROBOT
+
+
 def _capsule(body: mujoco.MjsBody, name: str, p0, p1, radius: float, rgba, prefix: str) -> None:
-    geom = body.add_geom(
-        name=f"{prefix}{name}",
-        type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-        fromto=[*p0, *p1],
-        size=[radius, 0.0, 0.0],
-        rgba=rgba,
-    )
-    geom.contype, geom.conaffinity = CONTYPE_ROBOT, CONAFFINITY_ROBOT
+    _tube(body, name, p0, p1, radius, rgba, prefix, mujoco.mjtGeom.mjGEOM_CAPSULE)
 
 
-def _cylinder(body: mujoco.MjsBody, name: str, p0, p1, radius: float, rgba, prefix: str) -> None:
-    geom = body.add_geom(
-        name=f"{prefix}{name}",
-        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-        fromto=[*p0, *p1],
-        size=[radius, 0.0, 0.0],
-        rgba=rgba,
-    )
-    geom.contype, geom.conaffinity = CONTYPE_ROBOT, CONAFFINITY_ROBOT
+_cylinder = _tube
 
 
 # Link shapes in each DH frame (points in metres). Tubes are grey, joint housings blue.

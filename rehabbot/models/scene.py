@@ -371,14 +371,15 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
         return min(_lowest_z(model0, data0, g) for g in ids)
 
     gap = opts.furniture_gap_m
+    lift = np.zeros(3)
     if posture == "supine":
         # Lower the body so its lowest point rests `gap` above the bed top.
         low = min(_lowest_z(model0, data0, g) for g in patient_geoms)
-        shift = bed_top + gap - low
-        torso_pos = torso_pos + np.array([0.0, 0.0, shift])
+        lift[2] = bed_top + gap - low
+        torso_pos = torso_pos + lift
         spec.body("torso").pos = list(torso_pos)
     _add_furniture(spec, posture, profile, geometry, seg, torso_pos, lowest, gap,
-                   hip_top=bed_top if posture == "supine" else None)
+                   bed_top=bed_top if posture == "supine" else None)
 
     # 2. Robots, placed from the patient's landmarks.
     for k, limb in enumerate(limbs):
@@ -416,16 +417,15 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
             effort.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             effort.forcerange = [-limit, limit]
 
-    # Cameras look at the middle of the exercise: the shoulders, the hip or the knee.
-    mujoco.mj_kinematics(model0, data0)
-    side = -1.0 if limbs[0].endswith("_r") and len(limbs) == 1 else 1.0
-    side = -1.0 if len(limbs) > 1 else side
+    # Cameras look at the middle of the exercise: the shoulders, the hip or the knee; from the
+    # exercised side (the right for the bilateral scene).
+    side = 1.0 if len(limbs) == 1 and limbs[0].endswith("_l") else -1.0
     if preset.startswith("upper"):
         focus = torso_pos + np.array([0.25, 0.0, -0.2])
     elif posture == "supine":
-        focus = data0.xpos[model0.body(f"thigh_{limbs[0][-1]}").id] + np.array([0.3, 0, 0.15])
+        focus = data0.xpos[model0.body(f"thigh_{limbs[0][-1]}").id] + lift + [0.3, 0.0, 0.15]
     else:
-        focus = data0.xpos[model0.body(f"shank_{limbs[0][-1]}").id] + np.array([0.1, 0, 0.1])
+        focus = data0.xpos[model0.body(f"shank_{limbs[0][-1]}").id] + lift + [0.1, 0.0, 0.1]
     _add_cameras(spec, focus, side)
     model = spec.compile()
     return _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
@@ -440,7 +440,9 @@ def _set_pose(model: mujoco.MjModel, qpos: np.ndarray, pose_deg: dict) -> None:
         qpos[model.joint(name).qposadr[0]] = math.radians(value)
 
 
-def _add_furniture(spec, posture, profile, geometry, seg, torso_pos, lowest, gap, hip_top) -> None:
+def _add_furniture(spec, posture, profile, geometry, seg, torso_pos, lowest, gap, bed_top) -> None:
+    """Chair (seat, backrest, legs) and leg rest under a seated body, or a bed under a supine
+    one; resting surfaces sit ``gap`` below the body at home."""
     world = spec.worldbody
     if posture == "seated":
         rest_z = min(lowest(("thigh_r", "thigh_l")), lowest(("pelvis",)))
@@ -465,7 +467,6 @@ def _add_furniture(spec, posture, profile, geometry, seg, torso_pos, lowest, gap
         _add_box(world, "leg_rest", (knee_x + 0.35 * foot_len, 0, rest_top / 2),
                  (0.8 * foot_len, 0.3, rest_top / 2), _WOOD)
     else:
-        bed_top = hip_top
         length = profile.height_m + 0.25
         head_x = torso_pos[0] - 0.45 * profile.height_m
         center_x = head_x + length / 2 - 0.05
