@@ -236,3 +236,36 @@ def test_valid_choices_are_listed_in_errors():
         build_scene("shoulder")
     for preset in ALL_PRESETS:
         assert preset in str(excinfo.value)
+
+
+@pytest.mark.parametrize(("preset", "pose"), [
+    ("upper_right", {"shoulder_flexion_r": 5.0, "elbow_flexion_r": 10.0}),
+    ("upper_bilateral", {"shoulder_flexion_l": 60.0, "elbow_flexion_l": 100.0}),
+    ("knee", {"knee_flexion_r": 40.0}),
+    ("hip", {"hip_flexion_r": 30.0}),
+])
+def test_home_pose_can_move_without_recompiling(preset, pose):
+    scene = build_scene(preset, weight_level=2)
+    model_before = scene.model
+    scene.set_home_pose(pose)
+    assert scene.model is model_before
+    data = scene.make_data()
+    for name, value in pose.items():
+        assert math.degrees(data.qpos[scene.model.joint(name).qposadr[0]]) == pytest.approx(value)
+    assert np.all(scene.cuff_errors_m(data) < 1e-3)
+    assert all(data.contact[i].dist > -1e-3 for i in range(data.ncon))
+    q0 = data.qpos.copy()
+    mujoco.mj_step(scene.model, data, nstep=1000)
+    assert np.max(np.abs(data.qpos - q0)) < math.radians(1.0)
+    # The same pose given at build time gives the same patient posture.
+    built = build_scene(preset, weight_level=2, initial_pose_deg=pose)
+    np.testing.assert_allclose(built.home_qpos[built.patient_qpos_adr],
+                               scene.home_qpos[scene.patient_qpos_adr])
+
+
+def test_home_pose_rejects_unknown_joints_and_out_of_range_angles(scenes):
+    scene = build_scene("upper_right")
+    with pytest.raises(ValueError, match="wrist_r"):
+        scene.set_home_pose({"wrist_r": 3.0})
+    with pytest.raises(ValueError, match="elbow_flexion_r"):
+        scene.set_home_pose({"elbow_flexion_r": -20.0})

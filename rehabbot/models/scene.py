@@ -98,12 +98,16 @@ class SceneOptions:
         _check_finite_range("timestep_s", self.timestep_s, 1e-4, 0.005)
         _check_finite_range("posture_hold_hz", self.posture_hold_hz, 0.5, 20.0)
         _check_finite_range("furniture_gap_m", self.furniture_gap_m, 0.0, 0.05)
-        for name, value in self.initial_pose_deg:
-            if name not in pt.JOINT_BY_NAME:
-                raise ValueError(f"initial_pose_deg: unknown patient joint {name!r}; "
-                                 f"valid joints: {list(pt.JOINT_NAMES)}")
-            low, high = pt.JOINT_BY_NAME[name].range_deg
-            _check_finite_range(f"initial_pose_deg[{name!r}]", value, low, high)
+        _check_pose(dict(self.initial_pose_deg), "initial_pose_deg")
+
+
+def _check_pose(pose_deg: dict, what: str = "pose_deg") -> None:
+    for name, value in pose_deg.items():
+        if name not in pt.JOINT_BY_NAME:
+            raise ValueError(f"{what}: unknown patient joint {name!r}; "
+                             f"valid joints: {list(pt.JOINT_NAMES)}")
+        low, high = pt.JOINT_BY_NAME[name].range_deg
+        _check_finite_range(f"{what}[{name!r}]", value, low, high)
 
 
 def _check_choice(name: str, value, choices) -> None:
@@ -188,6 +192,25 @@ class Scene:
         scratch.qpos[:] = self.model.qpos0
         mujoco.mj_setConst(self.model, scratch)
         self.weight_level = level
+        self.home_setpoints = balance_home(self)
+
+    def set_home_pose(self, pose_deg: dict[str, float]) -> None:
+        """Move the home state to another patient pose (joint name -> angle [deg]; joints not
+        named keep their current home angle), without recompiling.
+
+        The robots' home angles are re-solved by IK so the cuffs stay satisfied, and the home
+        state is re-balanced. Raises ``ValueError`` for unknown joints, angles outside the
+        joint's range, or a pose the robot cannot reach.
+        """
+        _check_pose(pose_deg)
+        home = self.home_qpos.copy()
+        _set_pose(self.model, home, pose_deg)
+        error = _solve_robot_home(self.model, self._scratch_data(), self.robots, home,
+                                  warm_start=True)
+        if error > _IK_TOLERANCE_M:
+            raise ValueError(f"pose {pose_deg} puts the cuff out of the robot's reach "
+                             f"(IK error {error * 1000:.1f} mm)")
+        self.home_qpos = home
         self.home_setpoints = balance_home(self)
 
     def _scratch_data(self) -> mujoco.MjData:
@@ -555,18 +578,11 @@ def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
 
     home = model.qpos0.copy()
     _set_pose(model, home, pose_deg)
-    robot_ik = RobotIK(model)
     ik_data = mujoco.MjData(model)
-    ik_data.qpos[:] = home
-    for handle in robots:
-        target_pos, target_quat = _cuff_target(model, ik_data, handle)
-        seed = _ik_seed(model, ik_data, handle)
-        q, err = robot_ik.solve(ik_data, handle, target_pos, target_quat, seed)
-        if err > 1e-4:
-            raise RuntimeError(f"{preset}: the robot cannot reach the patient's cuff "
-                               f"(IK error {err * 1000:.1f} mm); profile {profile}")
-        home[handle.qpos_adr] = q
-        ik_data.qpos[handle.qpos_adr] = q
+    error = _solve_robot_home(model, ik_data, tuple(robots), home, warm_start=False)
+    if error > _IK_TOLERANCE_M:
+        raise RuntimeError(f"{preset}: the robot cannot reach the patient's cuff "
+                           f"(IK error {error * 1000:.1f} mm); profile {profile}")
 
     scene = Scene(
         preset=preset,
@@ -597,6 +613,32 @@ def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
     _set_posture_springs(scene, ik_data)
     scene.set_weight_level(level)
     return scene
+
+
+_IK_TOLERANCE_M = 1e-4
+
+
+def _solve_robot_home(model: mujoco.MjModel, data: mujoco.MjData,
+                      robots: tuple[RobotHandle, ...], qpos: np.ndarray,
+                      warm_start: bool) -> float:
+    """Write into ``qpos`` the robot angles that meet the patient's cuffs at the patient pose
+    held in ``qpos``; return the worst IK pose error. Warm starts from the robot angles already
+    in ``qpos`` and falls back to an elbow-up seed."""
+    robot_ik = RobotIK(model)
+    data.qpos[:] = qpos
+    worst = 0.0
+    for handle in robots:
+        target_pos, target_quat = _cuff_target(model, data, handle)
+        seeds = [qpos[handle.qpos_adr].copy()] if warm_start else []
+        seeds.append(_ik_seed(model, data, handle))
+        for seed in seeds:
+            q, err = robot_ik.solve(data, handle, target_pos, target_quat, seed)
+            if err <= _IK_TOLERANCE_M:
+                break
+        worst = max(worst, err)
+        qpos[handle.qpos_adr] = q
+        data.qpos[handle.qpos_adr] = q
+    return worst
 
 
 def _cuff_target(model, data, handle) -> tuple[np.ndarray, np.ndarray]:
