@@ -34,8 +34,6 @@ if TYPE_CHECKING:
 DEFAULT_DURATION_S = 10.0
 MIN_REPORTED_MOTION_DEG = 1.0
 MAX_REPORTED_JOINTS = 6
-# Scalar fields of the sweep result recorded in summary.json when the result has them.
-OPTIONAL_RESULT_FIELDS = ("max_rom_excess_deg", "max_robot_torque_nm")
 
 
 @dataclass
@@ -48,7 +46,8 @@ class PresetReport:
     max_cuff_error_m: float = math.nan
     within_rom: bool = False
     finite: bool = False
-    extras: dict[str, float] = field(default_factory=dict)
+    max_rom_excess_deg: float = math.nan
+    max_robot_torque_nm: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -83,17 +82,19 @@ class PresetReport:
 
     def to_json(self) -> dict[str, Any]:
         """JSON-serialisable form (plain floats/bools; NaN becomes ``null``)."""
-        error_m = self.max_cuff_error_m
+        def number(value: float) -> float | None:
+            return float(value) if math.isfinite(value) else None
+
         return {
             "images": list(self.images),
             "exercised_joint_range_deg": {
                 name: float(deg) for name, deg in self.exercised_joint_range_deg.items()
             },
-            "max_cuff_error_m": float(error_m) if math.isfinite(error_m) else None,
+            "max_cuff_error_m": number(self.max_cuff_error_m),
             "within_rom": bool(self.within_rom),
             "finite": bool(self.finite),
-            **{name: (value if math.isfinite(value) else None)
-               for name, value in self.extras.items()},
+            "max_rom_excess_deg": number(self.max_rom_excess_deg),
+            "max_robot_torque_nm": number(self.max_robot_torque_nm),
         }
 
 
@@ -129,10 +130,8 @@ def run_preset(
     report.max_cuff_error_m = float(result.max_cuff_error_m)
     report.within_rom = bool(result.within_rom)
     report.finite = bool(result.finite)
-    for name in OPTIONAL_RESULT_FIELDS:
-        value = getattr(result, name, None)
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            report.extras[name] = float(value)
+    report.max_rom_excess_deg = float(result.max_rom_excess_deg)
+    report.max_robot_torque_nm = float(result.max_robot_torque_nm)
     return report
 
 
