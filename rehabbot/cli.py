@@ -7,6 +7,7 @@ Examples::
     rehabbot view upper_right --seconds 5          # step 5 s of physics in real time, then exit
     rehabbot snapshot upper_right --out front.png --width 1280 --height 720
     rehabbot snapshot upper_right --out tall.png --profile-height 1.95 --profile-mass 95
+    rehabbot view upper_right --menagerie ~/mujoco_menagerie   # real UR5e meshes (optional)
 
 Exit codes: 0 success, 1 runtime failure (no display, unwritable file, missing optional
 dependency), 2 bad usage (unknown scene or camera, invalid patient profile, image too large).
@@ -93,7 +94,11 @@ def _load_scene(args: argparse.Namespace) -> Scene:
         )
     try:
         profile = _profile_from_args(args)
-        return build_scene(args.scene, profile=profile, weight_level=args.weight_level)
+        options = {}
+        if getattr(args, "menagerie", None) is not None:
+            options["menagerie_dir"] = args.menagerie
+        return build_scene(args.scene, profile=profile, weight_level=args.weight_level,
+                           **options)
     except ValueError as err:
         raise CliError(str(err), EXIT_USAGE) from err
 
@@ -245,6 +250,11 @@ def _add_scene_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--weight-level", type=int, default=0, metavar="L",
         help="wrist weight level of the exercise (default: 0, no weight)",
+    )
+    parser.add_argument(
+        "--menagerie", metavar="DIR",
+        help="draw the UR5e with the meshes of a local mujoco_menagerie checkout (looks only; "
+             "nothing is downloaded)",
     )
 
 

@@ -100,12 +100,18 @@ class UR5eOptions:
 
     ``cuff_offset_m`` is the distance along the flange's z axis from the flange to the centre of
     the cuff that holds the patient's wrist or ankle.
+
+    ``menagerie_dir`` (optional, looks only): a local MuJoCo Menagerie checkout, its
+    ``universal_robots_ur5e`` folder or its ``ur5e.xml``; if given, the arm is drawn with the
+    menagerie's meshes and our own geoms keep the collisions, hidden in group 3
+    (:mod:`rehabbot.models.menagerie`). Nothing is downloaded.
     """
 
     prefix: str = ""
     gains: ImpedanceGains = field(default_factory=ImpedanceGains)
     cuff_offset_m: float = 0.09
     cuff_radius_m: float = 0.05
+    menagerie_dir: str | None = None
 
 
 def _dh_child_frame(i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -181,7 +187,8 @@ def add_ur5e(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: UR5eOptions | No
     Adds bodies ``{prefix}base``, ``{prefix}link1`` … ``{prefix}link6``; joints
     ``{prefix}<JOINT_NAMES>``; sites ``{prefix}tool`` (flange centre, z out of the flange) and
     ``{prefix}cuff`` (cuff centre, same orientation); actuators ``{prefix}<joint>_servo`` and
-    ``{prefix}<joint>_motor``.
+    ``{prefix}<joint>_motor``. With ``opts.menagerie_dir`` set, also the menagerie's visual
+    mesh geoms ``{prefix}menagerie_<body>_<k>``.
     """
     opts = opts or UR5eOptions()
     p = opts.prefix
@@ -239,6 +246,11 @@ def add_ur5e(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: UR5eOptions | No
         motor.gainprm[0] = 1.0
         motor.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         motor.ctrlrange = [-TORQUE_LIMIT_NM[i], TORQUE_LIMIT_NM[i]]
+
+    if opts.menagerie_dir is not None:
+        from rehabbot.models.menagerie import add_menagerie_visuals  # optional, loaded on demand
+
+        add_menagerie_visuals(spec, p, opts.menagerie_dir)
     return base
 
 

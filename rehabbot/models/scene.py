@@ -23,6 +23,7 @@ Physics choices (all documented in ``docs/physics.md``):
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 import mujoco
@@ -75,6 +76,9 @@ class SceneOptions:
     ``posture_hold_hz``          natural frequency of the posture-holding joint springs
     ``furniture_gap_m``          clearance between resting body and seat/bed at home
     ``initial_pose_deg``         overrides of the patient's home joint angles [deg]
+    ``menagerie_dir``            optional local MuJoCo Menagerie checkout (``~`` expanded):
+                                 draw the robots with its UR5e meshes (looks only;
+                                 collisions stay on our capsules; nothing is downloaded)
     ============================ =========================================================
     """
 
@@ -87,6 +91,7 @@ class SceneOptions:
     posture_hold_hz: float = 6.0
     furniture_gap_m: float = 0.003
     initial_pose_deg: tuple[tuple[str, float], ...] = ()
+    menagerie_dir: str | None = None
 
     def __post_init__(self) -> None:
         _check_choice("cuff", self.cuff, CUFF_TYPES)
@@ -99,6 +104,19 @@ class SceneOptions:
         _check_finite_range("posture_hold_hz", self.posture_hold_hz, 0.5, 20.0)
         _check_finite_range("furniture_gap_m", self.furniture_gap_m, 0.0, 0.05)
         _check_pose(dict(self.initial_pose_deg), "initial_pose_deg")
+        if self.menagerie_dir is not None:
+            _check_menagerie_dir(self.menagerie_dir)
+
+
+def _check_menagerie_dir(path) -> None:
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"menagerie_dir={path!r} must be a path (str) or None")
+    from rehabbot.models.menagerie import find_menagerie_ur5e  # optional, loaded on demand
+
+    try:
+        find_menagerie_ur5e(path)
+    except FileNotFoundError as err:
+        raise ValueError(f"menagerie_dir={str(path)!r}: {err}") from err
 
 
 def _check_pose(pose_deg: dict, what: str = "pose_deg") -> None:
@@ -416,8 +434,9 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
         _add_cylinder(stand, f"{prefix}stand_foot", (0, 0, 0.0), (0, 0, 0.03), 0.28, _METAL)
         _add_cylinder(stand, f"{prefix}stand_plate", (0, 0, base_pos[2] - 0.02),
                       (0, 0, base_pos[2]), 0.1, _METAL)
-        ur.add_ur5e(spec.worldbody, spec, ur.UR5eOptions(prefix=prefix, gains=opts.gains),
-                    pos=base_pos, quat=_yaw_quat(yaw))
+        robot_opts = ur.UR5eOptions(prefix=prefix, gains=opts.gains,
+                                    menagerie_dir=opts.menagerie_dir)
+        ur.add_ur5e(spec.worldbody, spec, robot_opts, pos=base_pos, quat=_yaw_quat(yaw))
         cuffed = pt.LIMB_BODIES[limb][1:]  # forearm+hand, or shank+foot
         for link in ("link4", "link5", "link6"):
             for body in cuffed:
