@@ -299,8 +299,6 @@ class PatientGeometry:
     shoulder_l: np.ndarray
     hip_r: np.ndarray
     hip_l: np.ndarray
-    pelvis_radius_m: float
-    thigh_radius_m: float
     torso_half_depth_m: float
 
 
@@ -434,7 +432,5 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
         shoulder_l=np.array([0, shoulder_y, z_shoulder - z_xyph]),
         hip_r=np.array([0, -hip_y, -mpt.length_m - lpt.length_m]),
         hip_l=np.array([0, hip_y, -mpt.length_m - lpt.length_m]),
-        pelvis_radius_m=pelvis_r,
-        thigh_radius_m=seg["thigh"].capsule_radius_m,
         torso_half_depth_m=chest_depth,
     )
