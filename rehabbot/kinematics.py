@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from rehabbot import statics
+
 if TYPE_CHECKING:
     from rehabbot.models.scene import RobotHandle, Scene
 
@@ -98,8 +100,6 @@ def coupled_path(scene: Scene, patient_deg: np.ndarray, dt_s: float) -> CoupledP
     one continuous branch; the servo setpoints add the static preload that carries the limb
     there (:mod:`rehabbot.statics`).
     """
-    from rehabbot import statics
-
     model = scene.model
     data = mujoco.MjData(model)
     data.qpos[:] = scene.home_qpos

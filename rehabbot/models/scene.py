@@ -668,8 +668,8 @@ def _cuff_target(model, data, handle) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _ik_seed(model, data, handle) -> np.ndarray:
-    """An elbow-up seed pointing the arm at the cuff."""
-    mujoco.mj_kinematics(model, data)
+    """An elbow-up seed pointing the arm at the cuff (``data`` holds current kinematics of the
+    base and the patient's cuff)."""
     base = data.xpos[handle.base_body_id]
     rot = data.xmat[handle.base_body_id].reshape(3, 3)
     rel = rot.T @ (data.site_xpos[handle.patient_cuff_site_id] - base)
