@@ -18,11 +18,15 @@ $(VENV): $(STAMP)
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON_BOOTSTRAP) -m venv $(VENV)
 	$(PY) -m pip install --upgrade pip
-	$(PY) -m pip install -e ".[dev,video]"
+	$(PY) -m pip install -e ".[dev,video,train]"
 	touch $(STAMP)
 
+# Without a display, the suite runs under Xvfb so that the `human` render mode (MuJoCo's
+# viewer) is tested too.
+XVFB := $(if $(DISPLAY),,$(shell command -v xvfb-run >/dev/null 2>&1 && echo xvfb-run -a))
+
 test: $(STAMP)
-	MUJOCO_GL=$(MUJOCO_GL) $(PY) -m pytest -q
+	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q
 
 demo: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(PY) -m rehabbot.demo --out runs/demo
@@ -32,6 +36,7 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) benchmarks/physics_throughput.py
+	$(PY) benchmarks/step_throughput.py
 
 # The README's scene pictures, rendered by our own code.
 images: $(STAMP)

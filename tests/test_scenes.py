@@ -76,7 +76,7 @@ def test_weight_levels_scale_exactly_the_exercised_limb(preset):
                             {h.limb for h in scene.robots}
                             for b in pt.LIMB_BODIES[limb_name]}
     assert limb == expected_limb_bodies
-    for level, factor in zip(sc.WEIGHT_LEVELS, sc.WEIGHT_FACTORS, strict=False):
+    for level, factor in zip(sc.WEIGHT_LEVELS, sc.weight_factors(preset), strict=True):
         scene.set_weight_level(level)
         for body in range(model.nbody):
             if body in limb:
@@ -85,7 +85,8 @@ def test_weight_levels_scale_exactly_the_exercised_limb(preset):
                                            inertia0[body] / mass0[body])
             else:
                 assert model.body_mass[body] == mass0[body]
-    assert sc.WEIGHT_FACTORS[0] == 1.0 and sorted(sc.WEIGHT_FACTORS) == list(sc.WEIGHT_FACTORS)
+    factors = sc.weight_factors(preset)
+    assert factors[0] == 1.0 and sorted(factors) == list(factors) and len(set(factors)) == 5
 
 
 def test_weight_level_at_reset_equals_weight_level_at_build():

@@ -68,6 +68,10 @@ LINK_INERTIA_KGM2 = np.array(
 BASE_MASS_KG = 4.0
 TORQUE_LIMIT_NM = np.array([150.0, 150.0, 150.0, 28.0, 28.0, 28.0])
 JOINT_RANGE_RAD = np.array([2 * np.pi, 2 * np.pi, np.pi, 2 * np.pi, 2 * np.pi, 2 * np.pi])
+# Actuator groups: MuJoCo can switch a whole group off (``model.opt.disableactuator``), which
+# is how the torque control mode removes the impedance servos.
+SERVO_ACTUATOR_GROUP = 1
+MOTOR_ACTUATOR_GROUP = 2
 MAX_JOINT_SPEED_RAD_S = np.pi  # 180 deg/s on all six joints
 ARMATURE_KGM2 = np.array([0.1, 0.1, 0.1, 0.05, 0.05, 0.05])
 
@@ -232,6 +236,7 @@ def add_ur5e(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: UR5eOptions | No
         kv = float(opts.gains.kv_nms_per_rad[i])
         servo = spec.add_actuator(name=f"{p}{joint_name}_servo", target=f"{p}{joint_name}",
                                   trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        servo.group = SERVO_ACTUATOR_GROUP
         servo.gaintype = mujoco.mjtGain.mjGAIN_FIXED
         servo.biastype = mujoco.mjtBias.mjBIAS_AFFINE
         servo.gainprm[0] = kp
@@ -242,6 +247,7 @@ def add_ur5e(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: UR5eOptions | No
         servo.forcerange = [-TORQUE_LIMIT_NM[i], TORQUE_LIMIT_NM[i]]
         motor = spec.add_actuator(name=f"{p}{joint_name}_motor", target=f"{p}{joint_name}",
                                   trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        motor.group = MOTOR_ACTUATOR_GROUP
         motor.gaintype = mujoco.mjtGain.mjGAIN_FIXED
         motor.gainprm[0] = 1.0
         motor.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE

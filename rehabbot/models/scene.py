@@ -45,8 +45,21 @@ POSTURES = ("seated", "supine")
 CUFF_TYPES = ("connect", "weld")
 SIDES = ("right", "left")
 WEIGHT_LEVELS = (0, 1, 2, 3, 4)
-# Weight level l multiplies the exercised limb's segment masses (and inertias) by this factor.
-WEIGHT_FACTORS: tuple[float, ...] = (1.0, 1.25, 1.5, 1.75, 2.0)
+# Weight level l multiplies the exercised limb's segment masses (and inertias) by a factor.
+# Arms: up to x2 (the paper's "weight of the arm the robot has to lift"). Legs: up to x1.4; a
+# leg is already ~16 % of body mass (a x2 leg of a 75 kg patient is 24 kg), and at x1.4 a
+# supine straight-leg raise held above the ankle stays inside the ISO/TS 15066 lower-leg
+# force limit (130 N) with room for tracking errors.
+WEIGHT_FACTORS_BY_LIMB: dict[str, tuple[float, ...]] = {
+    "arm": (1.0, 1.25, 1.5, 1.75, 2.0),
+    "leg": (1.0, 1.1, 1.2, 1.3, 1.4),
+}
+WEIGHT_FACTORS: tuple[float, ...] = WEIGHT_FACTORS_BY_LIMB["arm"]
+
+
+def weight_factors(preset: str) -> tuple[float, ...]:
+    """The mass factors of weight levels 0..4 for ``preset``'s exercised limb."""
+    return WEIGHT_FACTORS_BY_LIMB["arm" if preset.startswith("upper") else "leg"]
 
 CONTYPE_FURNITURE, CONAFFINITY_FURNITURE = 0, 3
 
@@ -202,7 +215,7 @@ class Scene:
         Inertia is scaled with mass (constant inertia/mass ratio); no recompilation.
         """
         level = check_weight_level(level)
-        factor = WEIGHT_FACTORS[level]
+        factor = weight_factors(self.preset)[level]
         ids = self.limb_body_ids
         self.model.body_mass[ids] = self.nominal_body_mass[ids] * factor
         self.model.body_inertia[ids] = self.nominal_body_inertia[ids] * factor

@@ -1,0 +1,349 @@
+"""The four paper environments: registry, spaces, targets, reward, info, reset draws, API."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import rehabbot
+from rehabbot import exercises as ex
+from rehabbot.env import P_STAR, PHI, THETA, THETA_STAR, P, RehabEnv
+from rehabbot.experts import ScriptedExpert
+from rehabbot.registration import ENV_SPECS
+
+PAPER_IDS = tuple(ENV_SPECS)
+INFO_KEYS = {"is_success", "target_index", "safety_violation", "reward_distance",
+             "reward_bonus", "reward_safety", "reward_smoothness", "reward_effort",
+             "interaction_force_n", "robot_torque_nm", "patient_qpos", "exercise",
+             "weight_level", "action_clipped", "num_targets"}
+REWARD_TERMS = ("reward_distance", "reward_bonus", "reward_safety", "reward_smoothness",
+                "reward_effort")
+
+
+@pytest.fixture(scope="module")
+def envs():
+    made = {env_id: gym.make(env_id) for env_id in PAPER_IDS}
+    yield made
+    for env in made.values():
+        env.close()
+
+
+def test_the_four_paper_ids_are_registered_as_kwargs_of_one_class():
+    assert set(PAPER_IDS) == {"rehabbot/rehab-reach-v0", "rehabbot/rehab-reach-l-v0",
+                              "rehabbot/rehab-hip-v0", "rehabbot/rehab-knee-v0"}
+    for env_id in PAPER_IDS:
+        spec = gym.spec(env_id)
+        assert spec.entry_point == "rehabbot.env:RehabEnv"
+        assert spec.max_episode_steps == 1000
+    expected = {
+        "rehabbot/rehab-reach-v0": ("arm", "right", "reaching"),
+        "rehabbot/rehab-reach-l-v0": ("arm", "left", "trajectory"),
+        "rehabbot/rehab-hip-v0": ("hip", "right", "reaching"),
+        "rehabbot/rehab-knee-v0": ("knee", "right", "trajectory"),
+    }
+    for env_id, (limb, side, task) in expected.items():
+        kwargs = gym.spec(env_id).kwargs
+        assert (kwargs["limb"], kwargs["side"], kwargs["task_type"]) == (limb, side, task)
+
+
+def test_every_registered_rehabbot_id_constructs_resets_and_steps():
+    ids = [i for i in gym.registry if i.startswith("rehabbot/")]
+    assert len(ids) >= 4
+    for env_id in ids:
+        env = gym.make(env_id)
+        obs, _info = env.reset(seed=0)
+        obs2, reward, _terminated, _truncated, _info = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs) and env.observation_space.contains(obs2)
+        assert math.isfinite(reward)
+        env.close()
+
+
+def test_registration_is_idempotent():
+    before = len(gym.registry)
+    rehabbot.register_envs()
+    assert len(gym.registry) == before
+
+
+def test_paper_spaces(envs):
+    for env in envs.values():
+        space = env.action_space
+        assert isinstance(space, gym.spaces.Box) and space.dtype == np.float32
+        assert space.shape == (6,)
+        np.testing.assert_array_equal(space.low, np.float32(-math.pi / 400))
+        np.testing.assert_array_equal(space.high, np.float32(math.pi / 400))
+        obs_space = env.observation_space
+        assert obs_space.shape == (23,) and obs_space.dtype == np.float32
+        assert env.unwrapped.dt_s == pytest.approx(0.02)
+        assert env.metadata["render_fps"] == 50
+
+
+def test_model_and_data_are_exposed(envs):
+    env = envs["rehabbot/rehab-reach-v0"].unwrapped
+    assert isinstance(env.model, mujoco.MjModel) and isinstance(env.data, mujoco.MjData)
+
+
+@pytest.mark.parametrize("mode", ["joint_position", "joint_velocity", "torque"])
+def test_other_control_modes_have_honest_spaces(mode):
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode=mode)
+    base = env.unwrapped
+    space = env.action_space
+    if mode == "joint_position":
+        np.testing.assert_allclose(space.low, base.setpoint_low_rad, rtol=1e-6)
+        np.testing.assert_allclose(space.high, base.setpoint_high_rad, rtol=1e-6)
+    elif mode == "joint_velocity":
+        np.testing.assert_allclose(space.high, 0.5)
+    else:
+        np.testing.assert_array_equal(space.high, 1.0)
+        # Servos are off: the action is the only robot torque besides gravity compensation.
+        assert base.model.opt.disableactuator == 1 << 1
+    obs, _ = env.reset(seed=3)
+    for _ in range(20):
+        obs, _reward, terminated, _, _info = env.step(space.sample())
+        assert env.observation_space.contains(obs)
+        if terminated:
+            obs, _ = env.reset()
+
+
+def test_joint_delta_moves_the_setpoint_by_the_action_and_keeps_it_in_bounds():
+    env = gym.make("rehabbot/rehab-reach-v0").unwrapped
+    env.reset(seed=0)
+    servo = env.handle.servo_ids
+    before = env.data.ctrl[servo].copy()
+    action = np.array([1, -1, 1, -1, 1, -1], np.float32) * np.float32(math.pi / 800)
+    env.step(action)
+    np.testing.assert_allclose(env.data.ctrl[servo] - before, action, atol=1e-7)
+    for _ in range(400):  # push one joint against its bound
+        env.step(np.array([math.pi / 400, 0, 0, 0, 0, 0], np.float32))
+    assert env.data.ctrl[servo[0]] <= env.setpoint_high_rad[0] + 1e-12
+
+
+def test_torque_mode_maps_action_to_the_joint_torque_limits():
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque").unwrapped
+    env.reset(seed=0)
+    env.step(np.array([0.5, 0, 0, 0, 0, -1.0], np.float32))
+    motors = env.data.ctrl[env.handle.motor_ids]
+    np.testing.assert_allclose(motors, [75.0, 0, 0, 0, 0, -28.0])
+
+
+# -- exercises and targets ------------------------------------------------------------------
+def test_targets_are_feasible_distinct_and_inside_the_bounds(envs):
+    for env_id, env in envs.items():
+        base = env.unwrapped
+        home = base.scene.home_qpos[base.handle.qpos_adr]
+        jnt = [base.model.joint(n).id for n in base.scene.exercised_joints]
+        rom = np.degrees(base.model.jnt_range[jnt])
+        for seq in base.targets:
+            assert seq.task_type == ENV_SPECS[env_id][0]["task_type"]
+            robot = np.vstack([home, seq.robot_rad])
+            steps = np.max(np.abs(np.diff(robot, axis=0)), axis=1)
+            assert steps.min() >= 0.1 - 1e-9, "no duplicate consecutive targets, first != start"
+            assert np.all(seq.robot_rad >= base.setpoint_low_rad)
+            assert np.all(seq.robot_rad <= base.setpoint_high_rad)
+            assert np.all(seq.ik_error_m < 1e-4), "every target is reachable with the cuff on"
+            assert np.all(seq.patient_deg >= rom[:, 0]) and np.all(seq.patient_deg <= rom[:, 1])
+            assert ex.within_table3(base.scene, base.limb, seq.patient_deg)
+            if seq.task_type == "reaching":
+                assert len(seq) == 6
+            else:
+                assert len(seq) >= 15, "trajectory following uses dense waypoints"
+
+
+def test_trajectory_waypoints_follow_a_minimum_jerk_profile():
+    start = np.array([90.0, 4.0, 90.0])
+    keys = np.array([[90.0, 4.0, 30.0]])
+    points, is_key = ex.trajectory_samples(start, keys, segment_s=3.0, waypoint_dt_s=0.1)
+    assert is_key[-1] and is_key.sum() == 1
+    tau = np.arange(1, 31) / 30
+    expected = 90.0 - 60.0 * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)
+    np.testing.assert_allclose(points[:, 2], expected)
+    # Thinning keeps the key pose and spaces the rest.
+    keep = ex.thin_waypoints(start, points, is_key, min_spacing=5.0)
+    kept = points[keep]
+    assert keep[-1] == len(points) - 1
+    assert np.min(np.max(np.abs(np.diff(np.vstack([start, kept]), axis=0)), axis=1)) >= 5.0
+
+
+def test_setpoint_bounds_cover_table3_workspace_and_stay_in_ur5e_ranges(envs):
+    for env in envs.values():
+        base = env.unwrapped
+        grid = ex.workspace_grid_deg(base.scene, base.limb)
+        assert ex.within_table3(base.scene, base.limb, grid)
+        assert np.all(base.setpoint_low_rad > -2 * math.pi)
+        assert np.all(base.setpoint_high_rad < 2 * math.pi)
+        # The robot's joint limits were narrowed around the setpoint bounds.
+        jnt = base.model.dof_jntid[base.handle.dof_adr]
+        assert np.all(base.model.jnt_range[jnt, 0] < base.setpoint_low_rad)
+        assert np.all(base.model.jnt_range[jnt, 1] > base.setpoint_high_rad)
+
+
+def test_observation_layout_matches_the_state(envs):
+    env = envs["rehabbot/rehab-reach-v0"]
+    base = env.unwrapped
+    obs, _info = env.reset(seed=0, options={"exercise": 1, "weight_level": 2})
+    seq = base.target_sequence
+    np.testing.assert_allclose(obs[THETA_STAR], seq.robot_rad[0], atol=1e-6)
+    np.testing.assert_allclose(obs[P_STAR], seq.tool_pos_base_m[0], atol=1e-6)
+    np.testing.assert_allclose(obs[THETA], base.data.qpos[base.handle.qpos_adr], atol=1e-6)
+    np.testing.assert_allclose(obs[PHI], base.data.qpos[base.scene.exercised_qpos_adr],
+                               atol=1e-6)
+    assert obs[21] == 1 and obs[22] == 2
+    # Tool position in the robot base frame: its distance from the base equals the world one.
+    world = base.data.site_xpos[base.handle.tool_site_id] - \
+        base.data.xpos[base.handle.base_body_id]
+    assert np.linalg.norm(obs[P]) == pytest.approx(np.linalg.norm(world), abs=1e-6)
+    # The target tool position is the flange at theta*.
+    data = mujoco.MjData(base.model)
+    data.qpos[:] = base.scene.home_qpos
+    data.qpos[base.handle.qpos_adr] = seq.robot_rad[0]
+    mujoco.mj_kinematics(base.model, data)
+    rot = data.xmat[base.handle.base_body_id].reshape(3, 3)
+    p_star = rot.T @ (data.site_xpos[base.handle.tool_site_id]
+                      - data.xpos[base.handle.base_body_id])
+    np.testing.assert_allclose(obs[P_STAR], p_star, atol=1e-6)
+
+
+def _rollout(env, policy, steps, seed):
+    obs, info = env.reset(seed=seed)
+    records = [(obs, None, info)]
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        records.append((obs, reward, info))
+        if terminated or truncated:
+            obs, info = env.reset()
+            records.append((obs, None, info))
+    return records
+
+
+@pytest.mark.parametrize("mode", ["joint_delta", "torque"])
+def test_observations_stay_in_bounds_and_reward_is_the_sum_of_its_terms(mode):
+    for env_id in PAPER_IDS:
+        env = gym.make(env_id, control_mode=mode, smoothness_weight=0.3, effort_weight=0.2)
+        env.action_space.seed(1)
+        records = _rollout(env, lambda _obs, env=env: env.action_space.sample(), 300, seed=1)
+        if mode == "joint_delta":
+            expert = ScriptedExpert(env)
+            records += _rollout(env, lambda obs, expert=expert: expert(obs), 300, seed=2)
+        for obs, reward, info in records:
+            assert env.observation_space.contains(obs), (env_id, obs)
+            assert set(info) >= INFO_KEYS
+            assert info["robot_torque_nm"].shape == (6,)
+            assert info["patient_qpos"].shape == (21,)
+            if reward is not None:
+                assert reward == pytest.approx(sum(info[k] for k in REWARD_TERMS), abs=1e-9)
+                assert info["reward_smoothness"] <= 0 and info["reward_effort"] <= 0
+
+
+def test_reward_is_equation_5():
+    env = gym.make("rehabbot/rehab-reach-v0", exercise=0, weight_level=0).unwrapped
+    env.reset(seed=0)
+    expert = ScriptedExpert(env)
+    obs = env._observation()
+    bonuses = []
+    while True:
+        target = env.target_sequence.robot_rad[env.target_index].copy()
+        last = env.target_index == len(env.target_sequence) - 1
+        obs, _reward, terminated, truncated, info = env.step(expert(obs))
+        theta = env.data.qpos[env.handle.qpos_adr]
+        error = theta - target
+        assert info["reward_distance"] == pytest.approx(-np.linalg.norm(error), abs=1e-12)
+        reached = np.max(np.abs(error)) < 0.05
+        assert info["reward_bonus"] == (100.0 if last else 10.0) * reached
+        bonuses.append(info["reward_bonus"])
+        if terminated or truncated:
+            break
+    assert info["is_success"] and terminated
+    assert bonuses.count(10.0) == 5 and bonuses.count(100.0) == 1
+
+
+def test_extra_reward_terms_are_zero_in_the_paper_ids(envs):
+    for env in envs.values():
+        env.reset(seed=0)
+        for _ in range(5):
+            _, _, _, _, info = env.step(env.action_space.sample())
+            assert info["reward_smoothness"] == 0.0 and info["reward_effort"] == 0.0
+
+
+# -- reset draws --------------------------------------------------------------------------------
+def test_reset_draws_exercise_and_weight_level_from_the_seed(envs):
+    env = envs["rehabbot/rehab-hip-v0"]
+    draws = {}
+    for seed in range(12):
+        _, info = env.reset(seed=seed)
+        draws[seed] = (info["exercise"], info["weight_level"])
+        _, again = env.reset(seed=seed)
+        assert (again["exercise"], again["weight_level"]) == draws[seed]
+    assert len(set(draws.values())) > 3
+    assert {e for e, _ in draws.values()} == {0, 1}
+
+
+def test_reset_options_and_constructor_kwargs_fix_the_draws(envs):
+    env = envs["rehabbot/rehab-reach-v0"]
+    for seed in range(4):
+        obs, info = env.reset(seed=seed, options={"exercise": 1, "weight_level": 4})
+        assert (info["exercise"], info["weight_level"]) == (1, 4)
+        assert obs[21] == 1 and obs[22] == 4
+    fixed = gym.make("rehabbot/rehab-reach-v0", exercise=0, weight_level=3)
+    for seed in range(4):
+        _, info = fixed.reset(seed=seed)
+        assert (info["exercise"], info["weight_level"]) == (0, 3)
+    # The weight level changes the limb's mass.
+    base = fixed.unwrapped
+    mass3 = base.model.body_mass[base.scene.limb_body_ids].sum()
+    fixed.reset(options={"weight_level": 0})
+    mass0 = base.model.body_mass[base.scene.limb_body_ids].sum()
+    assert mass3 / mass0 == pytest.approx(1.75)
+
+
+def test_every_variant_is_reachable_by_kwargs():
+    for limb in ex.LIMBS:
+        for side in ("right", "left"):
+            for task in ex.TASK_TYPES:
+                env = RehabEnv(limb=limb, side=side, task_type=task,
+                               profile={"height_m": 1.6, "mass_kg": 60, "sex": "female"},
+                               weight_level=1)
+                obs, _info = env.reset(seed=0)
+                assert env.observation_space.contains(obs)
+                assert env.scene.profile.sex == "female"
+                assert env.scene.exercised_joints[0].endswith("_r" if side == "right" else "_l")
+
+
+@pytest.mark.parametrize("kwargs, word", [
+    ({"limb": "neck"}, "limb"), ({"side": "middle"}, "side"), ({"task_type": "dance"}, "task"),
+    ({"control_mode": "telepathy"}, "control_mode"), ({"weight_level": 7}, "weight_level"),
+    ({"exercise": 2}, "exercise"), ({"profile": {"height_m": 3.0}}, "height"),
+    ({"render_mode": "ascii"}, "render_mode"), ({"camera_name": "ceiling"}, "camera_name"),
+    ({"frame_skip": 0}, "frame_skip"), ({"target_tolerance_rad": float("nan")}, "tolerance"),
+    ({"cuff_force_limit_n": -1.0}, "cuff_force_limit_n"),
+])
+def test_bad_kwargs_raise_value_error_naming_the_value(kwargs, word):
+    with pytest.raises(ValueError, match=word):
+        gym.make("rehabbot/rehab-reach-v0", **kwargs)
+
+
+def test_bad_reset_options_raise(envs):
+    env = envs["rehabbot/rehab-reach-v0"]
+    with pytest.raises(ValueError, match="exercise"):
+        env.reset(options={"exercise": 5})
+    with pytest.raises(ValueError, match="weight_level"):
+        env.reset(options={"weight_level": -1})
+    with pytest.raises(ValueError, match="unknown reset options"):
+        env.reset(options={"speed": 3})
+
+
+def test_bad_actions_raise_value_error_and_out_of_bound_actions_are_clipped_and_counted(envs):
+    env = envs["rehabbot/rehab-reach-v0"]
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"indices \[1, 4\]"):
+        env.step(np.array([0, np.nan, 0, 0, np.inf, 0], np.float32))
+    with pytest.raises(ValueError, match=r"expected \(6,\)"):
+        env.step(np.zeros(5, np.float32))
+    _, _, _, _, info = env.step(np.array([1.0, 0, 0, 0, 0, -1.0]))  # float64, too large
+    assert info["action_clipped"] == 2
+    base = env.unwrapped
+    setpoint = base.controller.setpoint_rad.copy()
+    env.step([0.001, 0, 0, 0, 0, 0])  # a list within bounds is accepted
+    assert base.controller.setpoint_rad[0] - setpoint[0] == pytest.approx(0.001)

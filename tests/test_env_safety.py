@@ -1,0 +1,132 @@
+"""Safety terminations: each rule provoked, its penalty, and the expert never triggering one."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+from rehabbot.models import robot as ur
+from rehabbot.safety import ISO_TS_15066_QUASI_STATIC_N, RULES
+
+
+def _run_until_terminated(env, policy, max_steps=300):
+    for _ in range(max_steps):
+        _obs, reward, terminated, truncated, info = env.step(policy())
+        if terminated or truncated:
+            return reward, info
+    raise AssertionError("the episode did not end")
+
+
+def _assert_safety_penalty(env, reward, info):
+    base = env.unwrapped
+    steps_left = base.max_episode_steps - base._steps + 1
+    assert info["reward_safety"] == pytest.approx(steps_left * base.worst_step_reward)
+    # Never better than continuing: at least the worst return of the remaining steps.
+    theta_space = base.observation_space
+    worst_distance = np.linalg.norm(np.maximum(theta_space.high[9:15] - theta_space.low[0:6],
+                                               theta_space.high[0:6] - theta_space.low[9:15]))
+    assert info["reward_safety"] <= -worst_distance * (steps_left - 1)
+    assert not info["is_success"]
+    assert reward == pytest.approx(info["reward_distance"] + info["reward_safety"])
+
+
+def _pull_cuff_away_from_shoulder(base, scale):
+    """Torque-mode policy: J^T F with F pulling the hand away from the shoulder (extends the
+    elbow), normalised to the joint torque limits."""
+    model, data = base.model, base.data
+    jac = np.zeros((3, model.nv))
+    shoulder = data.xpos[model.body("upper_arm_r").id]
+
+    def policy():
+        hand = data.site_xpos[base.handle.cuff_site_id]
+        direction = (hand - shoulder) / np.linalg.norm(hand - shoulder)
+        mujoco.mj_jacSite(model, data, jac, None, base.handle.cuff_site_id)
+        torque = jac[:, base.handle.dof_adr].T @ (scale * direction)
+        return np.clip(torque / ur.TORQUE_LIMIT_NM, -1, 1).astype(np.float32)
+
+    return policy
+
+
+def test_forcing_the_elbow_into_hyperextension_ends_with_range_of_motion():
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", cuff_force_limit_n=1e5,
+                   contact_tolerance_m=1.0)
+    base = env.unwrapped
+    env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))
+    assert info["safety_violation"] == "range_of_motion"
+    elbow = base.data.qpos[base.model.joint("elbow_flexion_r").qposadr[0]]
+    assert math.degrees(elbow) < -2.0, "the elbow is hyperextended past its 0 deg limit"
+    _assert_safety_penalty(env, reward, info)
+
+
+def test_cuff_force_beyond_the_iso_limit_ends_the_episode():
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
+    base = env.unwrapped
+    assert base.safety.force_limit_n == ISO_TS_15066_QUASI_STATIC_N["hands_and_fingers"] == 140
+    env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    reward, info = _run_until_terminated(env, lambda: np.array([0, -0.5, 0, 0, 0, 0],
+                                                               np.float32))
+    assert info["safety_violation"] == "cuff_force"
+    assert info["interaction_force_n"] > 140
+    _assert_safety_penalty(env, reward, info)
+
+
+def test_leg_cuff_uses_the_lower_leg_limit_and_the_threshold_is_a_kwarg():
+    assert gym.make("rehabbot/rehab-knee-v0").unwrapped.safety.force_limit_n == 130
+    env = gym.make("rehabbot/rehab-hip-v0", cuff_force_limit_n=20.0)
+    assert env.unwrapped.safety.force_limit_n == 20.0
+    _obs, info = env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    assert info["interaction_force_n"] > 20.0  # the cuff carries the supine leg at rest
+    _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
+    assert terminated and info["safety_violation"] == "cuff_force"
+
+
+def test_driving_the_robot_into_the_patient_or_furniture_is_unintended_contact():
+    env = gym.make("rehabbot/rehab-knee-v0", control_mode="torque")
+    base = env.unwrapped
+    env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    reward, info = _run_until_terminated(env, lambda: np.array([0, 0.5, 0, 0, 0, 0],
+                                                               np.float32))
+    assert info["safety_violation"] == "unintended_contact"
+    robot = set(base.scene.robot_geom_ids.tolist())
+    others = set(base.scene.patient_geom_ids.tolist()) | set(
+        base.scene.furniture_geom_ids.tolist())
+    pairs = [tuple(c.geom) for c in base.data.contact[: base.data.ncon]]
+    assert any((a in robot and b in others) or (b in robot and a in others) for a, b in pairs)
+    _assert_safety_penalty(env, reward, info)
+
+
+def test_instability_ends_the_episode_and_the_next_reset_is_healthy():
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
+    base = env.unwrapped
+    obs0, _ = env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    env.step(np.zeros(6, np.float32))
+    base.data.qvel[:] = 1e12  # a blow-up: MuJoCo detects the bad state and resets it
+    obs, reward, terminated, _, info = env.step(np.ones(6, np.float32))
+    assert terminated and info["safety_violation"] == "instability"
+    assert env.observation_space.contains(obs) and math.isfinite(reward)
+    _assert_safety_penalty(env, reward, info)
+    obs, info = env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    np.testing.assert_array_equal(obs, obs0)
+    _, reward, terminated, _, info = env.step(np.zeros(6, np.float32))
+    assert info["safety_violation"] is None and not terminated
+
+
+def test_terminate_on_safety_false_reports_without_ending():
+    env = gym.make("rehabbot/rehab-hip-v0", cuff_force_limit_n=5.0, terminate_on_safety=False)
+    env.reset(seed=0)
+    _, _reward, terminated, _, info = env.step(np.zeros(6, np.float32))
+    assert info["safety_violation"] == "cuff_force" and not terminated
+    assert info["reward_safety"] == 0.0
+
+
+def test_rules_are_documented():
+    assert RULES == ("instability", "range_of_motion", "cuff_force", "unintended_contact")
+    import rehabbot.safety as safety
+
+    for rule in RULES:
+        assert f'"{rule}"' in safety.__doc__

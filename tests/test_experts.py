@@ -1,0 +1,72 @@
+"""The scripted expert finishes every exercise of every id at every weight level, safely."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from rehabbot.experts import ScriptedExpert
+from rehabbot.registration import ENV_SPECS
+
+
+def run_expert(env, expert, exercise, level, seed=0):
+    obs, info = env.reset(seed=seed, options={"exercise": exercise, "weight_level": level})
+    steps, ret, peak_force = 0, 0.0, 0.0
+    while True:
+        action, _ = expert.predict(obs, deterministic=True)
+        obs, reward, terminated, truncated, info = env.step(action)
+        steps += 1
+        ret += reward
+        peak_force = max(peak_force, info["interaction_force_n"])
+        if terminated or truncated:
+            return steps, ret, info, peak_force
+
+
+@pytest.mark.parametrize("env_id", tuple(ENV_SPECS))
+def test_expert_finishes_every_exercise_at_every_weight_level_without_safety_events(env_id):
+    env = gym.make(env_id)
+    expert = ScriptedExpert(env)
+    limit = env.unwrapped.safety.force_limit_n
+    for exercise in (0, 1):
+        for level in range(5):
+            steps, _ret, info, peak = run_expert(env, expert, exercise, level)
+            assert info["is_success"], (env_id, exercise, level, info["safety_violation"])
+            assert info["safety_violation"] is None
+            assert steps < 1000
+            assert info["target_index"] == info["num_targets"] - 1
+            assert peak < 0.9 * limit, "the expert keeps a margin to the ISO force limit"
+
+
+@pytest.mark.parametrize("mode", ["joint_velocity", "joint_position"])
+def test_expert_works_in_setpoint_modes(mode):
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode=mode)
+    steps, _, info, _ = run_expert(env, ScriptedExpert(env), exercise=1, level=2)
+    assert info["is_success"] and steps < 1000
+
+
+def test_expert_refuses_torque_mode_and_bad_parameters():
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
+    with pytest.raises(ValueError, match="torque"):
+        ScriptedExpert(env)
+    with pytest.raises(ValueError, match="gain"):
+        ScriptedExpert(gym.make("rehabbot/rehab-reach-v0"), gain=0.0)
+
+
+def test_expert_predicts_batches_within_the_action_space():
+    env = gym.make("rehabbot/rehab-reach-v0")
+    expert = ScriptedExpert(env)
+    obs, _ = env.reset(seed=0)
+    batch = np.stack([obs, obs])
+    actions, state = expert.predict(batch)
+    assert actions.shape == (2, 6) and state is None
+    assert all(env.action_space.contains(a) for a in actions)
+    np.testing.assert_array_equal(actions[0], expert.predict(obs)[0])
+
+
+def test_expert_is_evaluated_by_stable_baselines3():
+    evaluation = pytest.importorskip("stable_baselines3.common.evaluation")
+    monitor = pytest.importorskip("stable_baselines3.common.monitor")
+    env = monitor.Monitor(gym.make("rehabbot/rehab-reach-v0", exercise=0, weight_level=0))
+    mean, std = evaluation.evaluate_policy(ScriptedExpert(env), env, n_eval_episodes=2)
+    assert mean > 0 and std == pytest.approx(0.0, abs=1e-6)
