@@ -87,7 +87,11 @@ class JointDeltaController(Controller):
         return spaces.Box(-self.delta_max_rad, self.delta_max_rad, (6,), np.float32)
 
     def apply(self, action, data):
-        self._set(self.setpoint_rad + action, data)
+        setpoint = self.setpoint_rad
+        np.add(setpoint, action, out=setpoint)
+        np.maximum(setpoint, self.low_rad, out=setpoint)
+        np.minimum(setpoint, self.high_rad, out=setpoint)
+        self._ctrl[self._servo] = setpoint
 
 
 class JointPositionController(Controller):

@@ -287,6 +287,8 @@ class RehabEnv(gym.Env):
         self._action_high = self.action_space.high.astype(float)
         self._action_range = self._action_high - self._action_low
         self._action_shape = self.action_space.shape
+        self._action_low32 = self.action_space.low
+        self._action_high32 = self.action_space.high
 
         # -- observation space -------------------------------------------------------------
         ex_jnt = [model.joint(n).id for n in self.scene.exercised_joints]
@@ -406,8 +408,8 @@ class RehabEnv(gym.Env):
 
         i = self._target_index
         error = self._theta - self._sequence.robot_rad[i]
-        reward_distance = -float(np.sqrt(error @ error))
-        reached = float(np.max(np.abs(error))) < self.target_tolerance_rad
+        reward_distance = -math.sqrt(float(error @ error))
+        reached = float(np.maximum.reduce(np.abs(error))) < self.target_tolerance_rad
         reward_smoothness = reward_effort = reward_safety = reward_bonus = 0.0
         if self.smoothness_weight:
             change = (action - self._prev_action) / self._action_range
@@ -486,10 +488,10 @@ class RehabEnv(gym.Env):
         return self._sequence
 
     def _check_action(self, action) -> tuple[np.ndarray, int]:
-        if type(action) is np.ndarray and action.shape == self._action_shape:
-            a = action.astype(float)
-            if (a >= self._action_low).all() and (a <= self._action_high).all():
-                return a, 0  # the common case: a valid array (NaN fails the comparisons)
+        if type(action) is np.ndarray and action.shape == self._action_shape \
+                and action.dtype == np.float32 and np.logical_and.reduce(
+                    (action >= self._action_low32) & (action <= self._action_high32)):
+            return action.astype(float), 0  # the common case (NaN fails the comparisons)
         try:
             a = np.asarray(action, dtype=float)
         except (TypeError, ValueError) as err:
@@ -522,7 +524,7 @@ class RehabEnv(gym.Env):
 
     def _inside(self, obs: np.ndarray) -> bool:
         # NaN fails both comparisons, so this also rejects non-finite values.
-        return bool(((obs >= self._obs_low32) & (obs <= self._obs_high32)).all())
+        return bool(np.logical_and.reduce((obs >= self._obs_low32) & (obs <= self._obs_high32)))
 
     def _info(self, safety_violation, is_success, force_n, terms, clipped) -> dict:
         distance, bonus, safety, smoothness, effort = terms

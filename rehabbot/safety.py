@@ -79,7 +79,9 @@ class SafetyMonitor:
         self.force_limit_n = cuff_force_limit_n(scene, thresholds)
         jnt = [model.joint(n).id for n in scene.patient_joint_names]
         tol = math.radians(thresholds.rom_tolerance_deg)
-        self._patient_qpos_adr = scene.patient_qpos_adr
+        adr = scene.patient_qpos_adr
+        contiguous = len(adr) > 0 and np.array_equal(adr, np.arange(adr[0], adr[0] + len(adr)))
+        self._patient_qpos_adr = slice(int(adr[0]), int(adr[-1]) + 1) if contiguous else adr
         self._rom_low = model.jnt_range[jnt, 0] - tol
         self._rom_high = model.jnt_range[jnt, 1] + tol
         self._is_robot = np.zeros(model.ngeom, dtype=bool)
@@ -122,7 +124,7 @@ class SafetyMonitor:
         if self.unstable(data):
             return "instability"
         q = self._qpos[self._patient_qpos_adr]
-        if (q < self._rom_low).any() or (q > self._rom_high).any():
+        if np.logical_or.reduce((q < self._rom_low) | (q > self._rom_high)):
             return "range_of_motion"
         if force_n > self.force_limit_n:
             return "cuff_force"
