@@ -47,8 +47,8 @@ class Controller:
         self.dt_s = dt_s
         self.setpoint_rad = np.zeros(6)
         self.action_space = self._make_space()
-        self._servo = _as_slice(handle.servo_ids)
-        self._motor = _as_slice(handle.motor_ids)
+        self._servo = as_index(handle.servo_ids)
+        self._motor = as_index(handle.motor_ids)
         self._ctrl = np.zeros(0)
 
     def _make_space(self) -> spaces.Box:
@@ -141,11 +141,15 @@ class TorqueController(Controller):
         self._ctrl[self._motor] = ur.TORQUE_LIMIT_NM * np.asarray(action, dtype=float)
 
 
-def _as_slice(ids: np.ndarray) -> slice | np.ndarray:
-    ids = np.asarray(ids, dtype=int)
-    if len(ids) > 1 and np.all(np.diff(ids) == ids[1] - ids[0]) and ids[1] > ids[0]:
-        return slice(int(ids[0]), int(ids[-1]) + 1, int(ids[1] - ids[0]))
-    return ids
+def as_index(indices: np.ndarray) -> slice | np.ndarray:
+    """A slice equal to ``indices`` when they form an increasing arithmetic progression (reads
+    are views, writes are faster), else the indices themselves."""
+    idx = np.asarray(indices, dtype=int)
+    if len(idx) == 1:
+        return slice(int(idx[0]), int(idx[0]) + 1)
+    if len(idx) > 1 and idx[1] > idx[0] and np.all(np.diff(idx) == idx[1] - idx[0]):
+        return slice(int(idx[0]), int(idx[-1]) + 1, int(idx[1] - idx[0]))
+    return idx
 
 
 def make_controller(mode: str, handle: RobotHandle, low_rad: np.ndarray, high_rad: np.ndarray,

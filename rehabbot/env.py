@@ -120,7 +120,7 @@ from gymnasium import spaces
 
 from rehabbot import exercises as ex
 from rehabbot import overlay
-from rehabbot.control import CONTROL_MODES, make_controller
+from rehabbot.control import CONTROL_MODES, as_index, make_controller
 from rehabbot.models import robot as ur
 from rehabbot.models.patient import PatientProfile
 from rehabbot.models.scene import SIDES, WEIGHT_LEVELS, build_scene, check_weight_level
@@ -138,17 +138,6 @@ ROBOT_LIMIT_SOLREF = (0.004, 1.0)  # stiff joint limits (2 x the physics step)
 _PRESET = {("arm", "right"): "upper_right", ("arm", "left"): "upper_left",
            ("hip", "right"): "hip", ("hip", "left"): "hip",
            ("knee", "right"): "knee", ("knee", "left"): "knee"}
-
-
-def as_index(indices: np.ndarray) -> slice | np.ndarray:
-    """A slice equal to ``indices`` when they form an arithmetic progression (views, no copy
-    on read, faster on write), else the indices themselves."""
-    idx = np.asarray(indices, dtype=int)
-    if len(idx) == 1 or (len(idx) > 1 and np.all(np.diff(idx) == idx[1] - idx[0])
-                         and idx[1] > idx[0]):
-        step = int(idx[1] - idx[0]) if len(idx) > 1 else 1
-        return slice(int(idx[0]), int(idx[-1]) + 1, step)
-    return idx
 
 
 def _check_number(name: str, value, low: float, high: float, integer: bool = False):

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from rehabbot.control import as_index
 from rehabbot.models.scene import Scene
 
 RULES = ("instability", "range_of_motion", "cuff_force", "unintended_contact")
@@ -79,9 +80,7 @@ class SafetyMonitor:
         self.force_limit_n = cuff_force_limit_n(scene, thresholds)
         jnt = [model.joint(n).id for n in scene.patient_joint_names]
         tol = math.radians(thresholds.rom_tolerance_deg)
-        adr = scene.patient_qpos_adr
-        contiguous = len(adr) > 0 and np.array_equal(adr, np.arange(adr[0], adr[0] + len(adr)))
-        self._patient_qpos_adr = slice(int(adr[0]), int(adr[-1]) + 1) if contiguous else adr
+        self._patient_qpos_adr = as_index(scene.patient_qpos_adr)
         self._rom_low = model.jnt_range[jnt, 0] - tol
         self._rom_high = model.jnt_range[jnt, 1] + tol
         self._is_robot = np.zeros(model.ngeom, dtype=bool)
