@@ -134,9 +134,6 @@ class TorqueController(Controller):
     def configure(self, model):
         model.opt.disableactuator = 1 << ur.SERVO_ACTUATOR_GROUP
 
-    def reset(self, data, home_setpoint_rad):
-        super().reset(data, home_setpoint_rad)
-
     def apply(self, action, data):
         self._ctrl[self._motor] = ur.TORQUE_LIMIT_NM * np.asarray(action, dtype=float)
 

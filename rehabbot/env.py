@@ -110,7 +110,6 @@ import os
 import sys
 import threading
 import time
-from dataclasses import asdict
 from typing import ClassVar
 
 import gymnasium as gym
@@ -622,6 +621,3 @@ class RehabEnv(gym.Env):
         state["_viewer_threads"] = set()
         return state
 
-    def profile_dict(self) -> dict:
-        """The patient profile as a plain dict (for manifests)."""
-        return asdict(self.profile)

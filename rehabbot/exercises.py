@@ -25,7 +25,7 @@ import numpy as np
 
 from rehabbot import statics
 from rehabbot.kinematics import CoupledPath, RobotIK, coupled_path, minimum_jerk, quat_from_mat
-from rehabbot.models.scene import Scene
+from rehabbot.models.scene import Scene, check_choice
 
 LIMBS = ("arm", "hip", "knee")
 TASK_TYPES = ("reaching", "trajectory")
@@ -95,16 +95,7 @@ TABLE3_RANGES_RAD: dict[str, tuple[tuple[str, str, float, float, float], ...]] =
             ("hip_rotation", "shoulder_pan", -np.pi / 3, np.pi / 6, 1.0)),
     "knee": (("knee_flexion", "shoulder_lift", -3 * np.pi / 4, 0.0, -1.0),),
 }
-MAPPED_ROBOT_JOINTS: dict[str, tuple[str, ...]] = {
-    limb: tuple(dict.fromkeys(row[1] for row in rows)) for limb, rows in TABLE3_RANGES_RAD.items()
-}
 WORKSPACE_MARGIN_RAD = 0.1
-
-
-def check_choice(name: str, value, choices) -> None:
-    """Raise ``ValueError`` naming ``value`` and the valid ``choices`` unless it is one."""
-    if isinstance(value, bool) or value not in choices:
-        raise ValueError(f"{name}={value!r} is not one of {list(choices)}")
 
 
 @dataclass(frozen=True)

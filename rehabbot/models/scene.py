@@ -107,11 +107,11 @@ class SceneOptions:
     menagerie_dir: str | None = None
 
     def __post_init__(self) -> None:
-        _check_choice("cuff", self.cuff, CUFF_TYPES)
+        check_choice("cuff", self.cuff, CUFF_TYPES)
         if self.side is not None:
-            _check_choice("side", self.side, SIDES)
+            check_choice("side", self.side, SIDES)
         if self.posture is not None:
-            _check_choice("posture", self.posture, POSTURES)
+            check_choice("posture", self.posture, POSTURES)
         _check_finite_range("base_reorientation_deg", self.base_reorientation_deg, -180.0, 180.0)
         _check_finite_range("timestep_s", self.timestep_s, 1e-4, 0.005)
         _check_finite_range("posture_hold_hz", self.posture_hold_hz, 0.5, 20.0)
@@ -141,8 +141,9 @@ def _check_pose(pose_deg: dict, what: str = "pose_deg") -> None:
         _check_finite_range(f"{what}[{name!r}]", value, low, high)
 
 
-def _check_choice(name: str, value, choices) -> None:
-    if value not in choices:
+def check_choice(name: str, value, choices) -> None:
+    """Raise ``ValueError`` naming ``value`` and the valid ``choices`` unless it is one."""
+    if isinstance(value, bool) or value not in choices:
         raise ValueError(f"{name}={value!r} is not one of {list(choices)}")
 
 
@@ -367,7 +368,7 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
                 **options) -> Scene:
     """Build a scene preset for ``profile`` at ``weight_level``; ``options`` are
     :class:`SceneOptions` fields. Raises ``ValueError`` naming any bad argument."""
-    _check_choice("preset", preset, tuple(PRESETS))
+    check_choice("preset", preset, tuple(PRESETS))
     profile = profile if profile is not None else pt.PatientProfile()
     if not isinstance(profile, pt.PatientProfile):
         raise ValueError(f"profile must be a PatientProfile, got {type(profile).__name__}")
