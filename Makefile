@@ -18,7 +18,7 @@ $(VENV): $(STAMP)
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON_BOOTSTRAP) -m venv $(VENV)
 	$(PY) -m pip install --upgrade pip
-	$(PY) -m pip install -e ".[dev,video,train]"
+	$(PY) -m pip install -e ".[all]"
 	touch $(STAMP)
 
 # Without a display, the suite runs under Xvfb so that the `human` render mode (MuJoCo's

@@ -1,7 +1,14 @@
-"""The ``rehabbot`` command line: list, view and snapshot the simulation scenes.
+"""The ``rehabbot`` command line: train, evaluate, plot and render policies on the registered
+environments; list, view and snapshot the simulation scenes.
 
 Examples::
 
+    rehabbot list                                  # the registered env ids
+    rehabbot train rehab-reach-v0 --algo sac --timesteps 200000 --seeds 0 1 2
+    rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random
+    rehabbot plot runs/rehab-reach-v0               # Figs. 3-6 of the paper for your runs
+    rehabbot render expert --env rehab-reach-v0 --out expert.mp4
+    rehabbot bench                                 # env step throughput vs raw physics
     rehabbot scenes
     rehabbot view upper_right                      # interactive, until the window is closed
     rehabbot view upper_right --seconds 5          # step 5 s of physics in real time, then exit
@@ -10,10 +17,11 @@ Examples::
     rehabbot view upper_right --menagerie ~/mujoco_menagerie   # real UR5e meshes (optional)
 
 Exit codes: 0 success, 1 runtime failure (no display, unwritable file, missing optional
-dependency), 2 bad usage (unknown scene or camera, invalid patient profile, image too large).
+dependency, corrupt model), 2 bad usage (unknown env id, algorithm, scene or camera, invalid
+patient profile, image too large), 130 training interrupted (a checkpoint was saved).
 
-Heavy imports (``mujoco``, the scene builders) happen inside the command functions so that
-``rehabbot --help`` stays fast.
+Heavy imports (``mujoco``, Stable-Baselines3, matplotlib) happen inside the command functions
+so that ``rehabbot --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -231,6 +239,40 @@ def cmd_view(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_list(args: argparse.Namespace) -> int:
+    """Print the registered env ids with their limb, task, spaces and description (each env
+    is built once, so the spaces shown are the real ones)."""
+    import gymnasium as gym
+
+    import rehabbot  # noqa: F401  (registers the ids)
+    from rehabbot.registration import ENV_SPECS
+
+    rows = [("id", "limb", "side", "task", "action", "observation", "description")]
+    for env_id, (kwargs, description) in ENV_SPECS.items():
+        env = gym.make(env_id)
+        act, obs = env.action_space, env.observation_space
+        env.close()
+        rows.append((env_id, kwargs["limb"], kwargs["side"], kwargs["task_type"],
+                     f"Box({float(act.low[0]):.5f}, {float(act.high[0]):.5f}, {act.shape})",
+                     f"Box({obs.shape})", description))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]) - 1)]
+    for row in rows:
+        cells = [cell.ljust(width) for cell, width in zip(row[:-1], widths, strict=True)]
+        print("  ".join([*cells, row[-1]]))
+    return EXIT_OK
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """The env step throughput table (:mod:`rehabbot.throughput`)."""
+    from rehabbot import throughput
+
+    argv = sys.argv[2:] if len(sys.argv) > 1 and sys.argv[1] == "bench" else []
+    code = throughput.run(args, argv)
+    if code != EXIT_OK:
+        raise CliError("bad benchmark options (see above)", EXIT_USAGE)
+    return code
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -265,6 +307,26 @@ def build_parser() -> argparse.ArgumentParser:
         description="RehabBot: a UR5e strapped to a humanoid patient, simulated in MuJoCo.",
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    from rehabbot.evaluation import add_evaluate_parser
+    from rehabbot.plotting import add_plot_parser
+    from rehabbot.throughput import add_arguments as add_bench_arguments
+    from rehabbot.training import add_train_parser
+    from rehabbot.video import add_render_parser
+
+    listing = commands.add_parser("list", help="list the registered env ids")
+    listing.set_defaults(func=cmd_list)
+    add_train_parser(commands)
+    add_evaluate_parser(commands)
+    add_plot_parser(commands)
+    add_render_parser(commands)
+    bench = commands.add_parser(
+        "bench", help="env step throughput of every id against the raw physics",
+        description="Steps every registered id through gym.make and the same mj_step calls "
+                    "on its model, interleaved; prints steps/s and the share of time in "
+                    "physics.")
+    add_bench_arguments(bench)
+    bench.set_defaults(func=cmd_bench)
 
     scenes = commands.add_parser("scenes", help="list the scene presets")
     scenes.set_defaults(func=cmd_scenes)

@@ -1,194 +1,161 @@
-"""End-to-end demo: render every scene preset and run its scripted exercise sweep.
+"""The main job (``make demo``): train SAC on ``rehabbot/rehab-reach-v0``, evaluate it against
+the scripted expert and random actions, and write the paper's figures, a video and a summary.
 
 Usage::
 
-    python -m rehabbot.demo --out runs/demo
+    python -m rehabbot.demo --out runs/demo [--timesteps 30000] [--episodes 10] [--seed 0]
 
-For every preset in :data:`rehabbot.models.PRESETS` this writes one PNG per camera
-(``DIR/<preset>_<camera>.png``), runs :func:`rehabbot.kinematics.run_sweep` and prints one
-line saying which patient joints the robot moved, e.g.::
+Steps, each with its output under ``OUT``:
 
-    upper_right: elbow_flexion_r moved 92.1 deg, shoulder_flexion_r 55.0 deg; \
-max cuff error 2.1 mm; within ROM: yes
+1. ``rehabbot train rehab-reach-v0 --algo sac`` with the demo's hyperparameter file
+   (``hyperparams/demo.yml``) → ``OUT/runs/rehab-reach-v0/sac/seed<k>/`` (model, checkpoints,
+   monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run the demo again: it
+   resumes from the last checkpoint.
+2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the
+   same episode seeds → ``OUT/evaluation/<policy>/evaluation.json`` and ``trace.npz``.
+3. ``rehabbot plot`` → ``OUT/figures/`` (Fig. 3 tool path, Fig. 4 learning curve, Fig. 5
+   kinematics, Fig. 6 torques; PNG and PDF).
+4. ``rehabbot render`` of one episode of the trained model → ``OUT/sac.mp4``.
+5. ``OUT/summary.md`` and ``OUT/summary.json``: the comparison table, the wall-clock time of
+   every step, and the commands that reproduce each step; the table is printed at the end.
 
-and finally writes ``DIR/summary.json`` with those numbers. The exit code is 1 if any
-sweep produced non-finite state or left the patient's range of motion.
+The default budget (30 000 steps) finishes within 15 minutes on 2 CPU cores; it is a
+demonstration of the pipeline, not a converged policy (see the README's results table for
+that: ``rehabbot train rehab-reach-v0 --algo sac --timesteps 200000``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
+import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
 from rehabbot.cli import use_headless_gl_by_default
 
-if TYPE_CHECKING:
-    from rehabbot.models.scene import Scene
-
-DEFAULT_DURATION_S = 10.0
-MIN_REPORTED_MOTION_DEG = 1.0
-MAX_REPORTED_JOINTS = 6
-
-
-@dataclass
-class PresetReport:
-    """What the demo did and measured for one preset."""
-
-    preset: str
-    images: list[str] = field(default_factory=list)
-    exercised_joint_range_deg: dict[str, float] = field(default_factory=dict)
-    max_cuff_error_m: float = math.nan
-    within_rom: bool = False
-    finite: bool = False
-    max_rom_excess_deg: float = math.nan
-    max_robot_torque_nm: float = math.nan
-
-    @property
-    def ok(self) -> bool:
-        """The sweep stayed finite and inside the patient's range of motion."""
-        return self.finite and self.within_rom
-
-    def summary_line(self) -> str:
-        """The one-line human summary printed by the demo."""
-        moved = sorted(
-            (
-                (name, deg)
-                for name, deg in self.exercised_joint_range_deg.items()
-                if deg >= MIN_REPORTED_MOTION_DEG
-            ),
-            key=lambda item: item[1],
-            reverse=True,
-        )[:MAX_REPORTED_JOINTS]
-        if moved:
-            first_name, first_deg = moved[0]
-            parts = [f"{first_name} moved {first_deg:.1f} deg"]
-            parts += [f"{name} {deg:.1f} deg" for name, deg in moved[1:]]
-            motion = ", ".join(parts)
-        else:
-            motion = f"no joint moved more than {MIN_REPORTED_MOTION_DEG:.0f} deg"
-        line = (
-            f"{self.preset}: {motion}; max cuff error {self.max_cuff_error_m * 1e3:.1f} mm; "
-            f"within ROM: {'yes' if self.within_rom else 'NO'}"
-        )
-        if not self.finite:
-            line += "; NON-FINITE STATE"
-        return line
-
-    def to_json(self) -> dict[str, Any]:
-        """JSON-serialisable form (plain floats/bools; NaN becomes ``null``)."""
-        def number(value: float) -> float | None:
-            return float(value) if math.isfinite(value) else None
-
-        return {
-            "images": list(self.images),
-            "exercised_joint_range_deg": {
-                name: float(deg) for name, deg in self.exercised_joint_range_deg.items()
-            },
-            "max_cuff_error_m": number(self.max_cuff_error_m),
-            "within_rom": bool(self.within_rom),
-            "finite": bool(self.finite),
-            "max_rom_excess_deg": number(self.max_rom_excess_deg),
-            "max_robot_torque_nm": number(self.max_robot_torque_nm),
-        }
-
-
-def render_cameras(
-    scene: Scene, preset: str, out_dir: Path, width_px: int, height_px: int
-) -> list[str]:
-    """Render the scene at its home pose from every camera; returns the PNG file names."""
-    from rehabbot.rendering import OffscreenRenderer, save_png
-
-    data = scene.make_data()
-    written: list[str] = []
-    with OffscreenRenderer(scene.model, width_px=width_px, height_px=height_px) as renderer:
-        for camera in scene.camera_names:
-            path = save_png(out_dir / f"{preset}_{camera}.png", renderer.rgb(data, camera))
-            written.append(path.name)
-    return written
-
-
-def run_preset(
-    preset: str, out_dir: Path, duration_s: float, width_px: int, height_px: int
-) -> PresetReport:
-    """Build one preset, render its cameras and run its exercise sweep."""
-    from rehabbot.kinematics import run_sweep
-    from rehabbot.models import build_scene
-
-    scene = build_scene(preset)
-    report = PresetReport(preset=preset)
-    report.images = render_cameras(scene, preset, out_dir, width_px, height_px)
-    result = run_sweep(scene, duration_s=duration_s)
-    report.exercised_joint_range_deg = {
-        str(name): float(deg) for name, deg in result.exercised_joint_range_deg.items()
-    }
-    report.max_cuff_error_m = float(result.max_cuff_error_m)
-    report.within_rom = bool(result.within_rom)
-    report.finite = bool(result.finite)
-    report.max_rom_excess_deg = float(result.max_rom_excess_deg)
-    report.max_robot_torque_nm = float(result.max_robot_torque_nm)
-    return report
-
-
-def write_summary(path: Path, reports: Sequence[PresetReport], duration_s: float) -> None:
-    """Write ``summary.json``: sweep duration plus one entry per preset."""
-    summary = {
-        "duration_s": duration_s,
-        "presets": {report.preset: report.to_json() for report in reports},
-    }
-    path.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+ENV_ID = "rehabbot/rehab-reach-v0"
+ALGO = "sac"
+DEFAULT_TIMESTEPS = 30_000
+DEFAULT_EPISODES = 10
+EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
+HYPERPARAMS = Path(__file__).resolve().parent.parent / "hyperparams" / "demo.yml"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Command-line options of the demo."""
-    parser = argparse.ArgumentParser(
-        prog="python -m rehabbot.demo",
-        description="Render every scene preset and run its scripted exercise sweep.",
-    )
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    parser.add_argument(
-        "--duration", type=float, default=DEFAULT_DURATION_S, metavar="S",
-        help=f"simulated seconds per sweep (default: {DEFAULT_DURATION_S})",
-    )
-    parser.add_argument("--width", type=int, default=640, metavar="W", help="image width [px]")
-    parser.add_argument("--height", type=int, default=480, metavar="H", help="image height [px]")
-    parser.add_argument(
-        "--presets", nargs="+", metavar="NAME", help="only these presets (default: all)"
-    )
+    parser = argparse.ArgumentParser(prog="python -m rehabbot.demo",
+                                     description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path("runs/demo"), metavar="DIR",
+                        help="output folder (default: runs/demo)")
+    parser.add_argument("--timesteps", type=int, default=DEFAULT_TIMESTEPS, metavar="N",
+                        help=f"SAC training steps (default: {DEFAULT_TIMESTEPS})")
+    parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
+                        help=f"evaluation episodes per policy (default: {DEFAULT_EPISODES})")
+    parser.add_argument("--seed", type=int, default=0, metavar="S", help="training seed (0)")
+    parser.add_argument("--hyperparams", type=Path, default=HYPERPARAMS, metavar="FILE.yaml",
+                        help="SAC hyperparameters (default: hyperparams/demo.yml)")
+    parser.add_argument("--no-video", action="store_true", help="skip the video")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the demo; returns 0 if every sweep was finite and within ROM, else 1 (2: usage)."""
-    args = build_parser().parse_args(argv)
     use_headless_gl_by_default()
-    from rehabbot.models import PRESETS
+    args = build_parser().parse_args(argv)
+    from rehabbot.cli import CliError
 
-    presets = list(args.presets or PRESETS)
-    unknown = [name for name in presets if name not in PRESETS]
-    if unknown:
-        print(
-            f"unknown preset(s) {', '.join(unknown)}; valid: {', '.join(PRESETS)}",
-            file=sys.stderr,
-        )
-        return 2
-    out_dir: Path = args.out
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        return run(args)
+    except CliError as err:
+        print(f"rehabbot demo: error: {' '.join(str(err).split())}", file=sys.stderr)
+        return err.exit_code
 
+
+def run(args: argparse.Namespace) -> int:
+    from rehabbot import evaluation, plotting, training, video
+
+    out: Path = args.out
+    evaluation.check_writable(out)
+    stages: dict[str, float] = {}
+    commands: dict[str, str] = {}
+
+    started = time.perf_counter()
+    run_root = out / "runs"
+    run_dir = training.run_dir_for(run_root, ENV_ID, ALGO, args.seed)
+    resume = (run_dir / "manifest.json").is_file()
+    hyperparams = training.load_hyperparams(args.hyperparams, ENV_ID, ALGO)
+    print(f"[1/5] training SAC on {ENV_ID} for {args.timesteps} steps"
+          f"{' (resuming)' if resume else ''} -> {run_dir}", flush=True)
+    training.train_run(ENV_ID, ALGO, args.seed, args.timesteps, run_root,
+                       hyperparams=hyperparams, resume=resume,
+                       progress_bar=not args.no_progress)
+    stages["train"] = time.perf_counter() - started
+    commands["train"] = (f"rehabbot train {evaluation.short_id(ENV_ID)} --algo sac --timesteps "
+                         f"{args.timesteps} --seeds {args.seed} --hyperparams {args.hyperparams}"
+                         f" --out {run_root}")
+
+    started = time.perf_counter()
+    print(f"[2/5] evaluating SAC, the scripted expert and random actions on "
+          f"{args.episodes} episodes (seeds {EVAL_SEED}..{EVAL_SEED + args.episodes - 1})",
+          flush=True)
     reports = []
-    for preset in presets:
-        report = run_preset(preset, out_dir, args.duration, args.width, args.height)
-        print(report.summary_line(), flush=True)
+    for spec in (str(run_dir / "model.zip"), "expert", "random"):
+        report, trace = evaluation.evaluate(spec, ENV_ID, args.episodes, EVAL_SEED)
+        evaluation.save_report(report, trace, out / "evaluation" / report["policy"]["label"])
         reports.append(report)
-    summary_path = out_dir / "summary.json"
-    write_summary(summary_path, reports, args.duration)
-    print(f"wrote {len(reports)} preset(s) to {out_dir} (summary: {summary_path})")
-    return 0 if all(report.ok for report in reports) else 1
+    stages["evaluate"] = time.perf_counter() - started
+    commands["evaluate"] = (f"rehabbot evaluate {run_dir / 'model.zip'} expert random --env "
+                            f"{evaluation.short_id(ENV_ID)} --episodes {args.episodes} --seed "
+                            f"{EVAL_SEED} --out {out / 'evaluation'}")
+
+    started = time.perf_counter()
+    print("[3/5] plotting the paper's figures 3-6", flush=True)
+    figures = plotting.plot_all([run_dir, out / "evaluation"], out / "figures", evaluate=False)
+    stages["plot"] = time.perf_counter() - started
+    commands["plot"] = (f"rehabbot plot {run_dir} {out / 'evaluation'} --out {out / 'figures'} "
+                        "--no-evaluate")
+
+    video_path = None
+    if not args.no_video:
+        started = time.perf_counter()
+        video_path = out / "sac.mp4"
+        print(f"[4/5] rendering one SAC episode -> {video_path}", flush=True)
+        video.render_episode(str(run_dir / "model.zip"), ENV_ID, video_path, seed=EVAL_SEED)
+        stages["render"] = time.perf_counter() - started
+        commands["render"] = (f"rehabbot render {run_dir / 'model.zip'} --out {video_path} "
+                              f"--seed {EVAL_SEED}")
+
+    print("[5/5] summary", flush=True)
+    table = evaluation.format_table(reports)
+    manifest = json.loads((run_dir / "manifest.json").read_text())
+    summary = {
+        "env_id": ENV_ID,
+        "algo": ALGO,
+        "train_seed": args.seed,
+        "train_timesteps": manifest.get("timesteps_done"),
+        "train_wall_clock_s": manifest.get("wall_clock_s"),
+        "eval_seeds": reports[0]["episode_seeds"],
+        "stage_wall_clock_s": stages,
+        "commands": commands,
+        "results": {r["policy"]["label"]: r["summary"] for r in reports},
+        "figures": [str(p) for p in figures],
+        "video": str(video_path) if video_path else None,
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    timing = ", ".join(f"{name} {seconds / 60:.1f} min" for name, seconds in stages.items())
+    text = (f"# RehabBot demo: SAC on {ENV_ID}\n\n"
+            f"SAC trained {summary['train_timesteps']} steps (seed {args.seed}); evaluated on "
+            f"{args.episodes} episodes with seeds {EVAL_SEED}..{EVAL_SEED + args.episodes - 1}"
+            f" (mean ± std over episodes).\n\n{table}\n\nWall clock: {timing}.\n\n"
+            "Reproduce each step:\n\n"
+            + "\n".join(f"    {command}" for command in commands.values()) + "\n")
+    (out / "summary.md").write_text(text)
+    print()
+    print(text)
+    print(f"figures: {out / 'figures'}; video: {video_path}; summary: {out / 'summary.md'}")
+    return 0
 
 
 if __name__ == "__main__":

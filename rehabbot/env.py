@@ -132,6 +132,7 @@ POSITION_BOUND_M = 1.35  # > the sum of the UR5e's link lengths: no flange posit
 JOINT_LIMIT_MARGIN_RAD = 0.3  # robot joint limits = setpoint bounds +- this
 THETA_OBS_MARGIN_RAD = 0.3  # theta bounds = joint limits +- this (soft-limit penetration)
 PHI_OBS_MARGIN_RAD = 0.5
+SAFETY_PENALTIES = ("worst_case", "hold")
 ROBOT_LIMIT_SOLREF = (0.004, 1.0)  # stiff joint limits (2 x the physics step)
 
 _PRESET = {("arm", "right"): "upper_right", ("arm", "left"): "upper_left",
@@ -176,6 +177,7 @@ class RehabEnv(gym.Env):
         smoothness_weight: float = 0.0,
         effort_weight: float = 0.0,
         terminate_on_safety: bool = True,
+        safety_penalty: str = "worst_case",
         rom_tolerance_deg: float = 2.0,
         cuff_force_limit_n: float | None = None,
         contact_tolerance_m: float = 0.002,
@@ -220,6 +222,8 @@ class RehabEnv(gym.Env):
         if not isinstance(terminate_on_safety, bool):
             raise ValueError(f"terminate_on_safety={terminate_on_safety!r} must be a bool")
         self.terminate_on_safety = terminate_on_safety
+        ex.check_choice("safety_penalty", safety_penalty, SAFETY_PENALTIES)
+        self.safety_penalty = safety_penalty
         thresholds = SafetyThresholds(rom_tolerance_deg=rom_tolerance_deg,
                                       cuff_force_limit_n=cuff_force_limit_n,
                                       contact_tolerance_m=contact_tolerance_m)
@@ -413,7 +417,9 @@ class RehabEnv(gym.Env):
         if violation is not None and (self.terminate_on_safety or violation == "instability"):
             terminated = True
             steps_left = max(self.max_episode_steps - self._steps, 0) + 1
-            reward_safety = steps_left * self.worst_step_reward
+            per_step = (self.worst_step_reward if self.safety_penalty == "worst_case"
+                        else reward_distance - self.smoothness_weight - self.effort_weight)
+            reward_safety = steps_left * per_step
         elif reached:
             last = i == len(self._sequence) - 1
             reward_bonus = self.final_bonus if last else self.intermediate_bonus

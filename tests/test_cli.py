@@ -221,16 +221,16 @@ def test_view_steps_physics_in_the_viewer(xvfb_display: str) -> None:
     assert frames >= 10, f"only {frames} viewer frames in 1 s of real-time simulation"
 
 
-# --------------------------------------------------------------------------- demo
+# --------------------------------------------------------------------------- scene tour
 
 
-def test_demo_renders_cameras_and_summarises_sweep(tmp_path: Path, capsys) -> None:
+def test_scene_tour_renders_cameras_and_summarises_sweep(tmp_path: Path, capsys) -> None:
     import json
 
-    from rehabbot import demo
+    from rehabbot import scene_tour
     from rehabbot.models import build_scene
 
-    code = demo.main(
+    code = scene_tour.main(
         ["--out", str(tmp_path), "--presets", SCENE, "--duration", "1",
          "--width", "160", "--height", "120"]
     )
@@ -251,8 +251,8 @@ def test_demo_renders_cameras_and_summarises_sweep(tmp_path: Path, capsys) -> No
     assert f"max cuff error {entry['max_cuff_error_m'] * 1e3:.1f} mm" in out
 
 
-def test_demo_rejects_unknown_preset(tmp_path: Path, capsys) -> None:
-    from rehabbot import demo
+def test_scene_tour_rejects_unknown_preset(tmp_path: Path, capsys) -> None:
+    from rehabbot import scene_tour
 
-    assert demo.main(["--out", str(tmp_path), "--presets", "bogus"]) == 2
+    assert scene_tour.main(["--out", str(tmp_path), "--presets", "bogus"]) == 2
     assert "upper_right" in capsys.readouterr().err

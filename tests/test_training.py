@@ -1,0 +1,505 @@
+"""``rehabbot train`` (:mod:`rehabbot.training`): runs, checkpoints, resume, interruption,
+hyperparameter files and user errors. Kept short: 100-step episodes, tiny networks, few
+gradient steps."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3", reason='training tests need "rehabbot[train]"')
+pytest.importorskip("yaml", reason="hyperparameter files need PyYAML")
+
+import rehabbot
+from rehabbot.cli import CliError
+from rehabbot.training import (
+    TrainingError,
+    TrainingInterrupted,
+    add_train_parser,
+    cmd_train,
+    hyperparameters_from_mapping,
+    load_hyperparameters,
+    parse_python_expression,
+    train_run,
+)
+
+ENV = "rehab-reach-v0"
+FULL_ID = "rehabbot/rehab-reach-v0"
+REPO = Path(__file__).resolve().parent.parent
+ENV_KWARGS = {"max_episode_steps": 100}
+SMALL = {
+    "ppo": {"n_steps": 256, "batch_size": 64, "n_epochs": 2,
+            "policy_kwargs": "dict(net_arch=[32, 32], activation_fn=nn.Tanh)"},
+    # Few gradient steps: learning starts late.
+    "sac": {"learning_starts": 1600, "buffer_size": 5000, "batch_size": 64,
+            "policy_kwargs": "dict(net_arch=[32, 32])"},
+    "td3": {"learning_starts": 1600, "buffer_size": 5000, "batch_size": 64,
+            "policy_kwargs": {"net_arch": [32, 32], "activation_fn": "nn.ReLU"}},
+}
+MANIFEST_KEYS = ("env_id", "algo", "seed", "total_timesteps", "timesteps_done", "n_envs",
+                 "env_kwargs", "hyperparameters", "versions", "git_commit", "command", "status",
+                 "started_at", "finished_at", "wall_clock_s", "resumed_from", "model")
+VERSION_KEYS = ("python", "rehabbot", "stable_baselines3", "torch", "gymnasium", "mujoco",
+                "numpy")
+
+
+def _algo_class(algo: str):
+    import stable_baselines3 as sb3
+
+    return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
+
+
+def _parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="rehabbot")
+    add_train_parser(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(["train", *argv])
+
+
+def _yaml(path: Path, data: dict) -> Path:
+    import yaml
+
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def _train_args(tmp_path: Path, algo: str, out: Path, *extra: str, hp: dict | None = None,
+                freq: int = 1000) -> argparse.Namespace:
+    hp_file = _yaml(tmp_path / f"{algo}.yml", {FULL_ID: hp if hp is not None else SMALL[algo]})
+    return _parse(ENV, "--algo", algo, "--hyperparams", str(hp_file), "--out", str(out),
+                  "--checkpoint-freq", str(freq), "--eval-freq", str(freq),
+                  "--eval-episodes", "1", "--env-kwargs", json.dumps(ENV_KWARGS),
+                  "--no-progress", *extra)
+
+
+def _manifest(run_dir: Path) -> dict:
+    return json.loads((run_dir / "manifest.json").read_text())
+
+
+def _monitor_rows(run_dir: Path) -> tuple[list[str], list[dict]]:
+    path = run_dir / "monitor" / "train_0.monitor.csv"
+    lines = path.read_text().splitlines()
+    return lines, list(csv.DictReader(lines[1:]))
+
+
+def _no_temp_files(run_dir: Path) -> bool:
+    return not [p for p in run_dir.rglob("*") if p.name.endswith(".tmp")]
+
+
+# --------------------------------------------------------------------------- full runs
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
+def test_train_writes_the_run_directory(tmp_path: Path, algo: str, capsys) -> None:
+    out = tmp_path / "runs"
+    assert cmd_train(_train_args(tmp_path, algo, out, "--timesteps", "2000")) == 0
+    run_dir = out / ENV / algo / "seed0"
+
+    model = _algo_class(algo).load(run_dir / "model.zip", device="cpu")
+    env = gym.make(FULL_ID)
+    assert model.observation_space == env.observation_space
+    assert model.action_space == env.action_space
+    assert model.num_timesteps == 2000  # PPO too: its partial last rollout is not trained on
+
+    header, rows = _monitor_rows(run_dir)
+    assert header[0].startswith("#")
+    assert header[1].split(",") == ["r", "l", "t", "is_success", "safety_violation"]
+    assert rows and 0 < sum(int(row["l"]) for row in rows) <= 2000
+    assert {row["is_success"] for row in rows} <= {"True", "False"}
+
+    with np.load(run_dir / "eval" / "evaluations.npz") as data:
+        assert list(data["timesteps"]) == [1000, 2000]
+        assert data["results"].shape == (2, 1)
+        assert data["successes"].shape == (2, 1)
+    events = list((run_dir / "tb").rglob("events.out.tfevents.*"))
+    assert len(events) == 1 and events[0].parent.name == f"{algo.upper()}_1"
+
+    manifest = _manifest(run_dir)
+    for key in MANIFEST_KEYS:
+        assert key in manifest, key
+    assert manifest["env_id"] == FULL_ID and manifest["algo"] == algo
+    assert manifest["status"] == "finished"
+    assert manifest["total_timesteps"] == manifest["timesteps_done"] == 2000
+    assert manifest["env_kwargs"] == ENV_KWARGS
+    assert manifest["model"] == "model.zip" and manifest["resumed_from"] is None
+    assert manifest["finished_at"] >= manifest["started_at"]
+    assert manifest["wall_clock_s"] > 0
+    assert set(VERSION_KEYS) <= set(manifest["versions"])
+    assert manifest["seeds"] == {"model": 0, "train_env": 0, "eval_env": 10_000}
+    hp = manifest["hyperparameters"]
+    assert hp["source"] == str(tmp_path / f"{algo}.yml")
+    assert hp["kwargs"]["batch_size"] == 64
+    assert hp["kwargs"]["policy_kwargs"]["net_arch"] == [32, 32]
+    assert hp["kwargs"]["gamma"] == 0.99  # SB3 defaults filled in
+    json.dumps(manifest)
+
+    checkpoints = run_dir / "checkpoints"
+    assert (checkpoints / "rl_model_1000_steps.zip").is_file()
+    assert (checkpoints / "rl_model_2000_steps.zip").is_file()
+    if algo != "ppo":  # only the newest replay buffer is kept
+        assert (checkpoints / "rl_model_replay_buffer_2000_steps.pkl").is_file()
+        assert not (checkpoints / "rl_model_replay_buffer_1000_steps.pkl").exists()
+    assert _no_temp_files(run_dir)
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-1].startswith(f"{run_dir}: 2000 steps")
+    assert "last eval at 2000 steps: success" in lines[-1] and "mean return" in lines[-1]
+
+
+def test_resume_continues_to_the_requested_total(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "runs"
+    hp = {**SMALL["td3"], "normalize": True, "noise_type": "normal", "noise_std": 0.2,
+          "learning_starts": 800}
+    assert cmd_train(_train_args(tmp_path, "td3", out, "--timesteps", "1000", hp=hp,
+                                 freq=500)) == 0
+    run_dir = out / ENV / "td3" / "seed0"
+    first = _manifest(run_dir)
+    lines_before, rows_before = _monitor_rows(run_dir)
+    assert (run_dir / "vecnormalize.pkl").is_file()
+
+    assert cmd_train(_train_args(tmp_path, "td3", out, "--timesteps", "2000", "--resume",
+                                 hp=hp, freq=500)) == 0
+    model = _algo_class("td3").load(run_dir / "model.zip", device="cpu")
+    assert model.num_timesteps == 2000
+    manifest = _manifest(run_dir)
+    assert manifest["status"] == "finished" and manifest["timesteps_done"] == 2000
+    assert manifest["total_timesteps"] == 2000
+    assert manifest["resumed_from"] == "checkpoints/rl_model_1000_steps.zip"
+    assert manifest["started_at"] == first["started_at"]
+    assert manifest["wall_clock_s"] > first["wall_clock_s"]
+    assert [s["start_timesteps"] for s in manifest["segments"]] == [0, 1000]
+    assert manifest["hyperparameters"]["noise_type"] == "normal"
+
+    lines_after, rows_after = _monitor_rows(run_dir)
+    assert lines_after[:len(lines_before)] == lines_before  # rows kept, then appended
+    assert len(rows_after) > len(rows_before)
+    assert sum(line.startswith("#") for line in lines_after) == 1
+    times = [float(row["t"]) for row in rows_after]
+    assert times == sorted(times)
+    with np.load(run_dir / "eval" / "evaluations.npz") as data:
+        assert list(data["timesteps"]) == [500, 1000, 1500, 2000]
+    tb_runs = [p for p in (run_dir / "tb").iterdir() if p.is_dir()]
+    assert [p.name for p in tb_runs] == ["TD3_1"]
+    assert len(list(tb_runs[0].glob("events.out.tfevents.*"))) == 2
+    assert (run_dir / "checkpoints" / "rl_model_vecnormalize_2000_steps.pkl").is_file()
+
+    capsys.readouterr()
+    assert cmd_train(_train_args(tmp_path, "td3", out, "--resume", hp=hp, freq=500)) == 0
+    assert "already finished 2000 steps" in capsys.readouterr().out
+
+
+def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "runs"
+    hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})
+    argv = [ENV, "--algo", "sac", "--timesteps", "1000000", "--hyperparams", str(hp_file),
+            "--out", str(out), "--checkpoint-freq", "500", "--eval-freq", "0",
+            "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress"]
+    run_dir = out / ENV / "sac" / "seed0"
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    proc = subprocess.Popen([sys.executable, "-m", "rehabbot.training", *argv], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while not (run_dir / "checkpoints" / "rl_model_500_steps.zip").exists():
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no checkpoint within 120 s"
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    resume_line = stdout.strip().splitlines()[-1]
+    assert "interrupted at" in resume_line
+    assert f"rehabbot train {ENV} --algo sac --timesteps 1000000 --seeds 0 --out" in resume_line
+    assert resume_line.endswith("--resume")
+
+    manifest = _manifest(run_dir)
+    done = manifest["timesteps_done"]
+    assert manifest["status"] == "interrupted" and done >= 500
+    checkpoint = run_dir / manifest["last_checkpoint"]
+    assert checkpoint.name == f"rl_model_{done}_steps.zip"
+    model = _algo_class("sac").load(checkpoint, device="cpu")
+    assert model.num_timesteps == done
+    from stable_baselines3.common.save_util import load_from_pkl
+
+    buffer = load_from_pkl(run_dir / "checkpoints" / f"rl_model_replay_buffer_{done}_steps.pkl")
+    assert buffer.size() in (done - 1, done)  # SB3 stops before storing the last transition
+    assert not (run_dir / "model.zip").exists()
+    assert _no_temp_files(run_dir)
+
+    target = (done // 500 + 1) * 500 + 100
+    assert cmd_train(_parse(*argv[:4], str(target), *argv[5:], "--resume")) == 0
+    manifest = _manifest(run_dir)
+    assert manifest["status"] == "finished" and manifest["timesteps_done"] == target
+    # Periodic checkpoints stay on multiples of --checkpoint-freq after the resume.
+    assert (run_dir / "checkpoints" / f"rl_model_{target - 100}_steps.zip").is_file()
+    assert manifest["resumed_from"] == f"checkpoints/rl_model_{done}_steps.zip"
+    assert _algo_class("sac").load(run_dir / "model.zip").num_timesteps == target
+
+
+def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path) -> None:
+    out = tmp_path / "runs"
+    hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})
+    argv = [ENV, "--algo", "sac", "--timesteps", "1000000", "--hyperparams", str(hp_file),
+            "--out", str(out), "--checkpoint-freq", "1000", "--eval-freq", "500",
+            "--eval-episodes", "1", "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress"]
+    run_dir = out / ENV / "sac" / "seed0"
+    proc = subprocess.Popen([sys.executable, "-m", "rehabbot.training", *argv], cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while True:  # SIGKILL once a checkpoint exists and episodes were logged after it
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no checkpoint within 120 s"
+            if (run_dir / "checkpoints" / "rl_model_1000_steps.zip").exists() and \
+                    sum(int(row["l"]) for row in _monitor_rows(run_dir)[1]) >= 1300:
+                break
+            time.sleep(0.02)
+    finally:
+        proc.kill()
+        proc.wait(timeout=60)
+    assert _manifest(run_dir)["status"] == "running"
+    done = max(int(p.name.split("_")[2]) for p in (run_dir / "checkpoints").glob("rl_model_*"
+                                                                                 "_steps.zip"))
+    _, rows_before = _monitor_rows(run_dir)
+    kept = np.searchsorted(np.cumsum([int(row["l"]) for row in rows_before]), done, "right")
+    assert kept < len(rows_before)  # some episodes were logged after the checkpoint
+
+    assert cmd_train(_parse(*argv[:4], str(done + 500), *argv[5:], "--resume")) == 0
+    _, rows_after = _monitor_rows(run_dir)
+    assert rows_after[:kept] == rows_before[:kept]
+    assert sum(int(row["l"]) for row in rows_after[kept:]) <= 500  # new episodes only
+    with np.load(run_dir / "eval" / "evaluations.npz") as data:
+        steps = list(data["timesteps"])
+    assert steps == list(range(500, done + 501, 500))  # none lost, none duplicated
+    manifest = _manifest(run_dir)
+    assert manifest["status"] == "finished" and manifest["timesteps_done"] == done + 500
+    assert [s["status"] for s in manifest["segments"]] == ["killed", "finished"]
+
+
+def test_sigterm_in_process_stops_and_restores_the_handlers(tmp_path: Path) -> None:
+    out = tmp_path / "runs"
+    run_dir = out / ENV / "td3" / "seed0"
+    before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+
+    def kill_after_first_checkpoint() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if (run_dir / "checkpoints" / "rl_model_300_steps.zip").exists():
+                os.kill(os.getpid(), signal.SIGTERM)
+                return
+            time.sleep(0.05)
+
+    killer = threading.Thread(target=kill_after_first_checkpoint, daemon=True)
+    killer.start()
+    with pytest.raises(TrainingInterrupted) as caught:
+        train_run(ENV, "td3", 0, 1_000_000, out, env_kwargs=ENV_KWARGS, checkpoint_freq=300,
+                  eval_freq=0, progress_bar=False,
+                  hyperparams={**SMALL["td3"], "learning_starts": 1_000_000})
+    killer.join()
+    assert caught.value.exit_code == 143
+    assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
+    manifest = _manifest(run_dir)
+    assert manifest["status"] == "interrupted"
+    assert manifest["timesteps_done"] == caught.value.timesteps_done >= 300
+    assert caught.value.checkpoint.is_file()
+
+
+# --------------------------------------------------------------------------- hyperparameters
+
+
+def test_zoo_strings_are_parsed_safely() -> None:
+    import torch
+
+    parsed = parse_python_expression(
+        "dict(net_arch=dict(pi=[64, 64], vf=[128]), activation_fn=nn.ReLU, log_std_init=-2, "
+        "ortho_init=False, optimizer_kwargs={'eps': 1e-5}, sizes=(1, 2))")
+    assert parsed == {"net_arch": {"pi": [64, 64], "vf": [128]},
+                      "activation_fn": torch.nn.ReLU, "log_std_init": -2, "ortho_init": False,
+                      "optimizer_kwargs": {"eps": 1e-5}, "sizes": (1, 2)}
+    assert parse_python_expression("dict(activation_fn=nn.LeakyReLU)")["activation_fn"] \
+        is torch.nn.LeakyReLU
+    for bad in ("__import__('os').system('echo pwned')", "dict(**kwargs)",
+                "dict(activation_fn=nn.Module)", "open('/etc/passwd')", "[x for x in 'ab']",
+                "lambda: 0", "dict(a=1 + 2)", "os.system"):
+        with pytest.raises(ValueError, match=r"not allowed|not a valid"):
+            parse_python_expression(bad)
+
+
+def test_policy_kwargs_string_with_code_is_rejected(tmp_path: Path) -> None:
+    path = _yaml(tmp_path / "hp.yml", {"policy_kwargs": "__import__('os').system('touch x')"})
+    with pytest.raises(TrainingError, match=r"policy_kwargs.*not allowed"):
+        load_hyperparameters(path, ENV, "sac")
+    assert not (tmp_path / "x").exists()
+
+
+def test_linear_schedule_and_numbers_from_strings() -> None:
+    hp = hyperparameters_from_mapping({"learning_rate": "lin_3e-4", "buffer_size": "1e4",
+                                       "tau": "5e-3", "train_freq": [1, "episode"]}, "sac")
+    schedule = hp.kwargs["learning_rate"]
+    assert schedule(1.0) == pytest.approx(3e-4)
+    assert schedule(0.5) == pytest.approx(1.5e-4)
+    assert schedule(0.0) == pytest.approx(0.0)
+    assert hp.kwargs["buffer_size"] == 10_000 and isinstance(hp.kwargs["buffer_size"], int)
+    assert hp.kwargs["tau"] == pytest.approx(5e-3)
+    assert hp.kwargs["train_freq"] == (1, "episode")
+    assert hp.to_manifest()["kwargs"]["learning_rate"] == "lin_3e-4"
+    with pytest.raises(TrainingError, match="lin_"):
+        hyperparameters_from_mapping({"learning_rate": "lin_fast"}, "sac")
+
+
+def test_unknown_key_is_named(tmp_path: Path) -> None:
+    path = _yaml(tmp_path / "hp.yml", {FULL_ID: {"n_stepz": 5}})
+    with pytest.raises(TrainingError, match=r"unknown hyperparameter 'n_stepz' for PPO"):
+        load_hyperparameters(path, ENV, "ppo")
+    with pytest.raises(TrainingError, match=r"'policy_delay' for SAC"):
+        hyperparameters_from_mapping({"policy_delay": 2}, "sac")
+    with pytest.raises(TrainingError, match=r"'seed'.*--seeds"):
+        hyperparameters_from_mapping({"seed": 3}, "td3")
+    with pytest.raises(TrainingError, match="noise_type applies to SAC and TD3"):
+        hyperparameters_from_mapping({"noise_type": "normal"}, "ppo")
+    with pytest.raises(TrainingError, match="unknown normalize key 'norm_everything'"):
+        hyperparameters_from_mapping({"normalize": {"norm_everything": True}}, "ppo")
+
+
+def test_env_keyed_and_flat_files(tmp_path: Path) -> None:
+    keyed = _yaml(tmp_path / "keyed.yml", {
+        FULL_ID: {"batch_size": 32, "n_timesteps": 5000},
+        "rehab-knee-v0": {"batch_size": 128, "normalize": "dict(norm_reward=False)"},
+    })
+    hp = load_hyperparameters(keyed, ENV, "sac")
+    assert hp.kwargs == {"batch_size": 32} and hp.n_timesteps == 5000
+    assert hp.entry == FULL_ID
+    knee = load_hyperparameters(keyed, "rehabbot/rehab-knee-v0", "sac")
+    assert knee.kwargs == {"batch_size": 128} and knee.normalize == {"norm_reward": False}
+    assert knee.entry == "rehab-knee-v0"
+    with pytest.raises(TrainingError, match="no entry for rehabbot/rehab-hip-v0"):
+        load_hyperparameters(keyed, "rehab-hip-v0", "sac")
+
+    flat = _yaml(tmp_path / "flat.yml", {"batch_size": 16, "n_envs": 2, "normalize": True,
+                                         "noise_type": "ornstein-uhlenbeck"})
+    hp = load_hyperparameters(flat, "rehab-hip-v0", "td3")
+    assert hp.kwargs == {"batch_size": 16} and hp.n_envs == 2 and hp.normalize == {}
+    assert (hp.noise_type, hp.noise_std) == ("ornstein-uhlenbeck", 0.1)
+    assert hp.entry is None
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
+def test_shipped_files_spell_out_the_sb3_defaults(algo: str) -> None:
+    import inspect
+
+    cls = _algo_class(algo)
+    defaults = inspect.signature(cls.__init__).parameters
+    env = gym.make(FULL_ID)
+    for env_id in rehabbot.registration.ENV_SPECS:
+        hp = load_hyperparameters(REPO / "hyperparams" / f"{algo}.yml", env_id, algo)
+        assert hp.entry == env_id and hp.policy == "MlpPolicy" and hp.normalize is None
+        assert hp.n_timesteps == 200_000 and hp.n_envs == 1
+        for key, value in hp.kwargs.items():
+            if key != "policy_kwargs":
+                assert value == defaults[key].default, (env_id, key)
+    explicit = cls("MlpPolicy", env, policy_kwargs=hp.kwargs["policy_kwargs"], device="cpu",
+                   buffer_size=10) if algo != "ppo" else \
+        cls("MlpPolicy", env, policy_kwargs=hp.kwargs["policy_kwargs"], device="cpu")
+    default = cls("MlpPolicy", env, device="cpu", buffer_size=10) if algo != "ppo" else \
+        cls("MlpPolicy", env, device="cpu")
+    assert str(explicit.policy) == str(default.policy)
+
+
+# --------------------------------------------------------------------------- user errors
+
+
+def _cli_error(args: argparse.Namespace) -> CliError:
+    with pytest.raises(CliError) as caught:
+        cmd_train(args)
+    return caught.value
+
+
+def test_user_errors_name_the_bad_value(tmp_path: Path) -> None:
+    out = tmp_path / "runs"
+    err = _cli_error(_parse(ENV, "--algo", "dqn", "--out", str(out)))
+    assert "'dqn'" in str(err) and "ppo, sac, td3" in str(err) and err.exit_code == 2
+    err = _cli_error(_parse("rehab-elbow-v9", "--algo", "sac", "--out", str(out)))
+    assert "'rehab-elbow-v9'" in str(err) and FULL_ID in str(err) and err.exit_code == 2
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--hyperparams", str(tmp_path / "no.yml"),
+                            "--out", str(out)))
+    assert "no.yml" in str(err) and "not found" in str(err) and err.exit_code == 2
+    bad_yaml = tmp_path / "bad.yml"
+    bad_yaml.write_text("batch_size: [1, 2\n")
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--hyperparams", str(bad_yaml),
+                            "--out", str(out)))
+    assert "not valid YAML" in str(err)
+    unknown = _yaml(tmp_path / "unknown.yml", {"gamma": 0.9, "bogus_rate": 1})
+    err = _cli_error(_parse(ENV, "--algo", "td3", "--hyperparams", str(unknown),
+                            "--out", str(out)))
+    assert "'bogus_rate'" in str(err) and "TD3" in str(err)
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(blocker / "runs")))
+    assert str(blocker / "runs") in str(err) and err.exit_code == 1
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--env-kwargs", "{oops"))
+    assert "--env-kwargs" in str(err)
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out),
+                            "--env-kwargs", '{"bogus_kwarg": 1}'))
+    assert "bogus_kwarg" in str(err)
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--resume"))
+    assert "nothing to resume" in str(err)
+    # Errors found before training leave nothing behind, including SB3's own checks.
+    err = _cli_error(_train_args(tmp_path, "ppo", out, hp={"batch_size": 1}))
+    assert "invalid hyperparameters for PPO" in str(err) and err.exit_code == 2
+    assert not out.exists()
+
+
+def test_existing_runs_need_resume_or_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "runs"
+    run_dir = out / ENV / "sac" / "seed0"
+    (run_dir / "checkpoints").mkdir(parents=True)
+    (run_dir / "checkpoints" / "rl_model_500_steps.zip").write_bytes(b"")
+    (run_dir / "manifest.json").write_text(json.dumps(
+        {"env_id": FULL_ID, "algo": "td3", "seed": 0, "status": "interrupted",
+         "timesteps_done": 500, "total_timesteps": 1000, "n_envs": 1, "env_kwargs": {}}))
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out)))
+    assert "--resume" in str(err) and "--overwrite" in str(err)
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--resume"))
+    assert "algo 'td3'" in str(err) and err.exit_code == 2
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--resume",
+                            "--overwrite"))
+    assert "exclude" in str(err)
+    assert (run_dir / "checkpoints" / "rl_model_500_steps.zip").exists()
+
+
+def test_parser_defaults_short_ids_and_help() -> None:
+    args = _parse(ENV, "--algo", "SAC")
+    assert (args.timesteps, args.seeds, args.n_envs, args.out, args.resume) == \
+        (None, None, None, "runs", False)
+    assert args.func is cmd_train
+    assert _parse(FULL_ID, "--algo", "ppo", "--timesteps", "2e5").timesteps == 200_000
+    assert _parse(ENV, "--algo", "td3", "--seeds", "0", "1", "2").seeds == [0, 1, 2]
+    parser = argparse.ArgumentParser(prog="rehabbot")
+    commands = parser.add_subparsers()
+    add_train_parser(commands)
+    text = commands.choices["train"].format_help()
+    for needle in ("examples:", "--resume", "--hyperparams", "--checkpoint-freq",
+                   "--eval-episodes", "--env-kwargs", "--no-progress", "rehab-knee-v0"):
+        assert needle in text, needle
+
+
+def test_module_import_is_cheap() -> None:
+    code = ("import sys, rehabbot.training; "
+            "print(sorted(m for m in ('torch', 'stable_baselines3', 'yaml') if m in sys.modules))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            check=True, timeout=60)
+    assert result.stdout.strip() == "[]"
