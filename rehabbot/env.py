@@ -132,7 +132,7 @@ POSITION_BOUND_M = 1.35  # > the sum of the UR5e's link lengths: no flange posit
 JOINT_LIMIT_MARGIN_RAD = 0.3  # robot joint limits = setpoint bounds +- this
 THETA_OBS_MARGIN_RAD = 0.3  # theta bounds = joint limits +- this (soft-limit penetration)
 PHI_OBS_MARGIN_RAD = 0.5
-SAFETY_PENALTIES = ("worst_case", "hold")
+SAFETY_PENALTIES = ("hold", "worst_case")
 ROBOT_LIMIT_SOLREF = (0.004, 1.0)  # stiff joint limits (2 x the physics step)
 
 _PRESET = {("arm", "right"): "upper_right", ("arm", "left"): "upper_left",
@@ -177,7 +177,7 @@ class RehabEnv(gym.Env):
         smoothness_weight: float = 0.0,
         effort_weight: float = 0.0,
         terminate_on_safety: bool = True,
-        safety_penalty: str = "worst_case",
+        safety_penalty: str = "hold",
         rom_tolerance_deg: float = 2.0,
         cuff_force_limit_n: float | None = None,
         contact_tolerance_m: float = 0.002,

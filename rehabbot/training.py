@@ -1563,7 +1563,8 @@ or one flat mapping. Keys: the SB3 constructor arguments of the algorithm, plus 
 n_envs, policy, normalize (true or VecNormalize arguments), noise_type (normal |
 ornstein-uhlenbeck) and noise_std (SAC/TD3). policy_kwargs may be a mapping or a string such
 as "dict(net_arch=[64, 64], activation_fn=nn.ReLU)"; learning_rate may be "lin_3e-4" (linear
-decay to 0). hyperparams/{ppo,sac,td3}.yml spell out the SB3 defaults as a template.
+decay to 0). hyperparams/{ppo,sac,td3}.yml hold the settings of the README results;
+hyperparams/sb3-defaults/ spells out the SB3 defaults as a template.
 
 exit codes: 0 done, 1 runtime failure, 2 bad usage, 130/143 interrupted (resumable)."""
 
