@@ -7,8 +7,8 @@ Usage::
 
 Steps, each with its output under ``OUT``:
 
-1. ``rehabbot train rehab-reach-v0 --algo sac`` with the demo's hyperparameter file
-   (``hyperparams/demo.yml``) → ``OUT/runs/rehab-reach-v0/sac/seed<k>/`` (model, checkpoints,
+1. ``rehabbot train rehab-reach-v0 --algo sac`` with ``hyperparams/sac.yml`` (the settings
+   of the README's results) → ``OUT/runs/rehab-reach-v0/sac/seed<k>/`` (model, checkpoints,
    monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run the demo again: it
    resumes from the last checkpoint.
 2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the
@@ -40,7 +40,8 @@ ALGO = "sac"
 DEFAULT_TIMESTEPS = 30_000
 DEFAULT_EPISODES = 10
 EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
-HYPERPARAMS = Path(__file__).resolve().parent.parent / "hyperparams" / "demo.yml"
+VIDEO_WIDTH_PX, VIDEO_HEIGHT_PX, VIDEO_FRAME_EVERY = 480, 360, 3  # 16.7 fps, software GL
+HYPERPARAMS = Path(__file__).resolve().parent.parent / "hyperparams" / "sac.yml"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -55,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f"evaluation episodes per policy (default: {DEFAULT_EPISODES})")
     parser.add_argument("--seed", type=int, default=0, metavar="S", help="training seed (0)")
     parser.add_argument("--hyperparams", type=Path, default=HYPERPARAMS, metavar="FILE.yaml",
-                        help="SAC hyperparameters (default: hyperparams/demo.yml)")
+                        help="SAC hyperparameters (default: hyperparams/sac.yml)")
     parser.add_argument("--no-video", action="store_true", help="skip the video")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
@@ -64,13 +65,19 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     use_headless_gl_by_default()
     args = build_parser().parse_args(argv)
-    from rehabbot.cli import CliError
+    from rehabbot.policies import PolicyError
+    from rehabbot.training import TrainingError, TrainingInterrupted
 
     try:
         return run(args)
-    except CliError as err:
+    except TrainingInterrupted as stop:
+        print(f"rehabbot demo: training interrupted at {stop.timesteps_done} steps; a "
+              f"checkpoint is saved in {stop.run_dir}. Run the demo again to resume.",
+              file=sys.stderr)
+        return stop.exit_code
+    except (TrainingError, PolicyError, OSError) as err:
         print(f"rehabbot demo: error: {' '.join(str(err).split())}", file=sys.stderr)
-        return err.exit_code
+        return getattr(err, "exit_code", 1)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -83,18 +90,18 @@ def run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     run_root = out / "runs"
-    run_dir = training.run_dir_for(run_root, ENV_ID, ALGO, args.seed)
+    run_dir = training.run_directory(run_root, ENV_ID, ALGO, args.seed)
     resume = (run_dir / "manifest.json").is_file()
-    hyperparams = training.load_hyperparams(args.hyperparams, ENV_ID, ALGO)
     print(f"[1/5] training SAC on {ENV_ID} for {args.timesteps} steps"
           f"{' (resuming)' if resume else ''} -> {run_dir}", flush=True)
     training.train_run(ENV_ID, ALGO, args.seed, args.timesteps, run_root,
-                       hyperparams=hyperparams, resume=resume,
+                       hyperparams=args.hyperparams, resume=resume,
                        progress_bar=not args.no_progress)
     stages["train"] = time.perf_counter() - started
     commands["train"] = (f"rehabbot train {evaluation.short_id(ENV_ID)} --algo sac --timesteps "
                          f"{args.timesteps} --seeds {args.seed} --hyperparams {args.hyperparams}"
                          f" --out {run_root}")
+    commands["train"] = commands["train"].replace(str(HYPERPARAMS), _relative(HYPERPARAMS))
 
     started = time.perf_counter()
     print(f"[2/5] evaluating SAC, the scripted expert and random actions on "
@@ -122,10 +129,13 @@ def run(args: argparse.Namespace) -> int:
         started = time.perf_counter()
         video_path = out / "sac.mp4"
         print(f"[4/5] rendering one SAC episode -> {video_path}", flush=True)
-        video.render_episode(str(run_dir / "model.zip"), ENV_ID, video_path, seed=EVAL_SEED)
+        video.render_episode(str(run_dir / "model.zip"), ENV_ID, video_path, seed=EVAL_SEED,
+                             width=VIDEO_WIDTH_PX, height=VIDEO_HEIGHT_PX,
+                             frame_every=VIDEO_FRAME_EVERY)
         stages["render"] = time.perf_counter() - started
         commands["render"] = (f"rehabbot render {run_dir / 'model.zip'} --out {video_path} "
-                              f"--seed {EVAL_SEED}")
+                              f"--seed {EVAL_SEED} --width {VIDEO_WIDTH_PX} --height "
+                              f"{VIDEO_HEIGHT_PX} --frame-every {VIDEO_FRAME_EVERY}")
 
     print("[5/5] summary", flush=True)
     table = evaluation.format_table(reports)
@@ -144,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
         "video": str(video_path) if video_path else None,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    timing = ", ".join(f"{name} {seconds / 60:.1f} min" for name, seconds in stages.items())
+    timing = ", ".join(f"{name} {seconds:.0f} s" for name, seconds in stages.items())
     text = (f"# RehabBot demo: SAC on {ENV_ID}\n\n"
             f"SAC trained {summary['train_timesteps']} steps (seed {args.seed}); evaluated on "
             f"{args.episodes} episodes with seeds {EVAL_SEED}..{EVAL_SEED + args.episodes - 1}"
@@ -156,6 +166,14 @@ def run(args: argparse.Namespace) -> int:
     print(text)
     print(f"figures: {out / 'figures'}; video: {video_path}; summary: {out / 'summary.md'}")
     return 0
+
+
+def _relative(path: Path) -> str:
+    """``path`` relative to the working folder when it is inside it (shorter commands)."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 if __name__ == "__main__":

@@ -53,8 +53,13 @@ B_i`` when ``||theta - theta*_i||_inf < target_tolerance_rad`` (``B_i = intermed
 or ``final_bonus`` for the last target). Optional terms, 0 by default:
 ``reward_smoothness = -smoothness_weight * mean(((a_t - a_{t-1}) / (high - low))^2)``,
 ``reward_effort = -effort_weight * mean((tau / tau_limit)^2)``. On a safety termination
-``reward_safety = -(steps left + 1) * (worst per-step reward)``, so that stopping never pays
-better than continuing. ``reward`` is the sum of the ``reward_*`` terms in ``info``.
+(``safety_penalty="hold"``, the default) ``reward_safety = -(steps left + 1) * (this step's
+distance + the extra terms' maxima)``: what holding still at the current error would cost
+for the rest of the episode, so stopping never pays better than holding still. With
+``safety_penalty="worst_case"``, ``reward_safety = -(steps left + 1) * (worst per-step
+reward the observation bounds allow)`` (up to about -7600): stopping never pays better than
+anything, but the penalty dwarfs the tracking reward and slows learning (README, Results).
+``reward`` is the sum of the ``reward_*`` terms in ``info``.
 
 ## Starting state
 The home posture of the scene (cuff satisfied, static equilibrium), no noise. The exercise and
@@ -87,6 +92,7 @@ the weight level are drawn from ``np_random`` unless fixed by the constructor or
 | ``smoothness_weight`` | 0.0 | weight of ``reward_smoothness`` |
 | ``effort_weight`` | 0.0 | weight of ``reward_effort`` |
 | ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
+| ``safety_penalty`` | ``"hold"`` | ``"hold"`` (steps left x current per-step loss) or ``"worst_case"`` (steps left x worst per-step loss); see Rewards |
 | ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range |
 | ``cuff_force_limit_n`` | None | cuff force rule: limit in N (None = ISO/TS 15066 quasi-static limit of the strapped region) |
 | ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact |

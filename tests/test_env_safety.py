@@ -24,13 +24,19 @@ def _run_until_terminated(env, policy, max_steps=300):
 def _assert_safety_penalty(env, reward, info):
     base = env.unwrapped
     steps_left = base.max_episode_steps - base._steps + 1
-    assert info["reward_safety"] == pytest.approx(steps_left * base.worst_step_reward)
-    # Never better than continuing: at least the worst return of the remaining steps.
-    theta_space = base.observation_space
-    worst_distance = np.linalg.norm(np.maximum(theta_space.high[9:15] - theta_space.low[0:6],
-                                               theta_space.high[0:6] - theta_space.low[9:15]))
-    assert info["reward_safety"] <= -worst_distance * (steps_left - 1)
     assert not info["is_success"]
+    if base.safety_penalty == "worst_case":
+        assert info["reward_safety"] == pytest.approx(steps_left * base.worst_step_reward)
+        # Never better than continuing: at least the worst return of the remaining steps.
+        theta_space = base.observation_space
+        worst_distance = np.linalg.norm(np.maximum(
+            theta_space.high[9:15] - theta_space.low[0:6],
+            theta_space.high[0:6] - theta_space.low[9:15]))
+        assert info["reward_safety"] <= -worst_distance * (steps_left - 1)
+    else:
+        # "hold": what holding still at this step's distance would cost until the time limit.
+        assert info["reward_safety"] == pytest.approx(steps_left * info["reward_distance"])
+        assert info["reward_safety"] < 0
     assert reward == pytest.approx(info["reward_distance"] + info["reward_safety"])
 
 
@@ -64,7 +70,7 @@ def test_forcing_the_elbow_into_hyperextension_ends_with_range_of_motion():
 
 
 def test_cuff_force_beyond_the_iso_limit_ends_the_episode():
-    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", safety_penalty="worst_case")
     base = env.unwrapped
     assert base.safety.force_limit_n == ISO_TS_15066_QUASI_STATIC_N["hands_and_fingers"] == 140
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
@@ -130,3 +136,18 @@ def test_rules_are_documented():
 
     for rule in RULES:
         assert f'"{rule}"' in safety.__doc__
+
+
+def test_hold_penalty_never_pays_better_than_holding_still():
+    """With the default penalty, stopping costs what holding still at the current error
+    would cost until the time limit; an unknown penalty name is refused."""
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
+    base = env.unwrapped
+    assert base.safety_penalty == "hold"
+    env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))
+    steps_left = base.max_episode_steps - base._steps + 1
+    assert info["safety_violation"] is not None
+    assert reward <= (steps_left + 1) * info["reward_distance"] + 1e-6
+    with pytest.raises(ValueError, match="safety_penalty.*'hold'.*'worst_case'"):
+        gym.make("rehabbot/rehab-reach-v0", safety_penalty="none")

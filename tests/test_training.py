@@ -405,7 +405,8 @@ def test_shipped_files_spell_out_the_sb3_defaults(algo: str) -> None:
     defaults = inspect.signature(cls.__init__).parameters
     env = gym.make(FULL_ID)
     for env_id in rehabbot.registration.ENV_SPECS:
-        hp = load_hyperparameters(REPO / "hyperparams" / "sb3-defaults" / f"{algo}.yml", env_id, algo)
+        path = REPO / "hyperparams" / "sb3-defaults" / f"{algo}.yml"
+        hp = load_hyperparameters(path, env_id, algo)
         assert hp.entry == env_id and hp.policy == "MlpPolicy" and hp.normalize is None
         assert hp.n_timesteps == 200_000 and hp.n_envs == 1
         for key, value in hp.kwargs.items():

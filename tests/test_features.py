@@ -1,0 +1,71 @@
+"""``rehabbot.features.TrackingErrorFeatures``: the agent-side features of the tuned settings."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import rehabbot  # noqa: F401
+from rehabbot.env import P, P_STAR, THETA, THETA_STAR
+from rehabbot.features import (
+    JOINT_ERROR_SCALE_RAD,
+    TOOL_ERROR_SCALE_M,
+    TrackingErrorFeatures,
+)
+from rehabbot.training import load_hyperparameters
+
+ID = "rehabbot/rehab-reach-v0"
+
+
+@pytest.fixture(scope="module")
+def env() -> gym.Env:
+    return gym.make(ID)
+
+
+def test_features_are_scaled_observation_plus_errors(env) -> None:
+    extractor = TrackingErrorFeatures(env.observation_space)
+    obs, _ = env.reset(seed=0)
+    batch = np.stack([obs, env.observation_space.sample()])
+    features = extractor(torch.as_tensor(batch)).numpy()
+    assert features.shape == (2, 32) and extractor.features_dim == 32
+    low, high = env.observation_space.low, env.observation_space.high
+    # Observations inside their bounds map into [-1, 1], bounds to -1 and +1.
+    assert np.all(np.abs(features[:, :23]) <= 1 + 1e-5)
+    edges = extractor(torch.as_tensor(np.stack([low, high]))).numpy()[:, :23]
+    np.testing.assert_allclose(edges, [[-1] * 23, [1] * 23], atol=1e-5)
+    # The appended errors are exactly theta* - theta and p* - p, in their scales.
+    np.testing.assert_allclose(features[:, 23:29],
+                               (batch[:, THETA_STAR] - batch[:, THETA]) / JOINT_ERROR_SCALE_RAD,
+                               rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(features[:, 29:32],
+                               (batch[:, P_STAR] - batch[:, P]) / TOOL_ERROR_SCALE_M,
+                               rtol=1e-5, atol=1e-5)
+    assert not list(extractor.parameters())  # nothing to learn: it is a fixed transform
+
+
+def test_other_observation_shapes_are_refused() -> None:
+    with pytest.raises(ValueError, match=r"\(23,\).*\(3,\)"):
+        TrackingErrorFeatures(gym.spaces.Box(-1, 1, (3,)))
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
+def test_shipped_settings_build_the_extractor_into_each_algorithm(env, algo: str) -> None:
+    from pathlib import Path
+
+    from rehabbot.training import algo_class
+
+    path = Path(__file__).resolve().parent.parent / "hyperparams" / f"{algo}.yml"
+    hp = load_hyperparameters(path, ID, algo)
+    kwargs = hp.kwargs["policy_kwargs"]
+    assert kwargs["features_extractor_class"] is TrackingErrorFeatures
+    model = algo_class(algo)("MlpPolicy", env, policy_kwargs=kwargs, seed=0,
+                             **({"n_steps": 64, "batch_size": 32} if algo == "ppo" else
+                                {"buffer_size": 100}))
+    extractor = (model.policy.actor.features_extractor if algo != "ppo"
+                 else model.policy.features_extractor)
+    assert isinstance(extractor, TrackingErrorFeatures)
+    obs, _ = env.reset(seed=0)
+    action, _ = model.predict(obs, deterministic=True)
+    assert env.action_space.contains(action)
