@@ -149,5 +149,5 @@ def test_hold_penalty_never_pays_better_than_holding_still():
     steps_left = base.max_episode_steps - base._steps + 1
     assert info["safety_violation"] is not None
     assert reward <= (steps_left + 1) * info["reward_distance"] + 1e-6
-    with pytest.raises(ValueError, match="safety_penalty.*'hold'.*'worst_case'"):
+    with pytest.raises(ValueError, match=r"safety_penalty.*'hold'.*'worst_case'"):
         gym.make("rehabbot/rehab-reach-v0", safety_penalty="none")

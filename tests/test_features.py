@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import rehabbot  # noqa: F401
-from rehabbot.env import P, P_STAR, THETA, THETA_STAR
+from rehabbot.env import P_STAR, THETA, THETA_STAR, P
 from rehabbot.features import (
     JOINT_ERROR_SCALE_RAD,
     TOOL_ERROR_SCALE_M,
