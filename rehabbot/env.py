@@ -59,6 +59,8 @@ for the rest of the episode, so stopping never pays better than holding still. W
 ``safety_penalty="worst_case"``, ``reward_safety = -(steps left + 1) * (worst per-step
 reward the observation bounds allow)`` (up to about -7600): stopping never pays better than
 anything, but the penalty dwarfs the tracking reward and slows learning (README, Results).
+``safety_penalty_steps=H`` counts at most H steps in either penalty (e.g. 100 = 1 / (1 -
+gamma) for gamma = 0.99: the discounted cost of holding still).
 ``reward`` is the sum of the ``reward_*`` terms in ``info``.
 
 ## Starting state
@@ -93,6 +95,7 @@ the weight level are drawn from ``np_random`` unless fixed by the constructor or
 | ``effort_weight`` | 0.0 | weight of ``reward_effort`` |
 | ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
 | ``safety_penalty`` | ``"hold"`` | ``"hold"`` (steps left x current per-step loss) or ``"worst_case"`` (steps left x worst per-step loss); see Rewards |
+| ``safety_penalty_steps`` | None | count at most this many steps in the safety penalty (None: all steps left until the time limit); see Rewards |
 | ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range |
 | ``cuff_force_limit_n`` | None | cuff force rule: limit in N (None = ISO/TS 15066 quasi-static limit of the strapped region) |
 | ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact |
@@ -184,6 +187,7 @@ class RehabEnv(gym.Env):
         effort_weight: float = 0.0,
         terminate_on_safety: bool = True,
         safety_penalty: str = "hold",
+        safety_penalty_steps: int | None = None,
         rom_tolerance_deg: float = 2.0,
         cuff_force_limit_n: float | None = None,
         contact_tolerance_m: float = 0.002,
@@ -230,6 +234,10 @@ class RehabEnv(gym.Env):
         self.terminate_on_safety = terminate_on_safety
         ex.check_choice("safety_penalty", safety_penalty, SAFETY_PENALTIES)
         self.safety_penalty = safety_penalty
+        if safety_penalty_steps is not None:
+            safety_penalty_steps = _check_number("safety_penalty_steps", safety_penalty_steps,
+                                                 1, 10**9, integer=True)
+        self.safety_penalty_steps = safety_penalty_steps
         thresholds = SafetyThresholds(rom_tolerance_deg=rom_tolerance_deg,
                                       cuff_force_limit_n=cuff_force_limit_n,
                                       contact_tolerance_m=contact_tolerance_m)
@@ -423,6 +431,8 @@ class RehabEnv(gym.Env):
         if violation is not None and (self.terminate_on_safety or violation == "instability"):
             terminated = True
             steps_left = max(self.max_episode_steps - self._steps, 0) + 1
+            if self.safety_penalty_steps is not None:
+                steps_left = min(steps_left, self.safety_penalty_steps)
             per_step = (self.worst_step_reward if self.safety_penalty == "worst_case"
                         else reward_distance - self.smoothness_weight - self.effort_weight)
             reward_safety = steps_left * per_step

@@ -151,3 +151,14 @@ def test_hold_penalty_never_pays_better_than_holding_still():
     assert reward <= (steps_left + 1) * info["reward_distance"] + 1e-6
     with pytest.raises(ValueError, match=r"safety_penalty.*'hold'.*'worst_case'"):
         gym.make("rehabbot/rehab-reach-v0", safety_penalty="none")
+
+
+def test_safety_penalty_steps_caps_the_steps_counted():
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", safety_penalty_steps=50)
+    base = env.unwrapped
+    env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    _reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))
+    assert base.max_episode_steps - base._steps + 1 > 50  # the cap is what binds
+    assert info["reward_safety"] == pytest.approx(50 * info["reward_distance"])
+    with pytest.raises(ValueError, match="safety_penalty_steps"):
+        gym.make("rehabbot/rehab-reach-v0", safety_penalty_steps=0)
