@@ -53,14 +53,14 @@ B_i`` when ``||theta - theta*_i||_inf < target_tolerance_rad`` (``B_i = intermed
 or ``final_bonus`` for the last target). Optional terms, 0 by default:
 ``reward_smoothness = -smoothness_weight * mean(((a_t - a_{t-1}) / (high - low))^2)``,
 ``reward_effort = -effort_weight * mean((tau / tau_limit)^2)``. On a safety termination
-(``safety_penalty="hold"``, the default) ``reward_safety = -(steps left + 1) * (this step's
-distance + the extra terms' maxima)``: what holding still at the current error would cost
-for the rest of the episode, so stopping never pays better than holding still. With
-``safety_penalty="worst_case"``, ``reward_safety = -(steps left + 1) * (worst per-step
-reward the observation bounds allow)`` (up to about -7600): stopping never pays better than
-anything, but the penalty dwarfs the tracking reward and slows learning (README, Results).
-``safety_penalty_steps=H`` counts at most H steps in either penalty (e.g. 100 = 1 / (1 -
-gamma) for gamma = 0.99: the discounted cost of holding still).
+(``safety_penalty="hold"``, the default) ``reward_safety = -min(steps left + 1, H) * (this
+step's distance + the extra terms' maxima)`` with ``H = safety_penalty_steps`` (default 100 =
+1 / (1 - gamma) for the usual gamma = 0.99): what holding still at the current error would
+cost an agent that discounts with gamma, so stopping never pays better than holding still.
+``safety_penalty_steps=None`` counts every step left until the time limit (a penalty of up to
+-1000 x the distance, which dwarfs the discounted values and stops SAC and TD3 from learning;
+README, Results). ``safety_penalty="worst_case"`` uses the worst per-step reward that the
+observation bounds allow instead of the current distance (up to about -7600 uncapped).
 ``reward`` is the sum of the ``reward_*`` terms in ``info``.
 
 ## Starting state
@@ -95,7 +95,7 @@ the weight level are drawn from ``np_random`` unless fixed by the constructor or
 | ``effort_weight`` | 0.0 | weight of ``reward_effort`` |
 | ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
 | ``safety_penalty`` | ``"hold"`` | ``"hold"`` (steps left x current per-step loss) or ``"worst_case"`` (steps left x worst per-step loss); see Rewards |
-| ``safety_penalty_steps`` | None | count at most this many steps in the safety penalty (None: all steps left until the time limit); see Rewards |
+| ``safety_penalty_steps`` | 100 | count at most this many steps in the safety penalty (None: all steps left until the time limit); see Rewards |
 | ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range |
 | ``cuff_force_limit_n`` | None | cuff force rule: limit in N (None = ISO/TS 15066 quasi-static limit of the strapped region) |
 | ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact |
@@ -142,6 +142,7 @@ JOINT_LIMIT_MARGIN_RAD = 0.3  # robot joint limits = setpoint bounds +- this
 THETA_OBS_MARGIN_RAD = 0.3  # theta bounds = joint limits +- this (soft-limit penetration)
 PHI_OBS_MARGIN_RAD = 0.5
 SAFETY_PENALTIES = ("hold", "worst_case")
+SAFETY_PENALTY_STEPS = 100  # 1 / (1 - gamma) for gamma = 0.99: the horizon of the agent's values
 ROBOT_LIMIT_SOLREF = (0.004, 1.0)  # stiff joint limits (2 x the physics step)
 
 _PRESET = {("arm", "right"): "upper_right", ("arm", "left"): "upper_left",
@@ -187,7 +188,7 @@ class RehabEnv(gym.Env):
         effort_weight: float = 0.0,
         terminate_on_safety: bool = True,
         safety_penalty: str = "hold",
-        safety_penalty_steps: int | None = None,
+        safety_penalty_steps: int | None = SAFETY_PENALTY_STEPS,
         rom_tolerance_deg: float = 2.0,
         cuff_force_limit_n: float | None = None,
         contact_tolerance_m: float = 0.002,

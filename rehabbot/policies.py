@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import pickle
+import warnings
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -174,7 +175,11 @@ def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
     run_dir = find_run_dir(path)
     manifest = _read_manifest(run_dir)
     try:
-        model = _algorithm_class(algo).load(path, device="cpu")
+        with warnings.catch_warnings():
+            # SB3 warns that a saved n-step replay buffer class overrides ``n_steps``; acting
+            # needs no replay buffer.
+            warnings.filterwarnings("ignore", message=".*n_steps.*is ignored because a custom")
+            model = _algorithm_class(algo).load(path, device="cpu")
     except Exception as err:  # SB3 raises many kinds on a damaged file
         raise PolicyError(f"cannot load model {str(path)!r}: {type(err).__name__}: "
                           f"{err}") from err

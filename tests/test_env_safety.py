@@ -24,6 +24,8 @@ def _run_until_terminated(env, policy, max_steps=300):
 def _assert_safety_penalty(env, reward, info):
     base = env.unwrapped
     steps_left = base.max_episode_steps - base._steps + 1
+    if base.safety_penalty_steps is not None:
+        steps_left = min(steps_left, base.safety_penalty_steps)
     assert not info["is_success"]
     if base.safety_penalty == "worst_case":
         assert info["reward_safety"] == pytest.approx(steps_left * base.worst_step_reward)
@@ -32,7 +34,7 @@ def _assert_safety_penalty(env, reward, info):
         worst_distance = np.linalg.norm(np.maximum(
             theta_space.high[9:15] - theta_space.low[0:6],
             theta_space.high[0:6] - theta_space.low[9:15]))
-        assert info["reward_safety"] <= -worst_distance * (steps_left - 1)
+        assert info["reward_safety"] <= -worst_distance * (steps_left - 1) + 1e-6
     else:
         # "hold": what holding still at this step's distance would cost until the time limit.
         assert info["reward_safety"] == pytest.approx(steps_left * info["reward_distance"])
@@ -141,19 +143,21 @@ def test_rules_are_documented():
 def test_hold_penalty_never_pays_better_than_holding_still():
     """With the default penalty, stopping costs what holding still at the current error
     would cost until the time limit; an unknown penalty name is refused."""
-    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", safety_penalty_steps=None)
     base = env.unwrapped
     assert base.safety_penalty == "hold"
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
     reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))
     steps_left = base.max_episode_steps - base._steps + 1
     assert info["safety_violation"] is not None
-    assert reward <= (steps_left + 1) * info["reward_distance"] + 1e-6
+    # Holding still at this distance until the time limit pays exactly the same.
+    assert reward == pytest.approx((steps_left + 1) * info["reward_distance"])
     with pytest.raises(ValueError, match=r"safety_penalty.*'hold'.*'worst_case'"):
         gym.make("rehabbot/rehab-reach-v0", safety_penalty="none")
 
 
 def test_safety_penalty_steps_caps_the_steps_counted():
+    assert gym.make("rehabbot/rehab-reach-v0").unwrapped.safety_penalty_steps == 100
     env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", safety_penalty_steps=50)
     base = env.unwrapped
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
