@@ -31,13 +31,21 @@ TOOL_ERROR_SCALE_M = 0.1
 
 
 class TrackingErrorFeatures(BaseFeaturesExtractor):
-    """``[obs, theta* - theta, p* - p]``: 23 + 6 + 3 = 32 features, no parameters."""
+    """``[obs scaled to [-1, 1], (theta* - theta) / 0.5 rad, (p* - p) / 0.1 m]``: 23 + 6 + 3 =
+    32 features, no parameters. With ``fine_scale_rad`` (e.g. the target tolerance, 0.05 rad)
+    six more: ``tanh((theta* - theta) / fine_scale_rad)``, which resolve the last few
+    hundredths of a radian that decide whether a target counts as reached."""
 
-    def __init__(self, observation_space: gym.spaces.Box, scale_to_bounds: bool = True) -> None:
+    def __init__(self, observation_space: gym.spaces.Box, scale_to_bounds: bool = True,
+                 fine_scale_rad: float | None = None) -> None:
         if observation_space.shape != (OBS_SIZE,):
             raise ValueError(f"TrackingErrorFeatures needs the RehabBot observation of shape "
                              f"({OBS_SIZE},), got {observation_space.shape}")
-        super().__init__(observation_space, features_dim=OBS_SIZE + ERROR_FEATURES)
+        if fine_scale_rad is not None and not fine_scale_rad > 0:
+            raise ValueError(f"fine_scale_rad={fine_scale_rad!r} must be > 0 or None")
+        fine = 0 if fine_scale_rad is None else THETA.stop - THETA.start
+        super().__init__(observation_space, features_dim=OBS_SIZE + ERROR_FEATURES + fine)
+        self.fine_scale_rad = fine_scale_rad
         low = torch.as_tensor(observation_space.low, dtype=torch.float32)
         high = torch.as_tensor(observation_space.high, dtype=torch.float32)
         if not scale_to_bounds:
@@ -50,4 +58,7 @@ class TrackingErrorFeatures(BaseFeaturesExtractor):
             / JOINT_ERROR_SCALE_RAD
         tool_error = (observations[:, P_STAR] - observations[:, P]) / TOOL_ERROR_SCALE_M
         scaled = (observations - self._center) / self._half_range
-        return torch.cat((scaled, joint_error, tool_error), dim=1)
+        if self.fine_scale_rad is None:
+            return torch.cat((scaled, joint_error, tool_error), dim=1)
+        fine = torch.tanh(joint_error * (JOINT_ERROR_SCALE_RAD / self.fine_scale_rad))
+        return torch.cat((scaled, joint_error, tool_error, fine), dim=1)
