@@ -45,6 +45,22 @@ def test_features_are_scaled_observation_plus_errors(env) -> None:
     assert not list(extractor.parameters())  # nothing to learn: it is a fixed transform
 
 
+def test_fine_features_resolve_errors_near_the_tolerance(env) -> None:
+    extractor = TrackingErrorFeatures(env.observation_space, fine_scale_rad=0.05)
+    obs, _ = env.reset(seed=0)
+    obs = obs.copy()
+    error = np.array([0.0, 0.02, -0.05, 0.07, 0.5, -2.0], np.float32)
+    obs[THETA] = obs[THETA_STAR] - error
+    features = extractor(torch.as_tensor(obs[None])).numpy()[0]
+    assert features.shape == (38,) and extractor.features_dim == 38
+    np.testing.assert_allclose(features[32:], np.tanh(error / 0.05), atol=1e-4)
+    # 0.05 rad (the tolerance) is tanh(1) = 0.76: near the target the fine features still
+    # change by ~0.4 per 0.02 rad, where the coarse ones change by 0.04.
+    assert features[32 + 2] == pytest.approx(-np.tanh(1.0), abs=1e-4)
+    with pytest.raises(ValueError, match="fine_scale_rad"):
+        TrackingErrorFeatures(env.observation_space, fine_scale_rad=0.0)
+
+
 def test_other_observation_shapes_are_refused() -> None:
     with pytest.raises(ValueError, match=r"\(23,\).*\(3,\)"):
         TrackingErrorFeatures(gym.spaces.Box(-1, 1, (3,)))
