@@ -88,8 +88,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         per_step = "-" if r["return_per_step"] is None else f"{r['return_per_step']:.3f}"
         best = "-" if r["best_eval_success"] is None else f"{100 * r['best_eval_success']:.0f} %"
         kwargs = ", ".join(f"{k}={v}" for k, v in r["env_kwargs"].items()) or "-"
-        print(f"| {r['run']} | {r['algo']} | {r['settings']} | {kwargs} | {r['steps'] // 1000}k | {per_step} "
-              f"| {r['safety_stops']} | {r['successes']} / {r['window_episodes']} | {best} |")
+        print(f"| {r['run']} | {r['algo']} | {r['settings']} | {kwargs} | "
+              f"{r['steps'] // 1000}k | {per_step} | {r['safety_stops']} | {r['successes']} / {r['window_episodes']} | {best} |")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
     return 0
