@@ -89,7 +89,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         best = "-" if r["best_eval_success"] is None else f"{100 * r['best_eval_success']:.0f} %"
         kwargs = ", ".join(f"{k}={v}" for k, v in r["env_kwargs"].items()) or "-"
         print(f"| {r['run']} | {r['algo']} | {r['settings']} | {kwargs} | "
-              f"{r['steps'] // 1000}k | {per_step} | {r['safety_stops']} | {r['successes']} / {r['window_episodes']} | {best} |")
+              f"{r['steps'] // 1000}k | {per_step} | {r['safety_stops']} | "
+              f"{r['successes']} / {r['window_episodes']} | {best} |")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
     return 0
