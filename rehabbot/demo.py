@@ -3,7 +3,7 @@ the scripted expert and random actions, and write the paper's figures, a video a
 
 Usage::
 
-    python -m rehabbot.demo --out runs/demo [--timesteps 30000] [--episodes 10] [--seed 0]
+    python -m rehabbot.demo --out runs/demo [--timesteps 40000] [--episodes 10] [--seed 0]
 
 Steps, each with its output under ``OUT``:
 
@@ -19,7 +19,7 @@ Steps, each with its output under ``OUT``:
 5. ``OUT/summary.md`` and ``OUT/summary.json``: the comparison table, the wall-clock time of
    every step, and the commands that reproduce each step; the table is printed at the end.
 
-The default budget (30 000 steps) finishes within 15 minutes on 2 CPU cores; it is a
+The default budget (40 000 steps) finishes within 15 minutes on 2 CPU cores; it is a
 demonstration of the pipeline, not a converged policy (see the README's results table for
 that: ``rehabbot train rehab-reach-v0 --algo sac --timesteps 200000``).
 """
@@ -37,7 +37,7 @@ from rehabbot.cli import use_headless_gl_by_default
 
 ENV_ID = "rehabbot/rehab-reach-v0"
 ALGO = "sac"
-DEFAULT_TIMESTEPS = 30_000
+DEFAULT_TIMESTEPS = 40_000
 DEFAULT_EPISODES = 10
 EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
 VIDEO_WIDTH_PX, VIDEO_HEIGHT_PX, VIDEO_FRAME_EVERY = 480, 360, 3  # 16.7 fps, software GL
