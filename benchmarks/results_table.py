@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabbot.evaluation import evaluate, short_id
+from rehabbot.evaluation import evaluate
+from rehabbot.training import env_short_name
 
 
 def find_runs(roots: Sequence[Path]) -> list[Path]:
@@ -70,7 +71,7 @@ def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
     episodes = [e for r in runs for e in r["report"]["per_episode"]]
     seeds = [r["manifest"].get("seed") for r in runs]
     return {
-        "env": short_id(env_id),
+        "env": env_short_name(env_id),
         "policy": name,
         "settings": source,
         "steps": sorted({r["manifest"].get("timesteps_done") for r in runs} - {None}),

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
                        hyperparams=args.hyperparams, resume=resume,
                        progress_bar=not args.no_progress)
     stages["train"] = time.perf_counter() - started
-    commands["train"] = (f"rehabbot train {evaluation.short_id(ENV_ID)} --algo sac --timesteps "
+    commands["train"] = (f"rehabbot train {training.env_short_name(ENV_ID)} --algo sac --timesteps "
                          f"{args.timesteps} --seeds {args.seed} --hyperparams {args.hyperparams}"
                          f" --out {run_root}")
     commands["train"] = commands["train"].replace(str(HYPERPARAMS), _relative(HYPERPARAMS))
@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         reports.append(report)
     stages["evaluate"] = time.perf_counter() - started
     commands["evaluate"] = (f"rehabbot evaluate {run_dir / 'model.zip'} expert random --env "
-                            f"{evaluation.short_id(ENV_ID)} --episodes {args.episodes} --seed "
+                            f"{training.env_short_name(ENV_ID)} --episodes {args.episodes} --seed "
                             f"{EVAL_SEED} --out {out / 'evaluation'}")
 
     started = time.perf_counter()

@@ -27,7 +27,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import tempfile
 import time
 from collections.abc import Sequence
@@ -35,6 +34,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from rehabbot.training import atomic_write, env_short_name, package_versions, resolve_env_id
 
 TRACE_KEYS = ("env_id", "policy", "seed", "dt_s", "time_s", "robot_qpos_rad", "robot_torque_nm",
               "torque_limit_nm", "joint_names", "tool_pos_m", "target_tool_pos_m",
@@ -58,19 +59,23 @@ SUMMARY_METRICS = (
 DEFAULT_EPISODES = 10
 
 
-def short_id(env_id: str) -> str:
-    """``rehabbot/rehab-reach-v0`` -> ``rehab-reach-v0``."""
-    return env_id.split("/", 1)[-1]
+def env_for(spec: str, env_id: str | None, env_kwargs: dict | None) -> tuple[str, dict]:
+    """The full env id and kwargs to run ``spec`` in: ``env_id`` if given (with or without
+    ``rehabbot/``), else the id and kwargs of the model's ``rehabbot train`` manifest."""
+    from rehabbot.policies import PolicyError, find_run_dir, model_file
+    from rehabbot.training import resolve_env_id
 
-
-def full_id(env_id: str) -> str:
-    """Accept an id with or without the ``rehabbot/`` namespace; ValueError if unknown."""
-    from rehabbot.registration import ENV_SPECS
-
-    candidate = env_id if "/" in env_id else f"rehabbot/{env_id}"
-    if candidate not in ENV_SPECS:
-        raise ValueError(f"unknown env id {env_id!r}; valid ids: {sorted(ENV_SPECS)}")
-    return candidate
+    kwargs = dict(env_kwargs or {})
+    if env_id is None:
+        if spec in ("expert", "random"):
+            raise ValueError(f"{spec!r} needs --env ENV")
+        run_dir = find_run_dir(model_file(spec))
+        if run_dir is None:
+            raise PolicyError(f"{spec!r} is not in a `rehabbot train` run directory; give --env")
+        manifest = json.loads((run_dir / "manifest.json").read_text())
+        env_id = manifest["env_id"]
+        kwargs = {**manifest.get("env_kwargs", {}), **kwargs}
+    return resolve_env_id(env_id), kwargs
 
 
 # --------------------------------------------------------------------------- one episode
@@ -176,19 +181,6 @@ def summarize(episodes: list[dict]) -> dict:
     return summary
 
 
-def versions() -> dict[str, str]:
-    """Versions of the packages a result depends on."""
-    from importlib import metadata
-
-    found = {"python": platform.python_version()}
-    for package in ("rehabbot", "mujoco", "gymnasium", "numpy", "stable-baselines3", "torch"):
-        try:
-            found[package] = metadata.version(package)
-        except metadata.PackageNotFoundError:
-            found[package] = None
-    return found
-
-
 def evaluate(spec: str, env_id: str | None = None, episodes: int = DEFAULT_EPISODES,
              seed: int = 0, env_kwargs: dict | None = None,
              deterministic: bool = True) -> tuple[dict, dict]:
@@ -200,21 +192,11 @@ def evaluate(spec: str, env_id: str | None = None, episodes: int = DEFAULT_EPISO
     import gymnasium as gym
 
     import rehabbot  # noqa: F401  (registers the ids)
-    from rehabbot.policies import PolicyError, find_run_dir, load_policy, model_file
+    from rehabbot.policies import load_policy
 
     if episodes < 1:
         raise ValueError(f"episodes={episodes!r} must be >= 1")
-    kwargs = dict(env_kwargs or {})
-    if env_id is None:
-        if spec in ("expert", "random"):
-            raise ValueError(f"{spec!r} needs --env ENV")
-        run_dir = find_run_dir(model_file(spec))
-        if run_dir is None:
-            raise PolicyError(f"{spec!r} is not in a `rehabbot train` run directory; give --env")
-        manifest = json.loads((run_dir / "manifest.json").read_text())
-        env_id = manifest["env_id"]
-        kwargs = {**manifest.get("env_kwargs", {}), **kwargs}
-    env_id = full_id(env_id)
+    env_id, kwargs = env_for(spec, env_id, env_kwargs)
     env = gym.make(env_id, **kwargs)
     try:
         policy = load_policy(spec, env, seed=seed)
@@ -237,7 +219,7 @@ def evaluate(spec: str, env_id: str | None = None, episodes: int = DEFAULT_EPISO
         "summary": summarize(figures),
         "per_episode": figures,
         "wall_clock_s": wall_s,
-        "versions": versions(),
+        "versions": package_versions(),
     }
     return report, traces
 
@@ -245,32 +227,13 @@ def evaluate(spec: str, env_id: str | None = None, episodes: int = DEFAULT_EPISO
 # --------------------------------------------------------------------------- output
 
 
-def _atomic_write(path: Path, write) -> None:
-    """Write through a temporary file in the same folder, then rename (no half files)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(handle)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def save_report(report: dict, trace: dict, out_dir: Path) -> tuple[Path, Path]:
     """``out_dir/evaluation.json`` and ``out_dir/trace.npz``, each written atomically."""
     json_path, trace_path = out_dir / "evaluation.json", out_dir / "trace.npz"
-
-    def write_json(tmp: str) -> None:
-        Path(tmp).write_text(json.dumps(report, indent=2, default=_json_default) + "\n")
-
-    def write_npz(tmp: str) -> None:
-        with open(tmp, "wb") as handle:
-            np.savez_compressed(handle, **trace)
-
-    _atomic_write(json_path, write_json)
-    _atomic_write(trace_path, write_npz)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(report, indent=2, default=_json_default) + "\n"
+    atomic_write(json_path, lambda stream: stream.write(text.encode("utf-8")))
+    atomic_write(trace_path, lambda stream: np.savez_compressed(stream, **trace))
     return json_path, trace_path
 
 
@@ -327,7 +290,7 @@ def default_out_dir(specs: Sequence[str], env_id: str | None) -> Path:
         runs.add(run_dir)
     if len(runs) == 1 and None not in runs and len(specs) == 1:
         return runs.pop() / "evaluation"
-    return Path("runs") / "evaluation" / (short_id(env_id) if env_id else "models")
+    return Path("runs") / "evaluation" / (env_short_name(env_id) if env_id else "models")
 
 
 def ensure_trace(run_dir: Path, seed: int | None = None) -> Path:
@@ -395,7 +358,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise CliError(f"--episodes {args.episodes} must be >= 1", EXIT_USAGE)
     try:
-        env_id = full_id(args.env) if args.env else None
+        env_id = resolve_env_id(args.env) if args.env else None
         out_dir = args.out or default_out_dir(args.policies, env_id)
     except (ValueError, PolicyError) as err:
         raise CliError(str(err), EXIT_USAGE) from err
@@ -418,6 +381,6 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     table = format_table(reports)
     print(f"\n{reports[0]['env_id']}, {args.episodes} episodes per policy\n\n{table}")
     if len(reports) > 1:
-        _atomic_write(out_dir / "comparison.md",
-                      lambda tmp: Path(tmp).write_text(table + "\n"))
+        atomic_write(out_dir / "comparison.md",
+                     lambda stream: stream.write((table + "\n").encode("utf-8")))
     return 0

@@ -145,7 +145,7 @@ _NUMBER_RE = re.compile(r"^[+-]?(?:\d[\d_]*(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$")
 _INT_RE = re.compile(r"^[+-]?\d[\d_]*$")
 
 
-class TrainingError(Exception):
+class TrainingError(ValueError):
     """A user error (bad id, file or option); ``cmd_train`` reports it as one line."""
 
     def __init__(self, message: str, exit_code: int = EXIT_FAILURE) -> None:
@@ -643,7 +643,7 @@ def _temp_path(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}.tmp")
 
 
-def _atomic_write(path: Path, write: Callable[[io.BufferedWriter], None]) -> None:
+def atomic_write(path: Path, write: Callable[[io.BufferedWriter], None]) -> None:
     """Write ``path`` via a temporary file in the same folder and ``os.replace``."""
     tmp = _temp_path(path)
     try:
@@ -660,7 +660,7 @@ def _atomic_write(path: Path, write: Callable[[io.BufferedWriter], None]) -> Non
 
 
 def _atomic_save_to_path(path: Path, save: Callable[[str], None]) -> None:
-    """Like :func:`_atomic_write` for savers that take a file name (VecNormalize.save)."""
+    """Like :func:`atomic_write` for savers that take a file name (VecNormalize.save)."""
     tmp = _temp_path(path)
     try:
         save(str(tmp))
@@ -675,7 +675,7 @@ def _atomic_save_to_path(path: Path, save: Callable[[str], None]) -> None:
 
 def _write_json_atomic(path: Path, data: Mapping[str, Any]) -> None:
     text = json.dumps(data, indent=2, sort_keys=False) + "\n"
-    _atomic_write(path, lambda stream: stream.write(text.encode("utf-8")))
+    atomic_write(path, lambda stream: stream.write(text.encode("utf-8")))
 
 
 def _read_manifest(run_dir: Path) -> dict[str, Any] | None:
@@ -692,7 +692,8 @@ def _read_manifest(run_dir: Path) -> dict[str, Any] | None:
 
 
 @functools.cache
-def _versions() -> dict[str, str | None]:
+def package_versions() -> dict[str, str | None]:
+    """Versions of Python and of the packages a result depends on."""
     from importlib import metadata
 
     import rehabbot
@@ -1032,7 +1033,7 @@ def _truncate_monitor(path: Path, max_steps: int) -> float:
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(columns)
         writer.writerows(kept)
-        _atomic_write(path, lambda stream: stream.write(out.getvalue().encode("utf-8")))
+        atomic_write(path, lambda stream: stream.write(out.getvalue().encode("utf-8")))
     return last_t
 
 
@@ -1104,12 +1105,12 @@ def _callback_classes() -> tuple[type, type]:
             folder.mkdir(parents=True, exist_ok=True)
             replay_path, vecnormalize_path = _companions(folder, steps)
             if getattr(self.model, "replay_buffer", None) is not None:
-                _atomic_write(replay_path, self.model.save_replay_buffer)
+                atomic_write(replay_path, self.model.save_replay_buffer)
             vec_normalize = self.model.get_vec_normalize_env()
             if vec_normalize is not None:
                 _atomic_save_to_path(vecnormalize_path, vec_normalize.save)
             model_path = folder / f"{CHECKPOINT_PREFIX}_{steps}_steps.zip"
-            _atomic_write(model_path, self.model.save)  # last: a zip marks a full checkpoint
+            atomic_write(model_path, self.model.save)  # last: a zip marks a full checkpoint
             for old in folder.glob(f"{CHECKPOINT_PREFIX}_replay_buffer_*_steps.pkl"):
                 if old != replay_path:
                     with contextlib.suppress(OSError):
@@ -1230,7 +1231,7 @@ class _Run:
             "start_timesteps": done, "end_timesteps": done, "status": "running",
             "resumed_from": self.rel(plan.resume.checkpoint) if plan.resume else None,
             "seeds": seeds, "wall_clock_s": 0.0, "command": list(sys.argv),
-            "versions": _versions(), "git_commit": _git_commit(),
+            "versions": package_versions(), "git_commit": _git_commit(),
         }
         if plan.resume is None:
             self.manifest = {
@@ -1249,7 +1250,7 @@ class _Run:
                 "eval_freq": plan.eval_freq,
                 "eval_episodes": plan.eval_episodes,
                 "eval_deterministic": True,
-                "versions": _versions(),
+                "versions": package_versions(),
                 "git_commit": _git_commit(),
                 "command": list(sys.argv),
                 "status": "running",
@@ -1272,7 +1273,7 @@ class _Run:
             self.manifest.update(
                 total_timesteps=plan.total_timesteps, timesteps_done=done,
                 checkpoint_freq=plan.checkpoint_freq, eval_freq=plan.eval_freq,
-                eval_episodes=plan.eval_episodes, versions=_versions(),
+                eval_episodes=plan.eval_episodes, versions=package_versions(),
                 git_commit=_git_commit(), command=list(sys.argv), status="running",
                 finished_at=None, resumed_from=self.rel(plan.resume.checkpoint),
                 last_checkpoint=self.rel(plan.resume.checkpoint)
@@ -1432,7 +1433,7 @@ def _execute(plan: _RunPlan) -> Path:
                       last_checkpoint=run.rel(checkpoint))
             raise TrainingInterrupted(run_dir, done, checkpoint, stopper.stop_signal)
         checkpoint = checkpointer.save_now()  # final checkpoint, so that --resume can extend
-        _atomic_write(run_dir / MODEL_NAME, model.save)
+        atomic_write(run_dir / MODEL_NAME, model.save)
         vec_normalize = model.get_vec_normalize_env()
         if vec_normalize is not None:
             _atomic_save_to_path(run_dir / VECNORMALIZE_NAME, vec_normalize.save)

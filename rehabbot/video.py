@@ -29,25 +29,15 @@ def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
     import gymnasium as gym
 
     import rehabbot  # noqa: F401  (registers the ids)
-    from rehabbot.evaluation import full_id
-    from rehabbot.policies import find_run_dir, load_policy, model_file
+    from rehabbot.evaluation import env_for
+    from rehabbot.policies import load_policy
 
     out_path = Path(out_path)
     if out_path.suffix.lower() not in VIDEO_SUFFIXES:
         raise ValueError(f"--out {str(out_path)!r}: the file must end in {VIDEO_SUFFIXES}")
     if frame_every < 1:
         raise ValueError(f"frame_every={frame_every!r} must be >= 1")
-    kwargs = dict(env_kwargs or {})
-    if env_id is None:
-        if spec in ("expert", "random"):
-            raise ValueError(f"{spec!r} needs --env ENV")
-        run_dir = find_run_dir(model_file(spec))
-        if run_dir is None:
-            raise ValueError(f"{spec!r} is not in a `rehabbot train` run directory; give --env")
-        manifest = json.loads((run_dir / "manifest.json").read_text())
-        env_id = manifest["env_id"]
-        kwargs = {**manifest.get("env_kwargs", {}), **kwargs}
-    env_id = full_id(env_id)
+    env_id, kwargs = env_for(spec, env_id, env_kwargs)
     env = gym.make(env_id, render_mode="rgb_array", width=width, height=height,
                    camera_name=camera, **kwargs)
     frames = []
