@@ -79,6 +79,7 @@ def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
         "success_rate": float(np.mean([e["success"] for e in episodes])),
         "return": _fmt([s["return"]["mean"] for s in per_seed]) if len(runs) > 1 else
         _fmt([e["return"] for e in episodes]),
+        "length": _fmt([e["length"] for e in episodes]),
         "steps_to_finish": _fmt([e["steps_to_finish"] for e in episodes
                                  if e["steps_to_finish"] is not None]),
         "sparc": _fmt([e["sparc"] for e in episodes], 2),
@@ -90,16 +91,16 @@ def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
 
 
 def format_rows(rows: list[dict]) -> str:
-    header = ("| env | policy | settings | steps | seeds | success | return | steps to finish "
-              "| SPARC | safety stops | wall-clock [min] |")
-    lines = [header, "|" + "---|" * 11]
+    header = ("| env | policy | settings | steps | seeds | success | return | length "
+              "| steps to finish | SPARC | safety stops | wall-clock [min] |")
+    lines = [header, "|" + "---|" * 12]
     for r in rows:
         steps = "/".join(f"{s // 1000}k" for s in r["steps"]) or "-"
         seeds = ",".join(str(s) for s in r["seeds"]) or "-"
         lines.append(f"| {r['env']} | {r['policy']} | {r['settings']} | {steps} | {seeds} | "
                      f"{100 * r['success_rate']:.0f} % ({r['episodes']} ep.) | {r['return']} | "
-                     f"{r['steps_to_finish']} | {r['sparc']} | {r['safety_stops']} | "
-                     f"{r['wall_clock_min']} |")
+                     f"{r['length']} | {r['steps_to_finish']} | {r['sparc']} | "
+                     f"{r['safety_stops']} | {r['wall_clock_min']} |")
     return "\n".join(lines)
 
 

@@ -1334,8 +1334,12 @@ def _setup(plan: _RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any
                                     f"({plan.hp.source}): {err}", EXIT_USAGE) from err
         else:
             try:
-                model = cls.load(str(plan.resume.checkpoint), env=venv, device="auto",
-                                 tensorboard_log=tb_dir, verbose=0)
+                with warnings.catch_warnings():
+                    # The saved n-step replay buffer class makes SB3 warn that ``n_steps`` is
+                    # ignored; the buffer loaded below keeps its n-step returns.
+                    warnings.filterwarnings("ignore", message=".*n_steps.*is ignored because")
+                    model = cls.load(str(plan.resume.checkpoint), env=venv, device="auto",
+                                     tensorboard_log=tb_dir, verbose=0)
             except Exception as err:  # SB3 raises many kinds on a damaged or foreign file
                 raise TrainingError(f"cannot load checkpoint {plan.resume.checkpoint}: "
                                     f"{type(err).__name__}: {err}") from err
