@@ -304,7 +304,18 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``rehabbot`` command."""
     parser = argparse.ArgumentParser(
         prog="rehabbot",
-        description="RehabBot: a UR5e strapped to a humanoid patient, simulated in MuJoCo.",
+        description="RehabBot: a UR5e strapped to a humanoid patient, simulated in MuJoCo. "
+                    "Train, evaluate, plot and render RL agents on its therapy exercises.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="a typical session:\n"
+               "  rehabbot list\n"
+               "  rehabbot train rehab-reach-v0 --algo sac --hyperparams hyperparams/sac.yml "
+               "--seeds 0 1 2\n"
+               "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random\n"
+               "  rehabbot plot runs/rehab-reach-v0\n"
+               "  rehabbot render runs/rehab-reach-v0/sac/seed0/model.zip --out sac.mp4\n\n"
+               "`rehabbot COMMAND --help` describes each command. Exit codes: 0 success, "
+               "1 failure, 2 bad usage, 130/143 training interrupted (resumable).",
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
