@@ -600,10 +600,15 @@ def build_kinematics(trace: Trace | Path | str) -> Figure:
 def plot_kinematics(trace_path: Trace | Path | str, out_dir: Path | str,
                     formats: Sequence[str] = DEFAULT_FORMATS) -> list[Path]:
     """Write Fig. 5 ``fig5_kinematics_<label>.*`` for one trace."""
+    return _plot_trace(build_kinematics, "fig5_kinematics", trace_path, out_dir, formats)
+
+
+def _plot_trace(build, prefix: str, trace_path: Trace | Path | str, out_dir: Path | str,
+                formats: Sequence[str]) -> list[Path]:
+    """Build one per-trace figure and save it as ``<prefix>_<label>.*``."""
     _check_formats(formats)
     trace = _as_trace(trace_path)
-    return save_figure(build_kinematics(trace), out_dir, f"fig5_kinematics_{trace.label}",
-                       formats)
+    return save_figure(build(trace), out_dir, f"{prefix}_{trace.label}", formats)
 
 
 def build_torques(trace: Trace | Path | str) -> Figure:
@@ -640,9 +645,7 @@ def build_torques(trace: Trace | Path | str) -> Figure:
 def plot_torques(trace_path: Trace | Path | str, out_dir: Path | str,
                  formats: Sequence[str] = DEFAULT_FORMATS) -> list[Path]:
     """Write Fig. 6 ``fig6_torques_<label>.*`` for one trace."""
-    _check_formats(formats)
-    trace = _as_trace(trace_path)
-    return save_figure(build_torques(trace), out_dir, f"fig6_torques_{trace.label}", formats)
+    return _plot_trace(build_torques, "fig6_torques", trace_path, out_dir, formats)
 
 
 def build_tool_path(trace: Trace | Path | str) -> Figure:
@@ -686,10 +689,7 @@ def build_tool_path(trace: Trace | Path | str) -> Figure:
 def plot_tool_path(trace_path: Trace | Path | str, out_dir: Path | str,
                    formats: Sequence[str] = DEFAULT_FORMATS) -> list[Path]:
     """Write Fig. 3 ``fig3_tool_path_<label>.*`` for one trace."""
-    _check_formats(formats)
-    trace = _as_trace(trace_path)
-    return save_figure(build_tool_path(trace), out_dir, f"fig3_tool_path_{trace.label}",
-                       formats)
+    return _plot_trace(build_tool_path, "fig3_tool_path", trace_path, out_dir, formats)
 
 
 # --------------------------------------------------------------------------- all figures
