@@ -29,8 +29,9 @@ Table 3 ranges in robot joint space). Other modes (:mod:`rehabbot.control`):
 ``"joint_position"`` (Box = setpoint bounds, rad), ``"joint_velocity"``
 (``Box(-max_speed_rad_s, max_speed_rad_s)``, rad/s), ``"torque"`` (``Box(-1, 1)``, fraction
 of each joint's torque limit, added to gravity compensation, servos off). Finite actions
-outside the box are clipped (counted in ``info["action_clipped"]``); NaN/inf or a wrong shape
-raise ``ValueError``.
+outside the box are clipped (counted in ``info["action_clipped"]``); NaN/inf (the error names
+the indices), a wrong shape, or a dtype that is not a real number (bool, complex, str, object)
+raise ``ValueError``. float64, integer and list actions are accepted.
 
 ## Observation space
 ``Box(low, high, (23,), float32)``, in the paper's order. Positions are in the robot base
@@ -74,6 +75,12 @@ the weight level are drawn from ``np_random`` unless fixed by the constructor or
   ``"instability"``, ``"range_of_motion"``, ``"cuff_force"`` or ``"unintended_contact"``;
 * truncated: ``max_episode_steps`` (1000 = 20 s), applied by the registration's ``TimeLimit``.
 
+``step()`` before the first ``reset()`` or after a termination raises
+``gymnasium.error.ResetNeeded``; after ``close()`` it raises ``RuntimeError``; ``close()`` twice
+is a no-op. An ``"instability"`` always ends the episode (even with
+``terminate_on_safety=False``) and returns the last healthy observation; the next ``reset()``
+starts from the healthy home state.
+
 ## Arguments
 | kwarg | default | meaning |
 |---|---|---|
@@ -114,6 +121,7 @@ hold the camera's far-plane distance.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import sys
@@ -131,7 +139,14 @@ from rehabbot import overlay
 from rehabbot.control import CONTROL_MODES, as_index, make_controller
 from rehabbot.models import robot as ur
 from rehabbot.models.patient import PatientProfile
-from rehabbot.models.scene import SIDES, WEIGHT_LEVELS, build_scene, check_weight_level
+from rehabbot.models.scene import (
+    CAMERA_NAMES,
+    SIDES,
+    WEIGHT_LEVELS,
+    SceneOptions,
+    build_scene,
+    check_weight_level,
+)
 from rehabbot.safety import SafetyMonitor, SafetyThresholds
 
 OBS_SIZE = 23
@@ -210,6 +225,10 @@ class RehabEnv(gym.Env):
         if render_mode is not None:
             ex.check_choice("render_mode", render_mode, self.metadata["render_modes"])
         if isinstance(profile, dict):
+            fields = [f.name for f in dataclasses.fields(PatientProfile)]
+            unknown = sorted(set(profile) - set(fields))
+            if unknown:
+                raise ValueError(f"profile has unknown field(s) {unknown}; valid: {fields}")
             profile = PatientProfile(**profile)
         elif profile is None:
             profile = PatientProfile()
@@ -239,6 +258,13 @@ class RehabEnv(gym.Env):
             safety_penalty_steps = _check_number("safety_penalty_steps", safety_penalty_steps,
                                                  1, 10**9, integer=True)
         self.safety_penalty_steps = safety_penalty_steps
+        _check_number("segment_s", segment_s, 0.1, 60.0)
+        _check_number("waypoint_dt_s", waypoint_dt_s, 0.01, min(1.0, float(segment_s)))
+        _check_number("min_waypoint_spacing_rad", min_waypoint_spacing_rad, 0.0, 1.0)
+        _check_number("max_speed_rad_s", max_speed_rad_s, 1e-3, ur.MAX_JOINT_SPEED_RAD_S)
+        if camera_name is not None and camera_name not in CAMERA_NAMES:
+            raise ValueError(f"camera_name={camera_name!r} is not one of "
+                             f"{list(CAMERA_NAMES)} or None")
         thresholds = SafetyThresholds(rom_tolerance_deg=rom_tolerance_deg,
                                       cuff_force_limit_n=cuff_force_limit_n,
                                       contact_tolerance_m=contact_tolerance_m)
@@ -252,19 +278,18 @@ class RehabEnv(gym.Env):
         self._fixed_weight_level = weight_level
         self._fixed_exercise = exercise
 
+        scene_options = {"cuff": cuff, "side": None if limb == "arm" else side,
+                         "base_reorientation_deg": base_reorientation_deg,
+                         "timestep_s": timestep_s}
+        SceneOptions(**scene_options)  # raises ValueError naming a bad option
+
         # -- build -----------------------------------------------------------------------
         self.scene = build_scene(_PRESET[(limb, side)], profile=profile,
-                                 weight_level=weight_level or 0, cuff=cuff,
-                                 side=None if limb == "arm" else side,
-                                 base_reorientation_deg=base_reorientation_deg,
-                                 timestep_s=timestep_s)
+                                 weight_level=weight_level or 0, **scene_options)
         self.model = self.scene.model
         self.data = mujoco.MjData(self.model)
         self.handle = self.scene.robots[0]
         model = self.model
-        if camera_name is not None and camera_name not in self.scene.camera_names:
-            raise ValueError(f"camera_name={camera_name!r} is not one of "
-                             f"{list(self.scene.camera_names)} or None")
         self.camera_name = camera_name
         if render_mode in ("rgb_array", "depth_array"):
             from rehabbot.rendering import check_offscreen_size
@@ -334,6 +359,7 @@ class RehabEnv(gym.Env):
         self._patient_qpos_adr = as_index(self.scene.patient_qpos_adr)
         self._bind_views()
         self._obs = np.zeros(OBS_SIZE)
+        self._healthy_obs = np.zeros(OBS_SIZE, np.float32)  # the last observation in bounds
         self._theta = np.zeros(6)
         self._prev_action = np.zeros(6)
         self._trace = np.zeros((self.max_episode_steps + 1, 3))
@@ -342,7 +368,7 @@ class RehabEnv(gym.Env):
         self._target_index = 0
         self._exercise = 0
         self._sequence = self.targets[0]
-        self._done = False
+        self._needs_reset = True  # before the first reset, after a termination, after close
         self._renderer: mujoco.Renderer | None = None
         self._viewer = None
         self._viewer_threads: set[threading.Thread] = set()
@@ -374,7 +400,6 @@ class RehabEnv(gym.Env):
         self._sequence = self.targets[self._exercise]
         self._target_index = 0
         self._steps = 0
-        self._done = False
         data = self.data
         self.scene.reset_data(data)
         self.controller.reset(data, self.scene.home_setpoints[0])
@@ -382,22 +407,22 @@ class RehabEnv(gym.Env):
         self._prev_action[:] = 0.0
         self._trace_len = 0
         self._record_trace()
-        obs = self._observation()
+        obs = self._healthy_obs = self._observation()
         self._theta[:] = self._qpos[self._qpos_adr]
         info = self._info(safety_violation=None, is_success=False, force_n=self.safety
                           .cuff_force_n(data), terms=(0.0, 0.0, 0.0, 0.0, 0.0), clipped=0)
+        self._needs_reset = False
         if self.render_mode == "human":
             self.render()
         return obs, info
 
     def step(self, action):
-        if self._closed:
-            raise RuntimeError("step() called after close(); make a new env")
+        if self._needs_reset:
+            self._refuse_step()
         action, clipped = self._check_action(action)
         data = self.data
         self.controller.apply(action, data)
         mujoco.mj_step(self.model, data, nstep=self.frame_skip)
-        self.safety.advance(self.frame_skip)
         self._steps += 1
 
         force_n = self.safety.cuff_force_n(data)
@@ -407,9 +432,10 @@ class RehabEnv(gym.Env):
             violation = "instability"
             obs = None
         if obs is None:  # keep the last healthy observation and joint angles
-            obs = self._obs.astype(np.float32)
+            obs = self._healthy_obs.copy()
             force_n = 0.0 if not math.isfinite(force_n) else force_n
         else:
+            self._healthy_obs = obs
             self._theta[:] = self._qpos[self._qpos_adr]
             self._record_trace()
 
@@ -444,10 +470,10 @@ class RehabEnv(gym.Env):
                 terminated = is_success = True
             else:
                 self._target_index += 1
-                obs = self._observation() if violation is None else obs
+                obs = self._healthy_obs = self._observation()  # the next target
         reward = (reward_distance + reward_bonus + reward_safety + reward_smoothness
                   + reward_effort)
-        self._done = terminated
+        self._needs_reset = terminated
         info = self._info(violation, is_success, force_n,
                           (reward_distance, reward_bonus, reward_safety, reward_smoothness,
                            reward_effort), clipped)
@@ -479,6 +505,7 @@ class RehabEnv(gym.Env):
                     thread.join(10.0)
             self._viewer_threads = set()
         self._closed = True
+        self._needs_reset = True
 
     # ------------------------------------------------------------------------------------------
     # Helpers
@@ -498,16 +525,28 @@ class RehabEnv(gym.Env):
         """The episode's targets (patient and robot joint space)."""
         return self._sequence
 
+    def _refuse_step(self) -> None:
+        if self._closed:
+            raise RuntimeError("step() called after close(); make a new env")
+        if self._steps == 0:
+            raise gym.error.ResetNeeded("step() called before reset(); call env.reset() first")
+        raise gym.error.ResetNeeded("step() called after the episode terminated; call "
+                                    "env.reset() to start the next one")
+
     def _check_action(self, action) -> tuple[np.ndarray, int]:
         if type(action) is np.ndarray and action.shape == self._action_shape \
                 and action.dtype == np.float32 and np.logical_and.reduce(
                     (action >= self._action_low32) & (action <= self._action_high32)):
             return action.astype(float), 0  # the common case (NaN fails the comparisons)
         try:
-            a = np.asarray(action, dtype=float)
+            a = np.asarray(action)
         except (TypeError, ValueError) as err:
             raise ValueError(f"action {action!r} cannot be read as {self.action_space.shape} "
                              f"floats: {err}") from None
+        if a.dtype.kind not in "iuf":  # no silent casts of bool, complex, str or objects
+            raise ValueError(f"action {action!r} has dtype {a.dtype}; expected "
+                             f"{self.action_space.shape} real numbers (float32 preferred)")
+        a = a.astype(float)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action has shape {a.shape}; expected {self.action_space.shape}")
         bad = ~np.isfinite(a)
@@ -631,7 +670,7 @@ class RehabEnv(gym.Env):
         self._site_xpos = data.site_xpos
         self._qfrc_actuator = data.qfrc_actuator
         self.controller._ctrl = data.ctrl
-        self.safety._qpos = data.qpos
+        self.safety.bind(data)
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)

@@ -3,9 +3,11 @@
 =========================  ====================================================================
 rule (``info`` name)       fires when
 =========================  ====================================================================
-``"instability"``          MuJoCo met a non-finite or diverging state (bad qacc/qpos/qvel:
-                           it warns and resets the state), or an observation left its bounds
-                           (checked by the env)
+``"instability"``          MuJoCo met a non-finite or huge state (its bad qpos/qvel/qacc
+                           warnings: it then resets the state), a joint moved faster than
+                           ``BLOWUP_SPEED_RAD_S``, the cuff force is non-finite or beyond
+                           ``BLOWUP_FORCE_N`` (constraint blow-up), or an observation left
+                           its bounds (checked by the env). Always ends the episode.
 ``"range_of_motion"``      a patient joint is more than ``rom_tolerance_deg`` beyond its
                            anatomical range (hyperextension)
 ``"cuff_force"``           the force in the cuff exceeds the ISO/TS 15066 quasi-static limit of
@@ -30,6 +32,14 @@ from rehabbot.control import as_index
 from rehabbot.models.scene import Scene
 
 RULES = ("instability", "range_of_motion", "cuff_force", "unintended_contact")
+
+# MuJoCo's warnings for a diverging simulation; on each it resets the state to the model's.
+UNSTABLE_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                     mujoco.mjtWarning.mjWARN_BADQACC)
+# Speeds and forces no motion of these scenes reaches: random torques at the UR5e limits with
+# the safety rules switched off peak at about 64 rad/s and 6.4 kN (benchmarks/soak.py).
+BLOWUP_SPEED_RAD_S = 1000.0
+BLOWUP_FORCE_N = 1.0e5
 
 # ISO/TS 15066 Table A.2, quasi-static contact force limits [N] (domain-facts §4.1).
 ISO_TS_15066_QUASI_STATIC_N: dict[str, float] = {
@@ -89,20 +99,25 @@ class SafetyMonitor:
         self._is_other[scene.patient_geom_ids] = True
         self._is_other[scene.furniture_geom_ids] = True
         self._eq_rows = 3  # a connect has 3 force rows; a weld's first 3 rows are its force
-        self._timestep_s = float(model.opt.timestep)
-        self._time0_s = 0.0
-        self._steps = 0
+        self._warnings0 = 0
         self._qpos = np.zeros(model.nq)
+        self._qvel = np.zeros(model.nv)
+        self._speed = np.zeros(model.nv)
+
+    def bind(self, data: mujoco.MjData) -> None:
+        """Cache views of ``data``'s arrays (again after a pickle round trip)."""
+        self._qpos = data.qpos
+        self._qvel = data.qvel
 
     def reset(self, data: mujoco.MjData) -> None:
-        """Start an episode on ``data`` (its views are cached and its clock recorded)."""
-        self._qpos = data.qpos
-        self._time0_s = float(data.time)
-        self._steps = 0
+        """Start an episode on ``data`` (its views are cached and its warnings counted)."""
+        self.bind(data)
+        self._warnings0 = self._warning_count(data)
 
-    def advance(self, physics_steps: int) -> None:
-        """Count ``physics_steps`` taken since the last check."""
-        self._steps += physics_steps
+    @staticmethod
+    def _warning_count(data: mujoco.MjData) -> int:
+        warning = data.warning
+        return sum(warning[w].number for w in UNSTABLE_WARNINGS)
 
     def cuff_force_n(self, data: mujoco.MjData) -> float:
         """Magnitude of the cuff's constraint force [N] (0 when the cuff is not active)."""
@@ -111,16 +126,21 @@ class SafetyMonitor:
         f = data.efc_force[:3]
         return math.sqrt(float(f @ f))
 
-    def unstable(self, data: mujoco.MjData) -> bool:
-        """Whether MuJoCo met an instability (bad qacc/qpos/qvel): it then warns and resets
-        the state, which sets the clock back. Non-finite or out-of-bounds observations are
-        checked by the env."""
-        expected_s = self._time0_s + self._steps * self._timestep_s
-        return abs(data.time - expected_s) > 0.5 * self._timestep_s
+    def unstable(self, data: mujoco.MjData, force_n: float) -> bool:
+        """Whether the simulation diverged since :meth:`reset`: MuJoCo warned of a bad
+        qpos/qvel/qacc (and reset the state), a joint speed or the cuff force ``force_n`` is
+        non-finite or beyond its blow-up bound. Out-of-bounds observations are checked by the
+        env."""
+        if self._warning_count(data) != self._warnings0:
+            return True
+        if not force_n <= BLOWUP_FORCE_N:  # also true for NaN
+            return True
+        speed = np.abs(self._qvel, out=self._speed)
+        return not float(speed.max()) <= BLOWUP_SPEED_RAD_S
 
     def check(self, data: mujoco.MjData, force_n: float) -> str | None:
         """The first rule that fires for ``data`` (with its cuff force ``force_n``), or None."""
-        if self.unstable(data):
+        if self.unstable(data, force_n):
             return "instability"
         q = self._qpos[self._patient_qpos_adr]
         if np.logical_or.reduce((q < self._rom_low) | (q > self._rom_high)):

@@ -1346,7 +1346,13 @@ def _setup(plan: _RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any
             model.set_random_seed(seeds["model"])
             if plan.algo in OFF_POLICY:
                 if plan.resume.replay_buffer is not None:
-                    model.load_replay_buffer(str(plan.resume.replay_buffer))
+                    try:
+                        model.load_replay_buffer(str(plan.resume.replay_buffer))
+                    except Exception as err:  # a damaged pickle raises many kinds
+                        raise TrainingError(
+                            f"cannot load replay buffer {plan.resume.replay_buffer}: "
+                            f"{type(err).__name__}: {err} (delete it to resume with an "
+                            "empty buffer)") from err
                 else:
                     print(f"warning: no replay buffer saved with {plan.resume.checkpoint}; "
                           "continuing with an empty one", file=sys.stderr)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import gymnasium as gym
 import mujoco
@@ -109,7 +110,7 @@ def test_other_control_modes_have_honest_spaces(mode):
 
 
 def test_joint_delta_moves_the_setpoint_by_the_action_and_keeps_it_in_bounds():
-    env = gym.make("rehabbot/rehab-reach-v0").unwrapped
+    env = gym.make("rehabbot/rehab-reach-v0", terminate_on_safety=False).unwrapped
     env.reset(seed=0)
     servo = env.handle.servo_ids
     before = env.data.ctrl[servo].copy()
@@ -318,10 +319,33 @@ def test_every_variant_is_reachable_by_kwargs():
     ({"render_mode": "ascii"}, "render_mode"), ({"camera_name": "ceiling"}, "camera_name"),
     ({"frame_skip": 0}, "frame_skip"), ({"target_tolerance_rad": float("nan")}, "tolerance"),
     ({"cuff_force_limit_n": -1.0}, "cuff_force_limit_n"),
+    ({"cuff": "velcro"}, "cuff"), ({"base_reorientation_deg": float("inf")}, "base_reorient"),
+    ({"timestep_s": 0.05}, "timestep_s"), ({"segment_s": float("nan")}, "segment_s"),
+    ({"waypoint_dt_s": 0.0}, "waypoint_dt_s"), ({"min_waypoint_spacing_rad": -0.1}, "spacing"),
+    ({"max_speed_rad_s": 10.0}, "max_speed_rad_s"), ({"profile": {"heigth_m": 1.7}}, "heigth_m"),
+    ({"profile": {"mass_kg": float("nan")}}, "mass_kg"), ({"profile": {"sex": "x"}}, "sex"),
+    ({"profile": "tall"}, "profile"), ({"weight_level": True}, "weight_level"),
+    ({"exercise": 1.5}, "exercise"), ({"terminate_on_safety": "yes"}, "terminate_on_safety"),
+    ({"safety_penalty": "none"}, "safety_penalty"), ({"safety_penalty_steps": 0}, "steps"),
+    ({"rom_tolerance_deg": -1.0}, "rom_tolerance_deg"), ({"width": 0}, "width"),
+    ({"contact_tolerance_m": float("nan")}, "contact_tolerance_m"),
 ])
-def test_bad_kwargs_raise_value_error_naming_the_value(kwargs, word):
-    with pytest.raises(ValueError, match=word):
+def test_bad_kwargs_raise_value_error_naming_the_value_before_building(kwargs, word,
+                                                                       monkeypatch):
+    def fail(*_args, **_kwargs):
+        raise AssertionError("the scene was built before the kwargs were checked")
+
+    monkeypatch.setattr("rehabbot.env.build_scene", fail)
+    with pytest.raises(ValueError, match=word) as err, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Gymnasium warns about an unknown render_mode
         gym.make("rehabbot/rehab-reach-v0", **kwargs)
+    assert repr(next(iter(kwargs.values()))).strip("{}")[:8] in str(err.value) \
+        or word in str(err.value)
+
+
+def test_unknown_id_is_gymnasiums_error_naming_the_id():
+    with pytest.raises(gym.error.Error, match="rehab-elbow"):
+        gym.make("rehabbot/rehab-elbow-v0")
 
 
 def test_bad_reset_options_raise(envs):
@@ -332,6 +356,17 @@ def test_bad_reset_options_raise(envs):
         env.reset(options={"weight_level": -1})
     with pytest.raises(ValueError, match="unknown reset options"):
         env.reset(options={"speed": 3})
+
+
+def test_a_refused_first_reset_leaves_a_usable_env():
+    """Regression: with Gymnasium's passive checker (gym.make's default) a first reset that
+    raised broke the next step with a TypeError; the ids disable that checker."""
+    env = gym.make("rehabbot/rehab-reach-v0")
+    with pytest.raises(ValueError, match="exercise=5"):
+        env.reset(options={"exercise": 5})
+    env.reset(seed=0)
+    obs, *_ = env.step(np.zeros(6, np.float32))
+    assert env.observation_space.contains(obs)
 
 
 def test_bad_actions_raise_value_error_and_out_of_bound_actions_are_clipped_and_counted(envs):
@@ -347,3 +382,32 @@ def test_bad_actions_raise_value_error_and_out_of_bound_actions_are_clipped_and_
     setpoint = base.controller.setpoint_rad.copy()
     env.step([0.001, 0, 0, 0, 0, 0])  # a list within bounds is accepted
     assert base.controller.setpoint_rad[0] - setpoint[0] == pytest.approx(0.001)
+    _, _, _, _, info = env.step(np.zeros(6, np.int64))  # integers are real numbers too
+    assert info["action_clipped"] == 0
+    for bad in (np.zeros(6, complex), np.zeros(6, bool), ["0.001"] * 6, [None] * 6,
+                np.zeros(6, object), "abcdef"):
+        with pytest.raises(ValueError, match=r"\(6,\)"):
+            env.step(bad)
+    with pytest.raises(ValueError, match=r"expected \(6,\)"):
+        env.step(np.zeros((1, 6), np.float32))  # a batch of one is not an action
+    with pytest.raises(ValueError, match=r"indices \[0\]"):
+        env.step([-np.inf, 0, 0, 0, 0, 0])
+    # After all the refused actions the env still steps normally.
+    _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
+    assert not terminated and info["action_clipped"] == 0
+
+
+def test_step_before_reset_after_termination_and_after_close_are_clear_errors():
+    env = RehabEnv(limb="knee", cuff_force_limit_n=1.0)  # unwrapped: no OrderEnforcing
+    with pytest.raises(gym.error.ResetNeeded, match="before reset"):
+        env.step(np.zeros(6, np.float32))
+    env.reset(seed=0)
+    _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
+    assert terminated and info["safety_violation"] == "cuff_force"
+    with pytest.raises(gym.error.ResetNeeded, match="terminated"):
+        env.step(np.zeros(6, np.float32))
+    env.reset(seed=0)  # a reset makes it usable again
+    env.close()
+    env.close()  # a no-op
+    with pytest.raises(RuntimeError, match="close"):
+        env.step(np.zeros(6, np.float32))

@@ -15,6 +15,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from rehabbot.experts import ScriptedExpert
 from rehabbot.registration import ENV_SPECS
 
 PAPER_IDS = tuple(ENV_SPECS)
@@ -144,18 +145,66 @@ def test_vector_envs_match_single_envs(mode):
         np.testing.assert_array_equal(np.array(single), np.array(vec_obs)[:, k])
 
 
-def test_env_pickles_mid_episode_and_continues_identically():
+def _vector_rollout(mode: str, steps: int = 60) -> dict[str, np.ndarray]:
+    """Torque-mode random actions (episodes end every few steps on the cuff-force rule, so the
+    vector env resets its sub-envs many times)."""
+    vec = gym.make_vec("rehabbot/rehab-hip-v0", num_envs=2, vectorization_mode=mode,
+                       control_mode="torque")
+    try:
+        obs, _ = vec.reset(seed=[21, 22])
+        vec.action_space.seed(3)
+        out: dict[str, list] = {"obs": [obs], "reward": [], "terminated": [], "truncated": [],
+                                "force": [], "torque": [], "level": []}
+        for _ in range(steps):
+            obs, reward, terminated, truncated, infos = vec.step(vec.action_space.sample())
+            out["obs"].append(obs)
+            out["reward"].append(reward)
+            out["terminated"].append(terminated)
+            out["truncated"].append(truncated)
+            out["force"].append(infos["interaction_force_n"])
+            out["torque"].append(infos["robot_torque_nm"])
+            out["level"].append(infos["weight_level"])
+    finally:
+        vec.close()
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def test_vector_sync_and_async_are_bit_identical_across_autoresets():
+    sync, async_ = _vector_rollout("sync"), _vector_rollout("async")
+    assert sync["terminated"].sum() >= 6, "the rollout must cross several autoresets"
+    assert len(np.unique(sync["level"])) > 1, "resets draw new weight levels"
+    for key in sync:
+        np.testing.assert_array_equal(sync[key], async_[key], err_msg=key)
+
+
+def test_env_and_scripted_expert_pickle_mid_episode_and_continue_identically():
     env = gym.make("rehabbot/rehab-knee-v0")
-    env.reset(seed=4)
-    for _ in range(30):
-        env.step(env.action_space.high)
-    clone = pickle.loads(pickle.dumps(env))
-    actions = [env.action_space.sample() for _ in range(40)]
-    out_a = [env.step(a) for a in actions]
-    out_b = [clone.step(a) for a in actions]
-    for (oa, ra, ta, _, ia), (ob, rb, tb, _, ib) in zip(out_a, out_b, strict=True):
-        np.testing.assert_array_equal(oa, ob)
+    expert = ScriptedExpert(env)
+    obs, _ = env.reset(seed=4)
+    for _ in range(60):  # mid-episode: some targets reached, the limb moving
+        obs, _, terminated, _, info = env.step(expert(obs))
+        assert not terminated
+    assert info["target_index"] > 0
+    # Pickled together, the clone's expert drives the clone's env.
+    clone_env, clone_expert = pickle.loads(pickle.dumps((env, expert)))
+    assert clone_env.unwrapped.data is not env.unwrapped.data
+    assert clone_expert._base is clone_env.unwrapped
+    clone_obs = obs.copy()
+    for _ in range(500):
+        action = expert(obs)
+        np.testing.assert_array_equal(action, clone_expert(clone_obs))
+        obs, ra, ta, _, ia = env.step(action)
+        clone_obs, rb, tb, _, ib = clone_env.step(action)
+        np.testing.assert_array_equal(obs, clone_obs)
         assert ra == rb and ta == tb and ia["target_index"] == ib["target_index"]
+        np.testing.assert_array_equal(ia["robot_torque_nm"], ib["robot_torque_nm"])
+        if ta:
+            break
+    assert ia["is_success"] and ib["is_success"], "both finished the exercise"
+    # A pickled expert alone brings its own copy of the env and predicts the same actions.
+    lone = pickle.loads(pickle.dumps(expert))
+    np.testing.assert_array_equal(lone(obs), expert(obs))
+    assert lone._base is not env.unwrapped
 
 
 def test_step_after_close_raises_and_double_close_is_a_noop():

@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 
 from rehabbot.models import robot as ur
-from rehabbot.safety import ISO_TS_15066_QUASI_STATIC_N, RULES
+from rehabbot.safety import (
+    BLOWUP_FORCE_N,
+    BLOWUP_SPEED_RAD_S,
+    ISO_TS_15066_QUASI_STATIC_N,
+    RULES,
+)
 
 
 def _run_until_terminated(env, policy, max_steps=300):
@@ -108,20 +113,70 @@ def test_driving_the_robot_into_the_patient_or_furniture_is_unintended_contact()
     _assert_safety_penalty(env, reward, info)
 
 
-def test_instability_ends_the_episode_and_the_next_reset_is_healthy():
-    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
+def test_unstable_physics_option_ends_with_instability_and_the_next_reset_is_healthy(
+        tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo logs its warning to MUJOCO_LOG.TXT in the cwd
+    # terminate_on_safety=False: the other rules only report; instability still ends.
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", terminate_on_safety=False)
     base = env.unwrapped
-    obs0, _ = env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
-    env.step(np.zeros(6, np.float32))
-    base.data.qvel[:] = 1e12  # a blow-up: MuJoCo detects the bad state and resets it
-    obs, reward, terminated, _, info = env.step(np.ones(6, np.float32))
-    assert terminated and info["safety_violation"] == "instability"
+    options = {"exercise": 0, "weight_level": 0}
+    obs0, _ = env.reset(seed=0, options=options)
+    for _ in range(3):
+        healthy_obs, *_ = env.step(np.zeros(6, np.float32))
+    # A deliberately unstable option: a 50 ms explicit-Euler step under bang-bang torques.
+    base.model.opt.timestep = 0.05
+    base.model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    for k in range(50):
+        sign = 1.0 if k % 2 else -1.0
+        obs, reward, terminated, truncated, info = env.step(np.full(6, sign, np.float32))
+        if terminated:
+            break
+    assert terminated and not truncated and info["safety_violation"] == "instability"
+    bad_qacc = base.data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
+    assert bad_qacc >= 1, "MuJoCo itself flagged the divergence"
+    # The last healthy observation, finite and in its space; the penalty is charged.
+    np.testing.assert_array_equal(obs, healthy_obs)
     assert env.observation_space.contains(obs) and math.isfinite(reward)
     _assert_safety_penalty(env, reward, info)
-    obs, info = env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    assert all(np.all(np.isfinite(v)) for v in info.values() if isinstance(v, (float, np.ndarray)))
+    with pytest.raises(gym.error.ResetNeeded, match="terminated"):
+        env.step(np.zeros(6, np.float32))
+    # reset() is healthy even with the bad option still set (it does not step the physics)...
+    obs, _ = env.reset(seed=0, options=options)
     np.testing.assert_array_equal(obs, obs0)
-    _, reward, terminated, _, info = env.step(np.zeros(6, np.float32))
-    assert info["safety_violation"] is None and not terminated
+    # ... and with the option restored the episode runs as before.
+    base.model.opt.timestep = 0.002
+    base.model.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    obs, _ = env.reset(seed=0, options=options)
+    np.testing.assert_array_equal(obs, obs0)
+    for _ in range(3):
+        obs, reward, terminated, _, info = env.step(np.zeros(6, np.float32))
+        assert info["safety_violation"] is None and not terminated
+    np.testing.assert_array_equal(obs, healthy_obs)
+
+
+def test_instability_detectors_catch_blow_ups_that_mujoco_does_not_reset():
+    env = gym.make("rehabbot/rehab-knee-v0")
+    base = env.unwrapped
+    env.reset(seed=0)
+    monitor, data = base.safety, base.data
+    force = monitor.cuff_force_n(data)
+    assert monitor.check(data, force) is None
+    assert monitor.check(data, float("nan")) == "instability"
+    assert monitor.check(data, 2.0 * BLOWUP_FORCE_N) == "instability"
+    data.qvel[base.handle.dof_adr[0]] = 2.0 * BLOWUP_SPEED_RAD_S  # finite: MuJoCo keeps it
+    assert monitor.check(data, force) == "instability"
+    data.qvel[:] = 0.0
+    assert monitor.check(data, force) is None
+    # An observation outside its bounds is one too: shrink the checked bound of theta[0]
+    # below the current angle; the env returns its last healthy observation.
+    healthy_obs, *_ = env.step(np.zeros(6, np.float32))
+    base._obs_high32 = base._obs_high32.copy()
+    base._obs_high32[9] = healthy_obs[9] - 0.01
+    obs, reward, terminated, _, info = env.step(np.zeros(6, np.float32))
+    assert terminated and info["safety_violation"] == "instability"
+    np.testing.assert_array_equal(obs, healthy_obs)
+    assert math.isfinite(reward) and info["reward_safety"] < 0
 
 
 def test_terminate_on_safety_false_reports_without_ending():

@@ -198,6 +198,28 @@ def test_resume_continues_to_the_requested_total(tmp_path: Path, capsys) -> None
     assert "already finished 2000 steps" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("damaged", ["checkpoint", "replay_buffer", "manifest"])
+def test_resume_from_a_damaged_file_is_refused_and_changes_nothing(tmp_path: Path,
+                                                                   damaged: str) -> None:
+    out = tmp_path / "runs"
+    hp = {**SMALL["sac"], "learning_starts": 200}
+    assert cmd_train(_train_args(tmp_path, "sac", out, "--timesteps", "500", hp=hp,
+                                 freq=500)) == 0
+    run_dir = out / ENV / "sac" / "seed0"
+    checkpoints = run_dir / "checkpoints"
+    target = {"checkpoint": checkpoints / "rl_model_500_steps.zip",
+              "replay_buffer": checkpoints / "rl_model_replay_buffer_500_steps.pkl",
+              "manifest": run_dir / "manifest.json"}[damaged]
+    target.write_bytes(target.read_bytes()[: len(target.read_bytes()) // 2])  # torn write
+    before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
+    err = _cli_error(_train_args(tmp_path, "sac", out, "--timesteps", "1000", "--resume",
+                                 hp=hp, freq=500))
+    assert str(target) in str(err) and err.exit_code == 1
+    assert "\n" not in str(err)
+    after = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
+    assert after == before, "a refused resume leaves the run as it was"
+
+
 def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
     out = tmp_path / "runs"
     hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})

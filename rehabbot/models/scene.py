@@ -555,14 +555,15 @@ def _robot_base_pose(limb, posture, profile, seg, geometry, torso_pos, torso_qua
     return pos, math.pi / 2 * (1 if side < 0 else -1)
 
 
+CAMERA_NAMES = ("overview", "front", "side")  # the fixed cameras of every scene
+
+
 def _add_cameras(spec: mujoco.MjSpec, target: np.ndarray, side: float) -> None:
     """Three fixed cameras looking at ``target`` (world point): ``overview`` from the front on the
     exercised side and above, ``front``, and ``side`` (from the exercised side)."""
-    views = {
-        "overview": np.array([1.5, 1.25 * side, 0.9]),
-        "front": np.array([2.0, 0.0, 0.35]),
-        "side": np.array([0.15, 2.0 * side, 0.3]),
-    }
+    views = dict(zip(CAMERA_NAMES, (np.array([1.5, 1.25 * side, 0.9]),
+                                     np.array([2.0, 0.0, 0.35]),
+                                     np.array([0.15, 2.0 * side, 0.3])), strict=True))
     up = np.array([0.0, 0.0, 1.0])
     for name, offset in views.items():
         forward = -offset / np.linalg.norm(offset)
