@@ -64,6 +64,11 @@ README, Results). ``safety_penalty="worst_case"`` uses the worst per-step reward
 observation bounds allow instead of the current distance (up to about -7600 uncapped).
 ``reward`` is the sum of the ``reward_*`` terms in ``info``.
 
+A profile that cannot do the exercises in its scene (the robot cannot reach the cuff, a target
+outside the setpoint bounds, or a home state that already breaks a safety rule at a weight
+level the env may use) is refused with a ``ValueError`` when the env is built
+(:mod:`rehabbot.feasibility`).
+
 ## Starting state
 The home posture of the scene (cuff satisfied, static equilibrium), no noise. The exercise and
 the weight level are drawn from ``np_random`` unless fixed by the constructor or by
@@ -106,7 +111,7 @@ starts from the healthy home state.
 | ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range |
 | ``cuff_force_limit_n`` | None | cuff force rule: limit in N (None = ISO/TS 15066 quasi-static limit of the strapped region) |
 | ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact |
-| ``max_episode_steps`` | 1000 | horizon used by the safety penalty (the registration's TimeLimit uses the same) |
+| ``max_episode_steps`` | 1000 | horizon used by the safety penalty (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` takes the name for its TimeLimit and never passes it to the env, which keeps 1000: with the default ``safety_penalty_steps=100`` this only over-counts the penalty in the last 100 steps before m. Build ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` to change both |
 | ``segment_s`` | 3.0 | trajectory: duration of each min-jerk segment between key poses |
 | ``waypoint_dt_s`` | 0.1 | trajectory: sampling period of the min-jerk path |
 | ``min_waypoint_spacing_rad`` | 0.1 | trajectory: minimum distance (inf-norm, robot joints) between waypoints |
@@ -135,7 +140,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rehabbot import exercises as ex
-from rehabbot import overlay
+from rehabbot import feasibility, overlay
 from rehabbot.control import CONTROL_MODES, as_index, make_controller
 from rehabbot.models import robot as ur
 from rehabbot.models.patient import PatientProfile
@@ -358,6 +363,19 @@ class RehabEnv(gym.Env):
         self._exercised_qpos_adr = as_index(self.scene.exercised_qpos_adr)
         self._patient_qpos_adr = as_index(self.scene.patient_qpos_adr)
         self._bind_views()
+
+        # -- can this patient do these exercises here at all? (fails loudly, once) ---------
+        feasibility.check_targets(self.targets, self.setpoint_low_rad, self.setpoint_high_rad,
+                                  POSITION_BOUND_M, profile)
+        self._unusable_levels = {} if not terminate_on_safety else feasibility.unusable_levels(
+            self.scene, self.data, self.safety, WEIGHT_LEVELS, profile)
+        used = WEIGHT_LEVELS if weight_level is None else (weight_level,)
+        for level in used:
+            if level in self._unusable_levels:
+                feasibility.refuse(self._unusable_levels, WEIGHT_LEVELS, level)
+        self.scene.set_weight_level(weight_level or 0)
+        self.scene.reset_data(self.data)
+
         self._obs = np.zeros(OBS_SIZE)
         self._healthy_obs = np.zeros(OBS_SIZE, np.float32)  # the last observation in bounds
         self._theta = np.zeros(6)
@@ -393,6 +411,8 @@ class RehabEnv(gym.Env):
         ex.check_choice("exercise", exercise, ex.EXERCISE_IDS)
         level = options.get("weight_level", self._fixed_weight_level)
         level = drawn_level if level is None else check_weight_level(level)
+        if level in self._unusable_levels:
+            feasibility.refuse(self._unusable_levels, WEIGHT_LEVELS, level)
 
         if level != self.scene.weight_level:
             self.scene.set_weight_level(level)

@@ -398,12 +398,12 @@ def test_bad_actions_raise_value_error_and_out_of_bound_actions_are_clipped_and_
 
 
 def test_step_before_reset_after_termination_and_after_close_are_clear_errors():
-    env = RehabEnv(limb="knee", cuff_force_limit_n=1.0)  # unwrapped: no OrderEnforcing
+    env = RehabEnv(limb="knee", control_mode="joint_position")  # unwrapped: no OrderEnforcing
     with pytest.raises(gym.error.ResetNeeded, match="before reset"):
         env.step(np.zeros(6, np.float32))
     env.reset(seed=0)
-    _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
-    assert terminated and info["safety_violation"] == "cuff_force"
+    _, _, terminated, _, info = env.step(env.action_space.high)  # a far setpoint at once
+    assert terminated and info["safety_violation"] is not None
     with pytest.raises(gym.error.ResetNeeded, match="terminated"):
         env.step(np.zeros(6, np.float32))
     env.reset(seed=0)  # a reset makes it usable again

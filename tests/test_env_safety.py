@@ -90,12 +90,42 @@ def test_cuff_force_beyond_the_iso_limit_ends_the_episode():
 
 def test_leg_cuff_uses_the_lower_leg_limit_and_the_threshold_is_a_kwarg():
     assert gym.make("rehabbot/rehab-knee-v0").unwrapped.safety.force_limit_n == 130
-    env = gym.make("rehabbot/rehab-hip-v0", cuff_force_limit_n=20.0)
+    env = gym.make("rehabbot/rehab-hip-v0", cuff_force_limit_n=20.0, terminate_on_safety=False)
     assert env.unwrapped.safety.force_limit_n == 20.0
     _obs, info = env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
     assert info["interaction_force_n"] > 20.0  # the cuff carries the supine leg at rest
     _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
-    assert terminated and info["safety_violation"] == "cuff_force"
+    assert not terminated and info["safety_violation"] == "cuff_force"
+    # A limit that the limb at rest already exceeds would end every episode at its first
+    # step: with terminate_on_safety the env refuses it when it is built.
+    with pytest.raises(ValueError, match=r"cuff_force_limit_n=20.0 N") as err:
+        gym.make("rehabbot/rehab-hip-v0", cuff_force_limit_n=20.0)
+    assert "at rest" in str(err.value)
+
+
+def test_profiles_that_cannot_do_the_exercise_are_refused_when_the_env_is_built():
+    heavy = {"height_m": 1.75, "mass_kg": 130.0, "sex": "male"}
+    with pytest.raises(ValueError, match=r"weight_level 2: the cuff carries 13\d N") as err:
+        gym.make("rehabbot/rehab-hip-v0", profile=heavy)
+    assert "weight levels [0, 1] are usable" in str(err.value)
+    env = gym.make("rehabbot/rehab-hip-v0", profile=heavy, weight_level=1)
+    _, info = env.reset(seed=0)
+    with pytest.raises(ValueError, match="weight_level 3"):
+        env.reset(seed=0, options={"weight_level": 3})
+    # The usable level holds the leg below the limit for a whole second of holding still.
+    for _ in range(50):
+        _, _, terminated, _, info = env.step(np.zeros(6, np.float32))
+        assert not terminated
+    assert info["interaction_force_n"] < 130.0
+    with pytest.raises(ValueError, match="foot_l touches forearm_wrist1"):
+        gym.make("rehabbot/rehab-knee-v0", side="left",
+                 profile={"height_m": 1.5, "mass_kg": 60.0, "sex": "male"})
+    with pytest.raises(ValueError, match="outside its setpoint bounds"):
+        gym.make("rehabbot/rehab-reach-l-v0",
+                 profile={"height_m": 1.35, "mass_kg": 30.0, "sex": "male"})
+    with pytest.raises(ValueError, match="cannot reach the patient's cuff"):
+        gym.make("rehabbot/rehab-reach-v0",
+                 profile={"height_m": 1.2, "mass_kg": 30.0, "sex": "male"})
 
 
 def test_driving_the_robot_into_the_patient_or_furniture_is_unintended_contact():

@@ -615,8 +615,9 @@ def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
     ik_data = mujoco.MjData(model)
     error = _solve_robot_home(model, ik_data, tuple(robots), home, warm_start=False)
     if error > _IK_TOLERANCE_M:
-        raise RuntimeError(f"{preset}: the robot cannot reach the patient's cuff "
-                           f"(IK error {error * 1000:.1f} mm); profile {profile}")
+        raise ValueError(f"{preset}: the robot cannot reach the patient's cuff "
+                         f"(IK error {error * 1000:.1f} mm); this scene does not support "
+                         f"profile {profile} (README, Failure modes)")
 
     scene = Scene(
         preset=preset,
