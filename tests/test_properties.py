@@ -40,8 +40,11 @@ WORKING_HEIGHT_M = (1.40, pt.HEIGHT_RANGE_M[1])
 REFUSAL_WORDS = ("does not support", "at rest", "cannot reach")
 # The envelope the README promises (python benchmarks/profile_envelope.py): the lowest
 # height [m] by limb (or limb and side), and the highest mass [kg] by limb.
-SUPPORTED_HEIGHT_M = {"arm": 1.45, "hip": 1.45, "knee": 1.45, ("knee", "left"): 1.65}
-SUPPORTED_MASS_KG = {"arm": 120.0, "hip": 120.0, "knee": 120.0}
+# The grid's lowest fully accepted height + 5 cm (its spacing), so that heights between grid
+# points are covered too.
+SUPPORTED_HEIGHT_M = {"arm": 1.45, "hip": pt.HEIGHT_RANGE_M[0], "knee": 1.65,
+                      ("knee", "left"): 1.70}
+SUPPORTED_MASS_KG = {"hip": 100.0}
 GYM_ID = "rehabbot/rehab-reach-v0"
 
 SLOW = [HealthCheck.too_slow, HealthCheck.data_too_large]
