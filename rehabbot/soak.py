@@ -66,7 +66,6 @@ import os
 import shlex
 import signal
 import sys
-import threading
 import time
 import zlib
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -82,7 +81,7 @@ import numpy as np
 from rehabbot.control import CONTROL_MODES
 from rehabbot.registration import ENV_SPECS
 from rehabbot.safety import RULES
-from rehabbot.training import atomic_write, package_versions
+from rehabbot.training import atomic_write, handling_signals, package_versions
 
 __all__ = [
     "DEFAULT_TOTAL_STEPS",
@@ -708,22 +707,12 @@ def _mp_context() -> multiprocessing.context.BaseContext:
 def _stop_on_signals(stop: _Stop) -> Iterator[None]:
     """SIGINT and SIGTERM ask the run to stop (at the next check, within ``CHECK_EVERY``
     steps); the previous handlers come back afterwards. Only in the main thread."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
 
     def handler(signum: int, _frame: Any) -> None:
         stop.request(signal.Signals(signum).name)
 
-    signums = (signal.SIGINT, signal.SIGTERM)
-    previous = {signum: signal.getsignal(signum) for signum in signums}
-    for signum in signums:
-        signal.signal(signum, handler)
-    try:
+    with handling_signals(handler):
         yield
-    finally:
-        for signum, old in previous.items():
-            signal.signal(signum, old if old is not None else signal.SIG_DFL)
 
 
 def _run_serial(specs: Sequence[CellSpec], make_env: MakeEnv, stop: _Stop,

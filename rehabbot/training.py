@@ -1143,12 +1143,27 @@ def _callback_classes() -> tuple[type, type]:
 
 
 @contextlib.contextmanager
-def _stop_on_signals(stopper: Any):
-    """SIGINT/SIGTERM ask ``stopper`` to stop at the next step; a second one raises
-    KeyboardInterrupt. The previous handlers come back afterwards."""
+def handling_signals(handler: Callable[[int, Any], None]):
+    """Install ``handler`` for SIGINT and SIGTERM (only in the main thread: elsewhere this is
+    a no-op); the previous handlers come back afterwards."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    signums = (signal.SIGINT, signal.SIGTERM)
+    previous = {signum: signal.getsignal(signum) for signum in signums}
+    for signum in signums:
+        signal.signal(signum, handler)
+    try:
+        yield
+    finally:
+        for signum, old in previous.items():
+            signal.signal(signum, old if old is not None else signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def _stop_on_signals(stopper: Any):
+    """SIGINT/SIGTERM ask ``stopper`` to stop at the next step; a second one raises
+    KeyboardInterrupt. The previous handlers come back afterwards."""
 
     def handler(signum: int, _frame: Any) -> None:
         if stopper.stop_signal is None:
@@ -1159,15 +1174,8 @@ def _stop_on_signals(stopper: Any):
         else:
             raise KeyboardInterrupt
 
-    signums = [signal.SIGINT, signal.SIGTERM]
-    previous = {signum: signal.getsignal(signum) for signum in signums}
-    for signum in signums:
-        signal.signal(signum, handler)
-    try:
+    with handling_signals(handler):
         yield
-    finally:
-        for signum, old in previous.items():
-            signal.signal(signum, old if old is not None else signal.SIG_DFL)
 
 
 # --------------------------------------------------------------------------- one run
