@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 
-.PHONY: venv test demo lint bench images clean distclean
+.PHONY: venv test test-fast demo lint bench images clean distclean
 
 venv: $(STAMP)
 
@@ -25,11 +25,16 @@ $(STAMP): pyproject.toml
 # viewer) is tested too.
 XVFB := $(if $(DISPLAY),,$(shell command -v xvfb-run >/dev/null 2>&1 && echo xvfb-run -a))
 
+# The full suite (CI runs this). `make test-fast` (or plain `pytest`) runs the fast selection:
+# every test not marked slow, in under two minutes.
 test: $(STAMP)
+	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q --full
+
+test-fast: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q
 
 demo: $(STAMP)
-	MUJOCO_GL=$(MUJOCO_GL) $(PY) -m rehabbot.demo --out runs/demo
+	MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot demo --out runs/demo
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

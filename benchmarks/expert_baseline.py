@@ -14,8 +14,8 @@ import gymnasium as gym
 import numpy as np
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.experts import ScriptedExpert
-from rehabbot.registration import ENV_SPECS
+from rehabbot.envs.registration import ENV_SPECS
+from rehabbot.rl.experts import ScriptedExpert
 
 
 def run_episode(env, expert, exercise: int, level: int, seed: int) -> dict:

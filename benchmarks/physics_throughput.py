@@ -3,7 +3,7 @@
 For each preset the scene is built at its home pose with the robot holding its home
 setpoints, warmed up, and then ``mujoco.mj_step`` is timed with ``time.perf_counter``.
 ``ncon``/``nefc`` are the contact count and constraint rows at the home pose.
-The baseline is the bare UR5e (``rehabbot.models.robot.build_ur5e_spec``) holding the same
+The baseline is the bare UR5e (``rehabbot.sim.robots.ur5e.build_ur5e_spec``) holding the same
 joint angles, so the ``x baseline`` column shows what the patient, the straps and the
 contacts cost relative to the robot alone, measured in the same run on the same machine.
 
@@ -100,7 +100,7 @@ def robot_only_model(home_angles_rad: dict[str, float]) -> tuple[mujoco.MjModel,
     Robot joints are matched to ``home_angles_rad`` by name, allowing for a prefix the
     scene may have added (e.g. ``robot/elbow``); unmatched joints stay at 0.
     """
-    from rehabbot.models.robot import JOINT_NAMES, build_ur5e_spec
+    from rehabbot.sim.robots.ur5e import JOINT_NAMES, build_ur5e_spec
 
     model = build_ur5e_spec().compile()
     data = mujoco.MjData(model)
@@ -120,7 +120,7 @@ def run_benchmark(
     presets: Sequence[str], steps: int, warmup: int, repeats: int
 ) -> list[ThroughputRow]:
     """Benchmark the presets and the robot-only baseline; baseline row first."""
-    from rehabbot.models import build_scene
+    from rehabbot.sim import build_scene
 
     scene_rows = []
     home_angles_rad: dict[str, float] = {}
@@ -171,7 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.steps < 1 or args.warmup < 0 or args.repeats < 1:
         print("--steps and --repeats must be >= 1, --warmup >= 0", file=sys.stderr)
         return 2
-    from rehabbot.models import PRESETS
+    from rehabbot.sim import PRESETS
 
     presets = list(args.presets or PRESETS)
     unknown = [name for name in presets if name not in PRESETS]

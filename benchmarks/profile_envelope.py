@@ -31,7 +31,7 @@ REASONS = {"cannot reach": "robot cannot reach the cuff", "setpoint bounds":
 
 def survey(combo: tuple[str, str]) -> list[dict]:
     """One row per profile of the grid for ``combo`` = (limb, side)."""
-    from rehabbot.env import RehabEnv
+    from rehabbot.envs.rehab_env import RehabEnv
 
     limb, side = combo
     rows = []

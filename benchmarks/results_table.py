@@ -2,7 +2,7 @@
 same episode seeds, next to the scripted expert and random actions.
 
 For each run folder (``.../<env>/<algo>/seed<k>/`` with a ``model.zip``) the final model is
-evaluated with :func:`rehabbot.evaluation.evaluate` on ``--episodes`` episodes seeded
+evaluated with :func:`rehabbot.analysis.evaluation.evaluate` on ``--episodes`` episodes seeded
 ``--seed``, ``--seed`` + 1, ... (deterministic actions); runs of one algorithm and env are then
 pooled (mean ± std over seeds of each seed's mean; success over all episodes). Wall-clock is
 the training time from each run's manifest. Rows are printed as a Markdown table, and with
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabbot.evaluation import evaluate
-from rehabbot.training import env_short_name
+from rehabbot.analysis.evaluation import evaluate
+from rehabbot.envs.registration import env_short_name
 
 
 def find_runs(roots: Sequence[Path]) -> list[Path]:

@@ -1,14 +1,186 @@
-"""Env step throughput of every registered id against the raw physics of the same model.
+"""How much of an env step is physics: every registered id, made the way users make it.
 
-The benchmark lives in :mod:`rehabbot.throughput` so that the installed ``rehabbot bench``
-command runs it too; see that module for the method. Usage::
+For each ``rehabbot/`` id the env comes from ``gym.make(id)`` (with the wrappers the
+registration adds) and takes zero actions. The baseline is the raw physics of the same step:
+``mujoco.mj_step(model, data, nstep=frame_skip)`` on a *copy* of the env's model, in an
+``MjData`` holding a copy of the env's state after ``reset``. A round is ``--steps`` env steps
+and as many physics calls, timed back to back; rounds alternate which of the two goes first,
+so that a change of the machine's speed (other processes) hits both alike. The figures are
+medians over ``--rounds`` rounds:
 
-    python benchmarks/step_throughput.py [--steps 2000] [--repeats 5] [--ids ID ...] [--json F]
+* ``physics share``: physics time / env time per step (the part of an env step spent in
+  ``mj_step``); the goal is at least 90 %;
+* ``overhead``: env time - physics time per step (Python, NumPy, wrappers, resets);
+* ``env steps/s`` and ``x realtime`` (env steps/s x ``dt``).
+
+The absolute rates depend on the machine; the share is a ratio measured in the same run.
+
+Usage::
+
+    python benchmarks/step_throughput.py [--steps 300] [--rounds 7] [--warmup 100]
+                                         [--ids ID ...] [--json FILE]
 """
 
-import sys
+from __future__ import annotations
 
-from rehabbot.throughput import main
+import argparse
+import copy
+import json
+import platform
+import shlex
+import statistics
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+PHYSICS_SHARE_GOAL = 0.90
+
+
+@dataclass
+class Row:
+    """One line of the table."""
+
+    env_id: str
+    wrappers: str
+    frame_skip: int
+    dt_s: float
+    env_steps_per_s: float
+    physics_steps_per_s: float
+    physics_share: float
+    overhead_us: float
+    realtime_factor: float
+    shares: list[float]
+
+
+def _wrappers(env: gym.Env) -> str:
+    names = []
+    while isinstance(env, gym.Wrapper):
+        names.append(type(env).__name__)
+        env = env.env
+    return " > ".join(names) or "-"
+
+
+def _physics_copy(env: gym.Env) -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """A copy of the env's model and an ``MjData`` holding the env's current state."""
+    base = env.unwrapped
+    model = copy.deepcopy(base.model)
+    data = mujoco.MjData(model)
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    state = np.empty(mujoco.mj_stateSize(base.model, spec))
+    mujoco.mj_getState(base.model, base.data, state, spec)
+    mujoco.mj_setState(model, data, state, spec)
+    mujoco.mj_forward(model, data)
+    return model, data
+
+
+def time_env(env: gym.Env, action: np.ndarray, steps: int) -> float:
+    """Seconds for ``steps`` env steps with ``action`` (episodes that end are reset)."""
+    step, reset, clock = env.step, env.reset, time.perf_counter
+    start = clock()
+    for _ in range(steps):
+        _obs, _reward, terminated, truncated, _info = step(action)
+        if terminated or truncated:
+            reset()
+    return clock() - start
+
+
+def time_physics(model: mujoco.MjModel, data: mujoco.MjData, frame_skip: int,
+                 steps: int) -> float:
+    """Seconds for ``steps`` calls of ``mj_step(model, data, nstep=frame_skip)``."""
+    mj_step, clock = mujoco.mj_step, time.perf_counter
+    start = clock()
+    for _ in range(steps):
+        mj_step(model, data, nstep=frame_skip)
+    return clock() - start
+
+
+def measure(env_id: str, steps: int, rounds: int, warmup: int, seed: int) -> Row:
+    env = gym.make(env_id)
+    try:
+        env.reset(seed=seed)
+        base = env.unwrapped
+        frame_skip, dt_s = int(base.frame_skip), float(base.dt)
+        model, data = _physics_copy(env)
+        action = np.zeros(env.action_space.shape, dtype=env.action_space.dtype)
+        time_env(env, action, warmup)
+        time_physics(model, data, frame_skip, warmup)
+        env_s, physics_s = [], []
+        for k in range(rounds):
+            if k % 2:
+                physics_s.append(time_physics(model, data, frame_skip, steps))
+                env_s.append(time_env(env, action, steps))
+            else:
+                env_s.append(time_env(env, action, steps))
+                physics_s.append(time_physics(model, data, frame_skip, steps))
+        wrappers = _wrappers(env)
+    finally:
+        env.close()
+    if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
+        raise RuntimeError(f"{env_id}: the physics copy diverged")
+    shares = [p / e for e, p in zip(env_s, physics_s, strict=True)]
+    env_rate = steps / statistics.median(env_s)
+    return Row(env_id=env_id, wrappers=wrappers, frame_skip=frame_skip, dt_s=dt_s,
+               env_steps_per_s=env_rate, physics_steps_per_s=steps / statistics.median(physics_s),
+               physics_share=statistics.median(shares),
+               overhead_us=statistics.median((e - p) / steps * 1e6
+                                             for e, p in zip(env_s, physics_s, strict=True)),
+               realtime_factor=env_rate * dt_s, shares=shares)
+
+
+def format_table(rows: Sequence[Row]) -> str:
+    lines = ["| id | env steps/s | physics steps/s | physics share | overhead [µs/step] "
+             "| x realtime |", "|---|---:|---:|---:|---:|---:|"]
+    for row in rows:
+        flag = "" if row.physics_share >= PHYSICS_SHARE_GOAL else " (< goal)"
+        lines.append(f"| {row.env_id} | {row.env_steps_per_s:.0f} | "
+                     f"{row.physics_steps_per_s:.0f} | {row.physics_share:.1%}{flag} | "
+                     f"{row.overhead_us:.1f} | {row.realtime_factor:.0f} |")
+    return "\n".join(lines)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--steps", type=int, default=300, help="env steps per round (300)")
+    parser.add_argument("--rounds", type=int, default=7, help="rounds; medians are kept (7)")
+    parser.add_argument("--warmup", type=int, default=100, help="untimed steps first (100)")
+    parser.add_argument("--seed", type=int, default=0, help="reset seed (0)")
+    parser.add_argument("--ids", nargs="+", metavar="ID", help="default: every rehabbot/ id")
+    parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows as JSON")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.steps < 1 or args.rounds < 1 or args.warmup < 0:
+        print("--steps and --rounds must be >= 1, --warmup >= 0", file=sys.stderr)
+        return 2
+    import rehabbot  # noqa: F401  (registers the ids)
+
+    registered = [i for i in gym.registry if i.startswith("rehabbot/")]
+    ids = [i if "/" in i else f"rehabbot/{i}" for i in (args.ids or registered)]
+    unknown = [i for i in ids if i not in registered]
+    if unknown:
+        print(f"unknown id(s) {', '.join(unknown)}; valid: {', '.join(registered)}",
+              file=sys.stderr)
+        return 2
+    rows = [measure(i, args.steps, args.rounds, args.warmup, args.seed) for i in ids]
+    print(f"command: {shlex.join([Path(sys.argv[0]).as_posix(), *(argv or sys.argv[1:])])}")
+    print(f"machine: {platform.platform()}, python {platform.python_version()}, mujoco "
+          f"{mujoco.__version__}, gymnasium {gym.__version__}, numpy {np.__version__}")
+    print(f"gym.make(id), zero actions; median of {args.rounds} interleaved rounds of "
+          f"{args.steps} steps against mj_step on a copy of the model and state; wrappers: "
+          f"{rows[0].wrappers}; goal: physics share >= {PHYSICS_SHARE_GOAL:.0%}\n")
+    print(format_table(rows))
+    if args.json is not None:
+        args.json.write_text(json.dumps([asdict(r) for r in rows], indent=2) + "\n")
+    return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

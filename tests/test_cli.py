@@ -23,7 +23,7 @@ WIDTH_PX, HEIGHT_PX = 200, 150
 
 @pytest.fixture(scope="module")
 def presets() -> dict[str, str]:
-    from rehabbot.models import PRESETS
+    from rehabbot.sim import PRESETS
 
     return dict(PRESETS)
 
@@ -49,7 +49,8 @@ def test_help_does_not_import_scene_builders() -> None:
         "    main(['--help'])\n"
         "except SystemExit as exc:\n"
         "    assert exc.code == 0\n"
-        "heavy = [m for m in ('rehabbot.models.scene', 'rehabbot.rendering') if m in sys.modules]\n"
+        "heavy = [m for m in ('rehabbot.sim.scene', 'rehabbot.envs.rendering', 'mujoco',\n"
+        "                     'torch', 'matplotlib') if m in sys.modules]\n"
         "print('HEAVY', heavy)\n"
     )
     result = subprocess.run(
@@ -89,7 +90,7 @@ def test_snapshot_writes_png_of_requested_size(tmp_path: Path, capsys) -> None:
 
 
 def test_snapshot_cameras_differ(tmp_path: Path) -> None:
-    from rehabbot.models import build_scene
+    from rehabbot.sim import build_scene
 
     cameras = build_scene(SCENE).camera_names
     assert cameras, "scene must define at least one camera"
@@ -125,7 +126,7 @@ def test_unknown_camera_exits_2_and_lists_cameras(tmp_path: Path, capsys) -> Non
     code = main(["snapshot", SCENE, "--out", str(tmp_path / "x.png"), "--camera", "nope"])
     assert code == 2
     err = capsys.readouterr().err
-    from rehabbot.models import build_scene
+    from rehabbot.sim import build_scene
 
     for camera in build_scene(SCENE).camera_names:
         assert camera in err
@@ -205,7 +206,7 @@ def test_view_steps_physics_in_the_viewer(xvfb_display: str) -> None:
     env = {**os.environ, "DISPLAY": xvfb_display}
     env.pop("WAYLAND_DISPLAY", None)
     result = subprocess.run(
-        [sys.executable, "-m", "rehabbot.cli", "view", SCENE, "--seconds", "1"],
+        [sys.executable, "-m", "rehabbot", "view", SCENE, "--seconds", "1"],
         capture_output=True, text=True, timeout=60, env=env,
     )
     assert result.returncode == 0, result.stderr
@@ -227,8 +228,8 @@ def test_view_steps_physics_in_the_viewer(xvfb_display: str) -> None:
 def test_scene_tour_renders_cameras_and_summarises_sweep(tmp_path: Path, capsys) -> None:
     import json
 
-    from rehabbot import scene_tour
-    from rehabbot.models import build_scene
+    from benchmarks import scene_tour
+    from rehabbot.sim import build_scene
 
     code = scene_tour.main(
         ["--out", str(tmp_path), "--presets", SCENE, "--duration", "1",
@@ -252,7 +253,7 @@ def test_scene_tour_renders_cameras_and_summarises_sweep(tmp_path: Path, capsys)
 
 
 def test_scene_tour_rejects_unknown_preset(tmp_path: Path, capsys) -> None:
-    from rehabbot import scene_tour
+    from benchmarks import scene_tour
 
     assert scene_tour.main(["--out", str(tmp_path), "--presets", "bogus"]) == 2
     assert "upper_right" in capsys.readouterr().err

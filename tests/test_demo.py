@@ -1,4 +1,4 @@
-"""``make demo`` (``python -m rehabbot.demo``): train, evaluate, plot, summarise; resumable."""
+"""``make demo`` (``rehabbot demo``): train, evaluate, plot, summarise; resumable."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from rehabbot import demo
+from rehabbot.cli import demo, main
 
 
 @pytest.fixture(scope="module")
 def demo_out(tmp_path_factory) -> tuple[Path, int, str]:
     out = tmp_path_factory.mktemp("demo")
-    code = demo.main(["--out", str(out), "--timesteps", "1100", "--episodes", "2",
-                      "--no-video", "--no-progress"])
+    code = main(["demo", "--out", str(out), "--timesteps", "1100", "--episodes", "2",
+                 "--no-video", "--no-progress"])
     return out, code, (out / "summary.md").read_text() if (out / "summary.md").exists() else ""
 
 
@@ -45,8 +45,8 @@ def test_demo_run_again_resumes_instead_of_retraining(demo_out) -> None:
     out, _code, _md = demo_out
     manifest_path = out / "runs" / "rehab-reach-v0" / "sac" / "seed0" / "manifest.json"
     before = json.loads(manifest_path.read_text())
-    code = demo.main(["--out", str(out), "--timesteps", "1200", "--episodes", "1",
-                      "--no-video", "--no-progress"])
+    code = main(["demo", "--out", str(out), "--timesteps", "1200", "--episodes", "1",
+                 "--no-video", "--no-progress"])
     after = json.loads(manifest_path.read_text())
     assert code == 0
     assert before["timesteps_done"] == 1100 and after["timesteps_done"] == 1200
@@ -56,6 +56,6 @@ def test_demo_run_again_resumes_instead_of_retraining(demo_out) -> None:
 def test_demo_reports_an_unwritable_output_folder(tmp_path: Path, capsys) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    assert demo.main(["--out", str(blocker / "demo"), "--timesteps", "300"]) != 0
+    assert main(["demo", "--out", str(blocker / "demo"), "--timesteps", "300"]) == 1
     err = capsys.readouterr().err
-    assert "rehabbot demo: error" in err and str(blocker) in err
+    assert "rehabbot: error: cannot write to output folder" in err and str(blocker) in err

@@ -11,10 +11,13 @@ import numpy as np
 import pytest
 
 import rehabbot
-from rehabbot import exercises as ex
-from rehabbot.env import P_STAR, PHI, THETA, THETA_STAR, P, RehabEnv
-from rehabbot.experts import ScriptedExpert
-from rehabbot.registration import ENV_SPECS
+from rehabbot.envs.registration import ENV_SPECS
+from rehabbot.envs.rehab_env import RehabEnv
+from rehabbot.rl.experts import ScriptedExpert
+from rehabbot.tasks import exercises as ex
+from rehabbot.tasks import targets as tg
+from rehabbot.tasks import workspace as ws
+from rehabbot.tasks.observation import P_STAR, PHI, THETA, THETA_STAR, P
 
 PAPER_IDS = tuple(ENV_SPECS)
 INFO_KEYS = {"is_success", "target_index", "safety_violation", "reward_distance",
@@ -38,7 +41,7 @@ def test_the_four_paper_ids_are_registered_as_kwargs_of_one_class():
                               "rehabbot/rehab-hip-v0", "rehabbot/rehab-knee-v0"}
     for env_id in PAPER_IDS:
         spec = gym.spec(env_id)
-        assert spec.entry_point == "rehabbot.env:RehabEnv"
+        assert spec.entry_point == "rehabbot.envs.rehab_env:RehabEnv"
         assert spec.max_episode_steps == 1000
     expected = {
         "rehabbot/rehab-reach-v0": ("arm", "right", "reaching"),
@@ -93,8 +96,18 @@ def test_other_control_modes_have_honest_spaces(mode):
     base = env.unwrapped
     space = env.action_space
     if mode == "joint_position":
-        np.testing.assert_allclose(space.low, base.setpoint_low_rad, rtol=1e-6)
-        np.testing.assert_allclose(space.high, base.setpoint_high_rad, rtol=1e-6)
+        # The hardware ranges (+ 0.5 rad), the same for every patient; this patient's setpoint
+        # bounds lie inside, and actions beyond them are clipped to them (and counted).
+        hardware = np.array(base.robot.joint_range_rad)
+        np.testing.assert_allclose(space.high, hardware + 0.5, rtol=1e-6)
+        np.testing.assert_allclose(space.low, -hardware - 0.5, rtol=1e-6)
+        assert np.all(space.low < base.setpoint_low_rad)
+        assert np.all(space.high > base.setpoint_high_rad)
+        env.reset(seed=3)
+        _obs, _r, _t, _tr, info = env.step(space.high)
+        np.testing.assert_allclose(base.controller.setpoint_rad, base.setpoint_high_rad,
+                                   rtol=1e-6)
+        assert info["action_clipped"] == 6
     elif mode == "joint_velocity":
         np.testing.assert_allclose(space.high, 0.5)
     else:
@@ -146,7 +159,7 @@ def test_targets_are_feasible_distinct_and_inside_the_bounds(envs):
             assert np.all(seq.robot_rad <= base.setpoint_high_rad)
             assert np.all(seq.ik_error_m < 1e-4), "every target is reachable with the cuff on"
             assert np.all(seq.patient_deg >= rom[:, 0]) and np.all(seq.patient_deg <= rom[:, 1])
-            assert ex.within_table3(base.scene, base.limb, seq.patient_deg)
+            assert ws.within_table3(base.scene, base.limb, seq.patient_deg)
             if seq.task_type == "reaching":
                 assert len(seq) == 6
             else:
@@ -156,13 +169,13 @@ def test_targets_are_feasible_distinct_and_inside_the_bounds(envs):
 def test_trajectory_waypoints_follow_a_minimum_jerk_profile():
     start = np.array([90.0, 4.0, 90.0])
     keys = np.array([[90.0, 4.0, 30.0]])
-    points, is_key = ex.trajectory_samples(start, keys, segment_s=3.0, waypoint_dt_s=0.1)
+    points, is_key = tg.trajectory_samples(start, keys, segment_s=3.0, waypoint_dt_s=0.1)
     assert is_key[-1] and is_key.sum() == 1
     tau = np.arange(1, 31) / 30
     expected = 90.0 - 60.0 * (10 * tau**3 - 15 * tau**4 + 6 * tau**5)
     np.testing.assert_allclose(points[:, 2], expected)
     # Thinning keeps the key pose and spaces the rest.
-    keep = ex.thin_waypoints(start, points, is_key, min_spacing=5.0)
+    keep = tg.thin_waypoints(start, points, is_key, min_spacing=5.0)
     kept = points[keep]
     assert keep[-1] == len(points) - 1
     assert np.min(np.max(np.abs(np.diff(np.vstack([start, kept]), axis=0)), axis=1)) >= 5.0
@@ -171,8 +184,8 @@ def test_trajectory_waypoints_follow_a_minimum_jerk_profile():
 def test_setpoint_bounds_cover_table3_workspace_and_stay_in_ur5e_ranges(envs):
     for env in envs.values():
         base = env.unwrapped
-        grid = ex.workspace_grid_deg(base.scene, base.limb)
-        assert ex.within_table3(base.scene, base.limb, grid)
+        grid = ws.workspace_grid_deg(base.scene, base.limb)
+        assert ws.within_table3(base.scene, base.limb, grid)
         assert np.all(base.setpoint_low_rad > -2 * math.pi)
         assert np.all(base.setpoint_high_rad < 2 * math.pi)
         # The robot's joint limits were narrowed around the setpoint bounds.
@@ -240,9 +253,8 @@ def test_observations_stay_in_bounds_and_reward_is_the_sum_of_its_terms(mode):
 
 def test_reward_is_equation_5():
     env = gym.make("rehabbot/rehab-reach-v0", exercise=0, weight_level=0).unwrapped
-    env.reset(seed=0)
+    obs, _ = env.reset(seed=0)
     expert = ScriptedExpert(env)
-    obs = env._observation()
     bonuses = []
     while True:
         target = env.target_sequence.robot_rad[env.target_index].copy()
@@ -335,7 +347,7 @@ def test_bad_kwargs_raise_value_error_naming_the_value_before_building(kwargs, w
     def fail(*_args, **_kwargs):
         raise AssertionError("the scene was built before the kwargs were checked")
 
-    monkeypatch.setattr("rehabbot.env.build_scene", fail)
+    monkeypatch.setattr("rehabbot.envs.build.build_scene", fail)
     with pytest.raises(ValueError, match=word) as err, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # Gymnasium warns about an unknown render_mode
         gym.make("rehabbot/rehab-reach-v0", **kwargs)

@@ -15,8 +15,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from rehabbot.experts import ScriptedExpert
-from rehabbot.registration import ENV_SPECS
+from rehabbot.envs.registration import ENV_SPECS
+from rehabbot.rl.experts import ScriptedExpert
 
 PAPER_IDS = tuple(ENV_SPECS)
 

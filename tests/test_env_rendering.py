@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot import overlay
-from rehabbot.env import P_STAR, RehabEnv
-from rehabbot.experts import ScriptedExpert
+from rehabbot.envs import overlay
+from rehabbot.envs.rehab_env import RehabEnv
+from rehabbot.rl.experts import ScriptedExpert
+from rehabbot.tasks.observation import P_STAR
 
 ROOT = Path(__file__).resolve().parents[1]
 LISTING_1 = ROOT / "examples" / "listing1_visualize.py"
@@ -126,13 +127,13 @@ def test_listing1_runs_as_printed_under_xvfb() -> None:
 HUMAN_SHORT_EPISODE = """
 import time
 import numpy as np, gymnasium as gym, rehabbot
-from rehabbot import overlay
-from rehabbot.experts import ScriptedExpert
+from rehabbot.envs import overlay
+from rehabbot.rl.experts import ScriptedExpert
 
 env = gym.make("rehabbot/rehab-reach-v0", render_mode="human", camera_name="front")
 base = env.unwrapped
 obs, info = env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
-viewer = base._viewer
+viewer = base._rendering._viewer
 assert viewer is not None and viewer.is_running(), "reset() must open the viewer"
 print("CAMERA", int(viewer.cam.type), int(viewer.cam.fixedcamid),
       base.model.camera("front").id)
@@ -147,10 +148,10 @@ scn = viewer.user_scn
 rgba = np.array([scn.geoms[i].rgba for i in range(scn.ngeom)])
 print("TRACE_GEOMS", int(np.sum(np.all(np.isclose(rgba, overlay.TRACE_RGBA), axis=1))))
 print("TARGET_GEOMS", int(np.sum(np.all(np.isclose(rgba, overlay.TARGET_RGBA), axis=1))))
-threads = set(base._viewer_threads)
+threads = set(base._rendering._viewer_threads)
 env.close()
 env.close()
-print("CLOSED", base._viewer is None, any(t.is_alive() for t in threads))
+print("CLOSED", base._rendering._viewer is None, any(t.is_alive() for t in threads))
 """
 
 
@@ -400,7 +401,7 @@ def test_close_twice_is_a_noop_and_render_after_close_raises(render_mode: str) -
     assert env.render() is not None
     env.close()
     env.close()
-    assert env.unwrapped._renderer is None
+    assert env.unwrapped._rendering._renderer is None
     with pytest.raises(RuntimeError, match="close"):
         env.render()
     # Closing an env that never rendered is fine too (no wrappers: Gymnasium's order

@@ -9,8 +9,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from rehabbot.models import robot as ur
-from rehabbot.safety import (
+from rehabbot.sim.robots import ur5e as ur
+from rehabbot.tasks.safety import (
     BLOWUP_FORCE_N,
     BLOWUP_SPEED_RAD_S,
     ISO_TS_15066_QUASI_STATIC_N,
@@ -34,11 +34,10 @@ def _assert_safety_penalty(env, reward, info):
     assert not info["is_success"]
     if base.safety_penalty == "worst_case":
         assert info["reward_safety"] == pytest.approx(steps_left * base.worst_step_reward)
-        # Never better than continuing: at least the worst return of the remaining steps.
-        theta_space = base.observation_space
-        worst_distance = np.linalg.norm(np.maximum(
-            theta_space.high[9:15] - theta_space.low[0:6],
-            theta_space.high[0:6] - theta_space.low[9:15]))
+        # Never better than continuing: at least the worst return of the remaining steps in
+        # this patient's bounds.
+        low, high = base.healthy_obs_low, base.healthy_obs_high
+        worst_distance = np.linalg.norm(np.maximum(high[9:15] - low[0:6], high[0:6] - low[9:15]))
         assert info["reward_safety"] <= -worst_distance * (steps_left - 1) + 1e-6
     else:
         # "hold": what holding still at this step's distance would cost until the time limit.
@@ -201,8 +200,8 @@ def test_instability_detectors_catch_blow_ups_that_mujoco_does_not_reset():
     # An observation outside its bounds is one too: shrink the checked bound of theta[0]
     # below the current angle; the env returns its last healthy observation.
     healthy_obs, *_ = env.step(np.zeros(6, np.float32))
-    base._obs_high32 = base._obs_high32.copy()
-    base._obs_high32[9] = healthy_obs[9] - 0.01
+    base.healthy_obs_high = base.healthy_obs_high.copy()
+    base.healthy_obs_high[9] = healthy_obs[9] - 0.01
     obs, reward, terminated, _, info = env.step(np.zeros(6, np.float32))
     assert terminated and info["safety_violation"] == "instability"
     np.testing.assert_array_equal(obs, healthy_obs)
@@ -219,7 +218,7 @@ def test_terminate_on_safety_false_reports_without_ending():
 
 def test_rules_are_documented():
     assert RULES == ("instability", "range_of_motion", "cuff_force", "unintended_contact")
-    import rehabbot.safety as safety
+    import rehabbot.tasks.safety as safety
 
     for rule in RULES:
         assert f'"{rule}"' in safety.__doc__

@@ -6,8 +6,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from rehabbot.experts import ScriptedExpert
-from rehabbot.registration import ENV_SPECS
+from rehabbot.envs.registration import ENV_SPECS
+from rehabbot.rl.experts import ScriptedExpert
 
 
 def run_expert(env, expert, exercise, level, seed=0):

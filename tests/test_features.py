@@ -8,13 +8,13 @@ import pytest
 import torch
 
 import rehabbot  # noqa: F401
-from rehabbot.env import P_STAR, THETA, THETA_STAR, P
-from rehabbot.features import (
+from rehabbot.rl.features import (
     JOINT_ERROR_SCALE_RAD,
     TOOL_ERROR_SCALE_M,
     TrackingErrorFeatures,
 )
-from rehabbot.training import load_hyperparameters
+from rehabbot.rl.hyperparams import load_hyperparameters
+from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
 
 ID = "rehabbot/rehab-reach-v0"
 
@@ -68,12 +68,9 @@ def test_other_observation_shapes_are_refused() -> None:
 
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
 def test_shipped_settings_build_the_extractor_into_each_algorithm(env, algo: str) -> None:
-    from pathlib import Path
+    from rehabbot.rl.algorithms import algo_class
 
-    from rehabbot.training import algo_class
-
-    path = Path(__file__).resolve().parent.parent / "hyperparams" / f"{algo}.yml"
-    hp = load_hyperparameters(path, ID, algo)
+    hp = load_hyperparameters(algo, ID, algo)  # the settings file shipped with the package
     kwargs = hp.kwargs["policy_kwargs"]
     assert kwargs["features_extractor_class"] is TrackingErrorFeatures
     model = algo_class(algo)("MlpPolicy", env, policy_kwargs=kwargs, seed=0,

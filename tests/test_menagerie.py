@@ -18,9 +18,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from rehabbot.models import build_scene
-from rehabbot.models import menagerie as mg
-from rehabbot.models import robot as ur
+from rehabbot.sim import build_scene
+from rehabbot.sim.robots import menagerie as mg
+from rehabbot.sim.robots import ur5e as ur
 
 MENAGERIE_BODIES = [men for _, men in mg.BODY_MAP]
 # The real Menagerie rounds the UR5e's link lengths to the millimetre.
@@ -346,22 +346,23 @@ def test_joint_turning_the_other_way_is_rejected(tmp_path):
     """Wrist 3 does not move the flange centre: the per-link frame check must catch it."""
     fake = write_fake_menagerie(tmp_path, flip_wrist_3=True)
     with pytest.raises(ValueError, match="does not match the UR5e kinematics"):
-        ur.build_ur5e_spec(ur.UR5eOptions(menagerie_dir=str(fake.root)))
+        mg.add_menagerie_visuals(ur.build_ur5e_spec(), "", str(fake.root))
 
 
 def test_menagerie_rounded_link_lengths_are_accepted(tmp_path):
     """The real Menagerie rounds link lengths to the millimetre; that must still fit."""
     fake = write_fake_menagerie(tmp_path, a_m=ROUNDED_A_M, d_m=ROUNDED_D_M)
-    spec = ur.build_ur5e_spec(ur.UR5eOptions(menagerie_dir=str(fake.root)))
+    spec = ur.build_ur5e_spec()
+    mg.add_menagerie_visuals(spec, "", str(fake.root))
     model = spec.compile()
     assert sum(model.geom_type == mujoco.mjtGeom.mjGEOM_MESH) == N_VISUALS
 
 
 def test_import_does_not_load_the_menagerie_module():
-    code = ("import sys, rehabbot.models\n"
-            "from rehabbot.models import build_scene\n"
+    code = ("import sys, rehabbot.sim\n"
+            "from rehabbot.sim import build_scene\n"
             "build_scene('upper_right')\n"
-            "print('rehabbot.models.menagerie' in sys.modules)\n")
+            "print('rehabbot.sim.robots.menagerie' in sys.modules)\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True, timeout=120)
     assert result.stdout.strip() == "False"

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rehabbot.metrics import (
+from rehabbot.analysis.metrics import (
     finite_differences,
     kinematic_summary,
     ldlj,
@@ -476,7 +476,7 @@ def test_bad_sparc_parameters_are_rejected():
 
 def test_import_prints_nothing_and_needs_no_scipy():
     probe = (
-        "import sys; import rehabbot.metrics; "
+        "import sys; import rehabbot.analysis.metrics; "
         "bad = [m for m in ('scipy', 'matplotlib') if m in sys.modules]; "
         "print('LOADED:' + ','.join(bad), file=sys.stderr)"
     )

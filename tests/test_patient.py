@@ -6,8 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from rehabbot.models import PatientProfile, build_scene
-from rehabbot.models import patient as pt
+from rehabbot.sim import PatientProfile, build_scene
+from rehabbot.sim import patient as pt
 
 PROFILES = [PatientProfile(), PatientProfile(1.62, 58.0, "female"), PatientProfile(1.98, 120.0)]
 # Proximal joint body -> the body at its distal joint centre (segment length = their distance).

@@ -1,4 +1,5 @@
-"""Tests of :mod:`rehabbot.plotting` on synthetic run directories and traces."""
+"""Tests of the figures (:mod:`rehabbot.analysis`) and ``rehabbot plot`` on synthetic run
+directories and traces."""
 
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ pytest.importorskip("matplotlib")
 
 from matplotlib.collections import PolyCollection
 
-from rehabbot import plotting
+from rehabbot.analysis import figures, learning_curves, plotting, traces
 from rehabbot.cli import EXIT_FAILURE, EXIT_USAGE, CliError
+from rehabbot.cli import plot as plot_cli
 
 ENV_ID = "rehabbot/rehab-reach-v0"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -110,7 +112,7 @@ def assert_pdf(path: Path) -> None:
 def plot_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="rehabbot")
     commands = parser.add_subparsers(dest="command", required=True)
-    plotting.add_plot_parser(commands)
+    plot_cli.add_plot_parser(commands)
     return parser
 
 
@@ -118,12 +120,13 @@ def plot_parser() -> argparse.ArgumentParser:
 
 
 def test_import_does_not_load_matplotlib() -> None:
-    code = "import sys, rehabbot.plotting; sys.exit('matplotlib' in sys.modules)"
+    code = ("import sys, rehabbot.analysis.plotting, rehabbot.cli.plot; "
+            "sys.exit('matplotlib' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
 
 
 def test_load_runs_reads_manifests_and_episodes(experiment: Path) -> None:
-    runs = plotting.load_runs([experiment])
+    runs = learning_curves.load_runs([experiment])
     assert sorted((run.algo, run.seed) for run in runs) == [
         ("ppo", 0), ("ppo", 1), ("sac", 0), ("sac", 1), ("sac", 2)]
     sac1 = next(run for run in runs if (run.algo, run.seed) == ("sac", 1))
@@ -133,7 +136,7 @@ def test_load_runs_reads_manifests_and_episodes(experiment: Path) -> None:
     np.testing.assert_allclose(sac1.lengths, 100.0)
     np.testing.assert_allclose(sac1.successes[:4], [1, 0, 1, 0])
     # the same run given twice (root and run dir) is loaded once
-    assert len(plotting.load_runs([experiment, sac1.path])) == 5
+    assert len(learning_curves.load_runs([experiment, sac1.path])) == 5
 
 
 def test_sub_env_monitors_are_merged_by_time(tmp_path: Path) -> None:
@@ -142,7 +145,7 @@ def test_sub_env_monitors_are_merged_by_time(tmp_path: Path) -> None:
                   [(1.0, 10, 1.0, True, ""), (3.0, 10, 3.0, False, "")])
     write_monitor(run_dir / "monitor" / "train_1.monitor.csv",
                   [(2.0, 20, 2.0, False, "force"), (4.0, 20, 4.0, True, "")])
-    run = plotting.load_runs([run_dir])[0]
+    run = learning_curves.load_runs([run_dir])[0]
     np.testing.assert_allclose(run.returns, [1, 2, 3, 4])
     np.testing.assert_allclose(run.steps, [10, 30, 40, 60])
     np.testing.assert_allclose(run.successes, [1, 0, 0, 1])
@@ -150,8 +153,8 @@ def test_sub_env_monitors_are_merged_by_time(tmp_path: Path) -> None:
 
 def test_rolling_mean_is_trailing_and_ignores_nan() -> None:
     values = np.array([1.0, 2.0, np.nan, 4.0, 5.0])
-    np.testing.assert_allclose(plotting.rolling_mean(values, 2), [1.0, 1.5, 2.0, 4.0, 4.5])
-    np.testing.assert_allclose(plotting.rolling_mean(values, 1)[[0, 1, 3]], [1, 2, 4])
+    np.testing.assert_allclose(learning_curves.rolling_mean(values, 2), [1.0, 1.5, 2.0, 4.0, 4.5])
+    np.testing.assert_allclose(learning_curves.rolling_mean(values, 1)[[0, 1, 3]], [1, 2, 4])
 
 
 # --------------------------------------------------------------------------- Fig. 4
@@ -162,8 +165,8 @@ def _lines(ax) -> list:
 
 
 def test_fig4_one_line_per_algorithm_with_band(experiment: Path) -> None:
-    runs = plotting.load_runs([experiment])
-    figures = plotting.build_learning_curves(runs, smooth=20)
+    runs = learning_curves.load_runs([experiment])
+    figures = learning_curves.build_learning_curves(runs, smooth=20)
     assert list(figures) == [ENV_ID]
     axes = figures[ENV_ID].axes
     assert len(axes) == 3
@@ -177,8 +180,8 @@ def test_fig4_one_line_per_algorithm_with_band(experiment: Path) -> None:
 
 
 def test_fig4_mean_over_seeds_and_common_step_range(experiment: Path) -> None:
-    runs = plotting.load_runs([experiment])
-    axes = plotting.build_learning_curves(runs, smooth=1)[ENV_ID].axes
+    runs = learning_curves.load_runs([experiment])
+    axes = learning_curves.build_learning_curves(runs, smooth=1)[ENV_ID].axes
     ppo, sac = _lines(axes[0])
     # only up to the steps all seeds reached: PPO seed 1 has 50 episodes, SAC seed 2 has 40
     assert sac.get_xdata()[-1] == pytest.approx(4000.0)
@@ -200,15 +203,15 @@ def test_fig4_mean_over_seeds_and_common_step_range(experiment: Path) -> None:
 def test_fig4_default_smoothing_of_constant_returns(tmp_path: Path) -> None:
     for seed, value in enumerate((3.0, 5.0, 10.0)):
         make_run(tmp_path, "sac", seed, [value] * 30)
-    runs = plotting.load_runs([tmp_path])
-    line = _lines(plotting.build_learning_curves(runs)[ENV_ID].axes[0])[0]
+    runs = learning_curves.load_runs([tmp_path])
+    line = _lines(learning_curves.build_learning_curves(runs)[ENV_ID].axes[0])[0]
     np.testing.assert_allclose(line.get_ydata(), 6.0)
 
 
 def test_fig4_smoothing_is_a_rolling_mean(tmp_path: Path) -> None:
     make_run(tmp_path, "ppo", 0, [0.0, 10.0] * 20)  # alternates, window 2 -> constant 5
-    runs = plotting.load_runs([tmp_path])
-    line = _lines(plotting.build_learning_curves(runs, smooth=2)[ENV_ID].axes[0])[0]
+    runs = learning_curves.load_runs([tmp_path])
+    line = _lines(learning_curves.build_learning_curves(runs, smooth=2)[ENV_ID].axes[0])[0]
     assert line.get_label() == "PPO (1 seed)"
     steps = line.get_xdata()
     values = line.get_ydata()
@@ -217,7 +220,7 @@ def test_fig4_smoothing_is_a_rolling_mean(tmp_path: Path) -> None:
 
 def test_plot_learning_curves_writes_png_and_pdf(experiment: Path, tmp_path: Path) -> None:
     out = tmp_path / "figs"
-    written = plotting.plot_learning_curves(plotting.load_runs([experiment]), out)
+    written = learning_curves.plot_learning_curves(learning_curves.load_runs([experiment]), out)
     assert written == [out / "fig4_learning_curves.png", out / "fig4_learning_curves.pdf"]
     assert_png(written[0])
     assert_pdf(written[1])
@@ -226,7 +229,7 @@ def test_plot_learning_curves_writes_png_and_pdf(experiment: Path, tmp_path: Pat
 def test_fig4_one_figure_per_env_id(experiment: Path, tmp_path: Path) -> None:
     make_run(experiment, "sac", 0, [1.0] * 10, env_id="rehabbot/rehab-knee-v0")
     out = tmp_path / "figs"
-    written = plotting.plot_learning_curves(plotting.load_runs([experiment]), out,
+    written = learning_curves.plot_learning_curves(learning_curves.load_runs([experiment]), out,
                                             formats=("png",))
     assert sorted(path.name for path in written) == [
         "fig4_learning_curves_rehab-knee-v0.png", "fig4_learning_curves_rehab-reach-v0.png"]
@@ -240,8 +243,8 @@ def test_fig4_from_evaluations(tmp_path: Path) -> None:
         results = offset + np.array([[1.0, 3.0], [5.0, 7.0], [9.0, 11.0]])
         np.savez(run_dir / "eval" / "evaluations.npz", timesteps=steps, results=results,
                  ep_lengths=np.full((3, 2), 50), successes=np.array([[0, 0], [0, 1], [1, 1]]))
-    runs = plotting.load_runs([tmp_path])
-    axes = plotting.build_learning_curves(runs, source="eval")[ENV_ID].axes
+    runs = learning_curves.load_runs([tmp_path])
+    axes = learning_curves.build_learning_curves(runs, source="eval")[ENV_ID].axes
     ret, length, success = (_lines(ax)[0] for ax in axes)
     assert ret.get_label() == "TD3 (2 seeds)"
     assert np.interp(2000, ret.get_xdata(), ret.get_ydata()) == pytest.approx(7.0)
@@ -250,7 +253,8 @@ def test_fig4_from_evaluations(tmp_path: Path) -> None:
     assert np.interp(2000, success.get_xdata(), success.get_ydata()) == pytest.approx(0.5)
     without_eval = make_run(tmp_path / "other", "td3", 0, [0.0] * 5)
     with pytest.raises(ValueError, match=r"no run has evaluations"):
-        plotting.build_learning_curves(plotting.load_runs([without_eval]), source="eval")
+        learning_curves.build_learning_curves(learning_curves.load_runs([without_eval]),
+                                              source="eval")
 
 
 # --------------------------------------------------------------------------- Figs. 5, 6, 3
@@ -264,7 +268,7 @@ def trace_file(tmp_path: Path) -> Path:
 
 
 def test_fig5_velocity_peak_of_sine_joints(trace_file: Path) -> None:
-    figure = plotting.build_kinematics(trace_file)
+    figure = figures.build_kinematics(trace_file)
     velocity_ax, acceleration_ax, jerk_ax = figure.axes[:3]
     omega = 2 * np.pi * 0.5
     amplitudes = [0.2, 0.4, 0.6, 0.8, 1.0, 1.2]
@@ -290,16 +294,16 @@ def test_fig5_uses_metrics_finite_differences(trace_file: Path,
         calls.append(dt_s)
         return np.ones_like(position), 2 * np.ones_like(position), 3 * np.ones_like(position)
 
-    fake_metrics = types.ModuleType("rehabbot.metrics")
+    fake_metrics = types.ModuleType("rehabbot.analysis.metrics")
     fake_metrics.finite_differences = fake  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "rehabbot.metrics", fake_metrics)
-    figure = plotting.build_kinematics(trace_file)
+    monkeypatch.setitem(sys.modules, "rehabbot.analysis.metrics", fake_metrics)
+    figure = figures.build_kinematics(trace_file)
     assert calls == [pytest.approx(0.01)]
     np.testing.assert_allclose(_lines(figure.axes[2])[0].get_ydata(), 3.0)
 
 
 def test_fig6_torques_with_limits(trace_file: Path) -> None:
-    figure = plotting.build_torques(trace_file)
+    figure = figures.build_torques(trace_file)
     axes = [ax for ax in figure.axes if ax.get_visible()]
     assert len(axes) == 6
     limits = [150, 150, 150, 28, 28, 28]
@@ -320,7 +324,7 @@ def test_fig3_tool_path(trace_file: Path) -> None:
     from matplotlib.colors import to_hex
 
     data = np.load(trace_file)
-    figure = plotting.build_tool_path(trace_file)
+    figure = figures.build_tool_path(trace_file)
     ax = figure.axes[0]
     assert ax.name == "3d"
     purple = [line for line in ax.get_lines() if to_hex(line.get_color()) == "#8000c0"]
@@ -339,9 +343,9 @@ def test_fig3_tool_path(trace_file: Path) -> None:
 
 def test_trace_figures_written(trace_file: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    written = (plotting.plot_kinematics(trace_file, out)
-               + plotting.plot_torques(trace_file, out, formats=("png",))
-               + plotting.plot_tool_path(trace_file, out, formats=("pdf",)))
+    written = (figures.plot_kinematics(trace_file, out)
+               + figures.plot_torques(trace_file, out, formats=("png",))
+               + figures.plot_tool_path(trace_file, out, formats=("pdf",)))
     names = [path.name for path in written]
     assert names == ["fig5_kinematics_sac-seed0_rehab-reach-v0.png",
                      "fig5_kinematics_sac-seed0_rehab-reach-v0.pdf",
@@ -353,7 +357,7 @@ def test_trace_figures_written(trace_file: Path, tmp_path: Path) -> None:
 
 def test_label_is_sanitised(tmp_path: Path) -> None:
     make_trace(tmp_path / "trace.npz", policy="my policy/v2:best", env_id="ns/odd env-v0")
-    assert plotting.load_trace(tmp_path / "trace.npz").label == "my-policy-v2-best_odd-env-v0"
+    assert traces.load_trace(tmp_path / "trace.npz").label == "my-policy-v2-best_odd-env-v0"
 
 
 # --------------------------------------------------------------------------- plot_all, errors
@@ -374,9 +378,9 @@ def test_plot_all_calls_ensure_trace_for_model_without_trace(
         make_trace(target, policy="sac-seed0")
         return target
 
-    fake = types.ModuleType("rehabbot.evaluation")
+    fake = types.ModuleType("rehabbot.analysis.evaluation")
     fake.ensure_trace = ensure_trace  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "rehabbot.evaluation", fake)
+    monkeypatch.setitem(sys.modules, "rehabbot.analysis.evaluation", fake)
 
     out = tmp_path / "figs"
     assert plotting.plot_all([root], out, evaluate=False, formats=("png",))
@@ -399,12 +403,12 @@ def test_plot_all_duplicate_labels_do_not_overwrite(tmp_path: Path) -> None:
 
 def test_missing_and_empty_dirs(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="no such file"):
-        plotting.load_runs([tmp_path / "nope"])
+        learning_curves.load_runs([tmp_path / "nope"])
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match=r"empty: no training runs"):
-        plotting.load_runs([tmp_path / "empty"])
+        learning_curves.load_runs([tmp_path / "empty"])
     with pytest.raises(ValueError, match="no such file"):
-        plotting.find_traces([tmp_path / "nope"])
+        traces.find_traces([tmp_path / "nope"])
 
 
 def test_corrupt_files_are_named(tmp_path: Path) -> None:
@@ -412,45 +416,46 @@ def test_corrupt_files_are_named(tmp_path: Path) -> None:
     monitor = run_dir / "monitor" / "train_0.monitor.csv"
     monitor.write_text('#{"t_start": 0}\nr,l,t\n1.0,abc,0.1\n', encoding="utf-8")
     with pytest.raises(ValueError, match=r"train_0\.monitor\.csv: not a readable Monitor"):
-        plotting.load_runs([tmp_path / "csv"])
+        learning_curves.load_runs([tmp_path / "csv"])
 
     bad_manifest = make_run(tmp_path / "json", "ppo", 0, [1.0]) / "manifest.json"
     bad_manifest.write_text("{not json", encoding="utf-8")
-    with pytest.raises(ValueError, match=r"manifest\.json: not a readable JSON"):
-        plotting.load_runs([tmp_path / "json"])
+    with pytest.raises(ValueError, match=r"manifest\.json is not a readable manifest"):
+        learning_curves.load_runs([tmp_path / "json"])
 
     (tmp_path / "npz").mkdir()
     (tmp_path / "npz" / "trace.npz").write_bytes(b"garbage")
     with pytest.raises(ValueError, match=r"trace\.npz: not a readable trace"):
-        plotting.load_trace(tmp_path / "npz" / "trace.npz")
+        traces.load_trace(tmp_path / "npz" / "trace.npz")
     np.savez(tmp_path / "npz" / "trace.npz", time_s=np.zeros(3))
     with pytest.raises(ValueError, match="missing key"):
-        plotting.load_trace(tmp_path / "npz" / "trace.npz")
+        traces.load_trace(tmp_path / "npz" / "trace.npz")
 
     make_trace(tmp_path / "short" / "trace.npz", duration_s=0.02)  # 2 samples: no jerk
     with pytest.raises(ValueError, match=r"short/trace\.npz: cannot differentiate"):
-        plotting.build_kinematics(tmp_path / "short" / "trace.npz")
+        figures.build_kinematics(tmp_path / "short" / "trace.npz")
 
     evals = make_run(tmp_path / "eval", "sac", 0, [1.0]) / "eval" / "evaluations.npz"
     evals.parent.mkdir()
     evals.write_bytes(b"garbage")
     with pytest.raises(ValueError, match=r"evaluations\.npz: not a readable"):
-        plotting.build_learning_curves(plotting.load_runs([tmp_path / "eval"]), source="eval")
+        learning_curves.build_learning_curves(learning_curves.load_runs([tmp_path / "eval"]),
+                                              source="eval")
 
 
 def test_missing_matplotlib_message(trace_file: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "matplotlib.backends.backend_agg", None)
     with pytest.raises(ImportError, match=r'pip install "rehabbot\[plot\]"'):
-        plotting.build_torques(trace_file)
+        figures.build_torques(trace_file)
 
 
 def test_bad_options() -> None:
     with pytest.raises(ValueError, match="source"):
-        plotting.build_learning_curves([], source="test")
+        learning_curves.build_learning_curves([], source="test")
     with pytest.raises(ValueError, match="smooth"):
-        plotting.build_learning_curves([], smooth=0)
+        learning_curves.build_learning_curves([], smooth=0)
     with pytest.raises(ValueError, match="format"):
-        plotting.save_figure(None, Path("."), "x", formats=("bmp",))  # type: ignore[arg-type]
+        figures.save_figure(None, Path("."), "x", formats=("bmp",))  # type: ignore[arg-type]
 
 
 # --------------------------------------------------------------------------- CLI
@@ -460,8 +465,8 @@ def test_cmd_plot_writes_files(experiment: Path, trace_file: Path,
                                capsys: pytest.CaptureFixture[str]) -> None:
     args = plot_parser().parse_args(["plot", str(experiment), "--smooth", "5",
                                      "--formats", "png", "--no-evaluate"])
-    assert args.func is plotting.cmd_plot
-    assert plotting.cmd_plot(args) == 0
+    assert args.func is plot_cli.cmd_plot
+    assert plot_cli.cmd_plot(args) == 0
     out = experiment / "figures"
     printed = capsys.readouterr().out.split()
     assert len(printed) == 4
@@ -479,7 +484,7 @@ def test_cmd_plot_errors(tmp_path: Path, trace_file: Path) -> None:
 
     def run(*argv: str) -> CliError:
         with pytest.raises(CliError) as info:
-            plotting.cmd_plot(parser.parse_args(["plot", *argv]))
+            plot_cli.cmd_plot(parser.parse_args(["plot", *argv]))
         message = str(info.value)
         assert "\n" not in message
         return info.value

@@ -9,13 +9,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from rehabbot import rendering
-from rehabbot.rendering import (
+from rehabbot.analysis.images import save_png
+from rehabbot.envs import rendering
+from rehabbot.envs.rendering import (
     BACKGROUND_ID,
     OffscreenRenderer,
     render_rgb,
     render_segmentation,
-    save_png,
 )
 
 WIDTH_PX, HEIGHT_PX = 160, 120
@@ -210,7 +210,7 @@ MIN_PIXELS = 500
 
 
 def test_default_camera_of_every_preset_sees_robot_and_patient() -> None:
-    from rehabbot.models import PRESETS, build_scene
+    from rehabbot.sim import PRESETS, build_scene
 
     pixel_counts = {}
     for preset in PRESETS:

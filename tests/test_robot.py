@@ -4,7 +4,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from rehabbot.models import robot as ur
+from rehabbot.sim import build_scene
+from rehabbot.sim.robots import ImpedanceGains, RobotBuildOptions, get_robot
+from rehabbot.sim.robots import ur5e as ur
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +89,25 @@ def test_total_actuator_torque_is_clamped_to_the_limit(ur5e):
 
 
 def test_impedance_gains_reject_bad_values():
-    with pytest.raises(ValueError, match="kp_nm_per_rad"):
-        ur.ImpedanceGains(kp_nm_per_rad=(1.0, 2.0))
+    kp, kv = ur.DEFAULT_GAINS.kp_nm_per_rad, ur.DEFAULT_GAINS.kv_nms_per_rad
+    with pytest.raises(ValueError, match="6 values per joint, got 2"):
+        ur.add_ur5e(mujoco.MjSpec().worldbody, mujoco.MjSpec(), RobotBuildOptions(
+            gains=ImpedanceGains(kp_nm_per_rad=(1.0, 2.0), kv_nms_per_rad=(1.0, 2.0))))
     with pytest.raises(ValueError, match="kv_nms_per_rad"):
-        ur.ImpedanceGains(kv_nms_per_rad=(1, 1, 1, 1, 1, float("nan")))
+        ImpedanceGains(kp_nm_per_rad=kp, kv_nms_per_rad=(1, 1, 1, 1, 1, float("nan")))
+    with pytest.raises(ValueError, match="6 stiffnesses but 5 dampings"):
+        ImpedanceGains(kp_nm_per_rad=kp, kv_nms_per_rad=kv[:5])
+    with pytest.raises(ValueError, match="gains for ur5e need 6 values"):
+        build_scene("upper_right", gains=ImpedanceGains((1.0,) * 7, (1.0,) * 7))
+
+
+def test_the_robot_model_describes_the_ur5e():
+    robot = get_robot("ur5e")
+    assert robot is ur.UR5E and robot.n_joints == 6
+    assert robot.joint_names == ur.JOINT_NAMES
+    np.testing.assert_array_equal(robot.torque_limits(), ur.TORQUE_LIMIT_NM)
+    model = ur.build_ur5e_spec().compile()
+    assert model.nu == 2 * robot.n_joints and model.njnt == robot.n_joints
+    assert [model.body(name).id for name in robot.link_names] == list(range(1, 8))
+    with pytest.raises(ValueError, match=r"robot='kuka' is not one of \['ur5e'\]"):
+        get_robot("kuka")

@@ -9,10 +9,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rehabbot.kinematics import run_sweep
-from rehabbot.models import PRESETS, PatientProfile, build_scene
-from rehabbot.models import patient as pt
-from rehabbot.models import scene as sc
+from rehabbot.sim import PRESETS, PatientProfile, build_scene
+from rehabbot.sim import patient as pt
+from rehabbot.sim import scene as sc
+from rehabbot.sim.sweep import run_sweep
 
 ALL_PRESETS = tuple(PRESETS)
 # Minimum range [deg] the sweep must move each preset's exercised joints through.

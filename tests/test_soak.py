@@ -1,4 +1,4 @@
-"""The random-action soak (:mod:`rehabbot.soak`): a short clean run of every cell, its
+"""The random-action soak (``benchmarks/soak.py``): a short clean run of every cell, its
 reproducibility, the detectors (with deliberately faulty envs), the JSON report, bad arguments
 and interrupts."""
 
@@ -16,9 +16,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from rehabbot.control import CONTROL_MODES
-from rehabbot.registration import ENV_SPECS
-from rehabbot.soak import END_REASONS, SoakReport, main, run_soak
+from benchmarks.soak import END_REASONS, SoakReport, main, run_soak
+from rehabbot.envs.control import CONTROL_MODES
+from rehabbot.envs.registration import ENV_SPECS
 
 SHORT_STEPS = 20_000  # 1250 per cell over the 16 cells
 FAULT_EVERY = 100  # the faulty envs misbehave on every 100th step call
@@ -286,7 +286,11 @@ def test_sigterm_stops_the_run_with_exit_143(tmp_path: Path) -> None:
     assert data["steps"] == first["steps"]
 
 
-def test_import_prints_nothing() -> None:
-    result = subprocess.run([sys.executable, "-c", "import rehabbot.soak"],
-                            capture_output=True, text=True, check=True)
-    assert result.stdout == "" and result.stderr == ""
+def test_the_script_runs_from_the_repository_root(tmp_path) -> None:
+    out = tmp_path / "soak.json"
+    result = subprocess.run([sys.executable, "benchmarks/soak.py", "--steps", "40", "--env",
+                             "rehab-knee-v0", "--mode", "joint_delta", "--out", str(out),
+                             "--quiet"], capture_output=True, text=True, timeout=300,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 0, result.stderr
+    assert json.loads(out.read_text())["steps"] == 40

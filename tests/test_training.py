@@ -1,4 +1,5 @@
-"""``rehabbot train`` (:mod:`rehabbot.training`): runs, checkpoints, resume, interruption,
+"""``rehabbot train`` (:mod:`rehabbot.rl.training`, :mod:`rehabbot.cli.train`): runs,
+checkpoints, resume, interruption,
 hyperparameter files and user errors. Kept short: 100-step episodes, tiny networks, few
 gradient steps."""
 
@@ -22,22 +23,19 @@ import pytest
 pytest.importorskip("stable_baselines3", reason='training tests need "rehabbot[train]"')
 pytest.importorskip("yaml", reason="hyperparameter files need PyYAML")
 
-import rehabbot
 from rehabbot.cli import CliError
-from rehabbot.training import (
-    TrainingError,
-    TrainingInterrupted,
-    add_train_parser,
-    cmd_train,
+from rehabbot.cli.train import add_train_parser, cmd_train
+from rehabbot.envs.registration import ENV_SPECS
+from rehabbot.rl.hyperparams import (
+    HyperparameterError,
     hyperparameters_from_mapping,
     load_hyperparameters,
     parse_python_expression,
-    train_run,
 )
+from rehabbot.rl.training import TrainingInterrupted, train_run
 
 ENV = "rehab-reach-v0"
 FULL_ID = "rehabbot/rehab-reach-v0"
-REPO = Path(__file__).resolve().parent.parent
 ENV_KWARGS = {"max_episode_steps": 100}
 SMALL = {
     "ppo": {"n_steps": 256, "batch_size": 64, "n_epochs": 2,
@@ -148,8 +146,8 @@ def test_train_writes_the_run_directory(tmp_path: Path, algo: str, capsys) -> No
     assert (checkpoints / "rl_model_1000_steps.zip").is_file()
     assert (checkpoints / "rl_model_2000_steps.zip").is_file()
     if algo != "ppo":  # only the newest replay buffer is kept
-        assert (checkpoints / "rl_model_replay_buffer_2000_steps.pkl").is_file()
-        assert not (checkpoints / "rl_model_replay_buffer_1000_steps.pkl").exists()
+        assert (checkpoints / "rl_model_replay_buffer_2000_steps.npz").is_file()
+        assert not (checkpoints / "rl_model_replay_buffer_1000_steps.npz").exists()
     assert _no_temp_files(run_dir)
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[-1].startswith(f"{run_dir}: 2000 steps")
@@ -208,7 +206,7 @@ def test_resume_from_a_damaged_file_is_refused_and_changes_nothing(tmp_path: Pat
     run_dir = out / ENV / "sac" / "seed0"
     checkpoints = run_dir / "checkpoints"
     target = {"checkpoint": checkpoints / "rl_model_500_steps.zip",
-              "replay_buffer": checkpoints / "rl_model_replay_buffer_500_steps.pkl",
+              "replay_buffer": checkpoints / "rl_model_replay_buffer_500_steps.npz",
               "manifest": run_dir / "manifest.json"}[damaged]
     target.write_bytes(target.read_bytes()[: len(target.read_bytes()) // 2])  # torn write
     before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
@@ -228,7 +226,7 @@ def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
             "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress"]
     run_dir = out / ENV / "sac" / "seed0"
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    proc = subprocess.Popen([sys.executable, "-m", "rehabbot.training", *argv], cwd=tmp_path,
+    proc = subprocess.Popen([sys.executable, "-m", "rehabbot", "train", *argv], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         deadline = time.monotonic() + 120
@@ -255,10 +253,10 @@ def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
     assert checkpoint.name == f"rl_model_{done}_steps.zip"
     model = _algo_class("sac").load(checkpoint, device="cpu")
     assert model.num_timesteps == done
-    from stable_baselines3.common.save_util import load_from_pkl
-
-    buffer = load_from_pkl(run_dir / "checkpoints" / f"rl_model_replay_buffer_{done}_steps.pkl")
-    assert buffer.size() in (done - 1, done)  # SB3 stops before storing the last transition
+    with np.load(run_dir / "checkpoints" / f"rl_model_replay_buffer_{done}_steps.npz") as buffer:
+        # Only what was collected is saved (SB3 stops before storing the last transition).
+        assert int(buffer["pos"]) in (done - 1, done) and not bool(buffer["full"])
+        assert buffer["observations"].shape == (int(buffer["pos"]), 1, 23)
     assert not (run_dir / "model.zip").exists()
     assert _no_temp_files(run_dir)
 
@@ -279,7 +277,7 @@ def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path)
             "--out", str(out), "--checkpoint-freq", "1000", "--eval-freq", "500",
             "--eval-episodes", "1", "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress"]
     run_dir = out / ENV / "sac" / "seed0"
-    proc = subprocess.Popen([sys.executable, "-m", "rehabbot.training", *argv], cwd=tmp_path,
+    proc = subprocess.Popen([sys.executable, "-m", "rehabbot", "train", *argv], cwd=tmp_path,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
@@ -363,7 +361,7 @@ def test_zoo_strings_are_parsed_safely() -> None:
 
 def test_policy_kwargs_string_with_code_is_rejected(tmp_path: Path) -> None:
     path = _yaml(tmp_path / "hp.yml", {"policy_kwargs": "__import__('os').system('touch x')"})
-    with pytest.raises(TrainingError, match=r"policy_kwargs.*not allowed"):
+    with pytest.raises(HyperparameterError, match=r"policy_kwargs.*not allowed"):
         load_hyperparameters(path, ENV, "sac")
     assert not (tmp_path / "x").exists()
 
@@ -379,21 +377,21 @@ def test_linear_schedule_and_numbers_from_strings() -> None:
     assert hp.kwargs["tau"] == pytest.approx(5e-3)
     assert hp.kwargs["train_freq"] == (1, "episode")
     assert hp.to_manifest()["kwargs"]["learning_rate"] == "lin_3e-4"
-    with pytest.raises(TrainingError, match="lin_"):
+    with pytest.raises(HyperparameterError, match="lin_"):
         hyperparameters_from_mapping({"learning_rate": "lin_fast"}, "sac")
 
 
 def test_unknown_key_is_named(tmp_path: Path) -> None:
     path = _yaml(tmp_path / "hp.yml", {FULL_ID: {"n_stepz": 5}})
-    with pytest.raises(TrainingError, match=r"unknown hyperparameter 'n_stepz' for PPO"):
+    with pytest.raises(HyperparameterError, match=r"unknown hyperparameter 'n_stepz' for PPO"):
         load_hyperparameters(path, ENV, "ppo")
-    with pytest.raises(TrainingError, match=r"'policy_delay' for SAC"):
+    with pytest.raises(HyperparameterError, match=r"'policy_delay' for SAC"):
         hyperparameters_from_mapping({"policy_delay": 2}, "sac")
-    with pytest.raises(TrainingError, match=r"'seed'.*--seeds"):
+    with pytest.raises(HyperparameterError, match=r"'seed'.*--seeds"):
         hyperparameters_from_mapping({"seed": 3}, "td3")
-    with pytest.raises(TrainingError, match="noise_type applies to SAC and TD3"):
+    with pytest.raises(HyperparameterError, match="noise_type applies to SAC and TD3"):
         hyperparameters_from_mapping({"noise_type": "normal"}, "ppo")
-    with pytest.raises(TrainingError, match="unknown normalize key 'norm_everything'"):
+    with pytest.raises(HyperparameterError, match="unknown normalize key 'norm_everything'"):
         hyperparameters_from_mapping({"normalize": {"norm_everything": True}}, "ppo")
 
 
@@ -408,7 +406,7 @@ def test_env_keyed_and_flat_files(tmp_path: Path) -> None:
     knee = load_hyperparameters(keyed, "rehabbot/rehab-knee-v0", "sac")
     assert knee.kwargs == {"batch_size": 128} and knee.normalize == {"norm_reward": False}
     assert knee.entry == "rehab-knee-v0"
-    with pytest.raises(TrainingError, match="no entry for rehabbot/rehab-hip-v0"):
+    with pytest.raises(HyperparameterError, match="no entry for rehabbot/rehab-hip-v0"):
         load_hyperparameters(keyed, "rehab-hip-v0", "sac")
 
     flat = _yaml(tmp_path / "flat.yml", {"batch_size": 16, "n_envs": 2, "normalize": True,
@@ -426,8 +424,8 @@ def test_shipped_files_spell_out_the_sb3_defaults(algo: str) -> None:
     cls = _algo_class(algo)
     defaults = inspect.signature(cls.__init__).parameters
     env = gym.make(FULL_ID)
-    for env_id in rehabbot.registration.ENV_SPECS:
-        path = REPO / "hyperparams" / "sb3-defaults" / f"{algo}.yml"
+    for env_id in ENV_SPECS:
+        path = f"sb3-defaults/{algo}"  # shipped with the package
         hp = load_hyperparameters(path, env_id, algo)
         assert hp.entry == env_id and hp.policy == "MlpPolicy" and hp.normalize is None
         assert hp.n_timesteps == 200_000 and hp.n_envs == 1
@@ -521,7 +519,7 @@ def test_parser_defaults_short_ids_and_help() -> None:
 
 
 def test_module_import_is_cheap() -> None:
-    code = ("import sys, rehabbot.training; "
+    code = ("import sys, rehabbot.rl.training, rehabbot.cli.train; "
             "print(sorted(m for m in ('torch', 'stable_baselines3', 'yaml') if m in sys.modules))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True, timeout=60)

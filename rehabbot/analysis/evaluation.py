@@ -1,0 +1,251 @@
+"""Clinical evaluation of a policy (``rehabbot evaluate MODEL|expert|random``).
+
+Each episode starts from ``reset(seed=seed + k)`` and runs the policy deterministically until
+the episode ends (success, safety termination or the 1000-step limit). Per episode it records
+the return, success, length, the steps to finish (length of a successful episode), the safety
+rule that ended it, the peak cuff force, and the kinematic quality of the robot's motion from
+:func:`rehabbot.analysis.metrics.kinematic_summary`: peak joint speed, RMS and peak joint
+acceleration, peak joint jerk (finite differences at the env's ``dt``), SPARC, log
+dimensionless jerk and normalised jerk of the tool's (the patient's hand's or foot's) speed
+profile, and the peak actuator torque of each joint.
+
+Outputs, for each policy, in ``OUT/<label>/``:
+
+================== ==========================================================================
+``evaluation.json`` the summary (mean ± std over episodes), every episode's figures, the seeds,
+                    the policy's provenance and the package versions
+``trace.npz``       the first episode step by step (:mod:`rehabbot.analysis.traces`), read by
+                    ``rehabbot plot`` for the paper's Figs. 3, 5 and 6
+================== ==========================================================================
+
+With several policies, ``OUT/comparison.md`` holds their summaries side by side.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from rehabbot.analysis.metrics import kinematic_summary
+from rehabbot.analysis.traces import TRACE_NAME, save_trace, trace_from_episode
+from rehabbot.common.errors import UsageError
+from rehabbot.common.files import atomic_write_text
+from rehabbot.common.provenance import package_versions
+from rehabbot.envs.registration import env_short_name
+from rehabbot.rl import runs
+from rehabbot.rl.policies import POLICY_KEYWORDS, env_for, load_policy, model_file
+from rehabbot.rl.rollout import Episode, run_episode
+from rehabbot.tasks.safety import RULES
+
+REPORT_NAME = "evaluation.json"
+COMPARISON_NAME = "comparison.md"
+SUMMARY_METRICS = (
+    # key in the summary, label in the table, unit
+    ("return", "return", ""),
+    ("success_rate", "success rate", "%"),
+    ("length", "episode length", "steps"),
+    ("steps_to_finish", "steps to finish", "steps"),
+    ("peak_cuff_force_n", "peak cuff force", "N"),
+    ("peak_joint_speed_rad_s", "peak joint speed", "rad/s"),
+    ("rms_joint_acceleration_rad_s2", "RMS joint acceleration", "rad/s²"),
+    ("peak_joint_acceleration_rad_s2", "peak joint acceleration", "rad/s²"),
+    ("peak_joint_jerk_rad_s3", "peak joint jerk", "rad/s³"),
+    ("sparc", "SPARC (tool speed)", ""),
+    ("ldlj", "LDLJ (tool speed)", ""),
+    ("normalized_jerk", "normalised jerk (tool)", ""),
+    ("peak_torque_nm", "peak robot torque", "N·m"),
+)
+DEFAULT_EPISODES = 10
+
+
+def episode_figures(episode: Episode) -> dict[str, Any]:
+    """The JSON-ready figures of one episode: outcome, cuff force and motion quality."""
+    figures = {
+        "seed": episode.seed,
+        "exercise": episode.exercise,
+        "weight_level": episode.weight_level,
+        "return": episode.total_return,
+        "length": episode.length,
+        "success": episode.success,
+        "steps_to_finish": episode.length if episode.success else None,
+        "targets_reached": episode.targets_reached,
+        "num_targets": episode.num_targets,
+        "safety_violation": episode.safety_violation,
+        "truncated": episode.truncated,
+        "peak_cuff_force_n": float(np.max(episode.interaction_force_n)),
+    }
+    figures.update(kinematic_summary(episode.robot_qpos_rad, episode.dt_s,
+                                     tool_m=episode.tool_pos_m,
+                                     torque_nm=episode.robot_torque_nm))
+    return figures
+
+
+def _mean_std(values: Sequence[float | None]) -> tuple[float | None, float | None]:
+    finite = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+    if not finite:
+        return None, None
+    return float(np.mean(finite)), float(np.std(finite))
+
+
+def summarize(episodes: list[dict]) -> dict:
+    """Mean ± std over episodes of every figure, the success rate, safety counts by rule."""
+    summary: dict[str, Any] = {"episodes": len(episodes)}
+    summary["success_rate"] = float(np.mean([e["success"] for e in episodes]))
+    for key, _label, _unit in SUMMARY_METRICS:
+        if key == "success_rate":
+            continue
+        mean, std = _mean_std([e.get(key) for e in episodes])
+        summary[key] = {"mean": mean, "std": std}
+    counts = dict.fromkeys(RULES, 0)
+    for episode in episodes:
+        if episode["safety_violation"] is not None:
+            counts[episode["safety_violation"]] += 1
+    summary["safety_terminations"] = counts
+    summary["truncated"] = sum(e["truncated"] for e in episodes)
+    summary["max_peak_cuff_force_n"] = max(e["peak_cuff_force_n"] for e in episodes)
+    per_joint = np.array([e["peak_torque_per_joint_nm"] for e in episodes])
+    summary["peak_torque_per_joint_nm"] = per_joint.max(axis=0).tolist()
+    return summary
+
+
+def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
+                      episodes: int = DEFAULT_EPISODES, seed: int = 0,
+                      env_kwargs: dict | None = None,
+                      deterministic: bool = True) -> list[tuple[dict, dict]]:
+    """Evaluate several policies (``"expert"``, ``"random"`` or model paths) on the same
+    episodes of one env; returns each one's report (JSON-ready) and first episode's trace.
+
+    ``env_id`` may be None when a model of a ``rehabbot train`` run is among ``specs`` (its
+    manifest's id and env kwargs are used). Every spec is loaded and checked against the env
+    before the first episode runs, so a bad one fails before any work is done.
+    """
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise UsageError(f"episodes={episodes!r} must be an integer >= 1")
+    env_id, kwargs = env_for(specs, env_id, env_kwargs)
+    env = gym.make(env_id, **kwargs)
+    try:
+        policies = [load_policy(spec, env, seed=seed) for spec in specs]
+        results = []
+        for policy in policies:
+            started = time.perf_counter()
+            figures, trace = [], None
+            for k in range(episodes):
+                episode = run_episode(env, policy, seed + k, deterministic)
+                figures.append(episode_figures(episode))
+                if trace is None:
+                    trace = trace_from_episode(episode)
+            report = {
+                "env_id": env_id,
+                "env_kwargs": kwargs,
+                "policy": policy.describe(),
+                "seed": seed,
+                "episode_seeds": [seed + k for k in range(episodes)],
+                "deterministic": deterministic,
+                "summary": summarize(figures),
+                "per_episode": figures,
+                "wall_clock_s": time.perf_counter() - started,
+                "versions": package_versions(),
+            }
+            results.append((report, trace))
+    finally:
+        env.close()
+    return results
+
+
+def evaluate(spec: str, env_id: str | None = None, episodes: int = DEFAULT_EPISODES,
+             seed: int = 0, env_kwargs: dict | None = None,
+             deterministic: bool = True) -> tuple[dict, dict]:
+    """Evaluate one policy (:func:`evaluate_policies`); returns its report and trace."""
+    return evaluate_policies([spec], env_id, episodes, seed, env_kwargs, deterministic)[0]
+
+
+# --------------------------------------------------------------------------- output
+
+
+def save_report(report: dict, trace: dict, out_dir: Path) -> tuple[Path, Path]:
+    """``out_dir/evaluation.json`` and ``out_dir/trace.npz``, each written atomically."""
+    out_dir = Path(out_dir)
+    json_path, trace_path = out_dir / REPORT_NAME, out_dir / TRACE_NAME
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(json_path, json.dumps(report, indent=2, default=_json_default) + "\n")
+    save_trace(trace_path, trace)
+    return json_path, trace_path
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _cell(stat: Any, key: str) -> str:
+    if key == "success_rate":
+        return f"{100 * stat:.0f} %"
+    mean, std = stat["mean"], stat["std"]
+    if mean is None:
+        return "-"
+    digits = 0 if abs(mean) >= 100 else (2 if abs(mean) >= 1 else 3)
+    return f"{mean:.{digits}f} ± {std:.{digits}f}"
+
+
+def format_table(reports: Sequence[dict]) -> str:
+    """A Markdown table, one column per policy (mean ± std over episodes)."""
+    header = ["metric"] + [r["policy"]["label"] for r in reports]
+    rows = []
+    for key, label, unit in SUMMARY_METRICS:
+        name = f"{label} [{unit}]" if unit and unit != "%" else label
+        rows.append([name] + [_cell(r["summary"][key], key) for r in reports])
+    rules = reports[0]["summary"]["safety_terminations"]
+    for rule in rules:
+        rows.append([f"safety stops: {rule}"]
+                    + [str(r["summary"]["safety_terminations"][rule]) for r in reports])
+    rows.append(["episodes (seeds)"] + [
+        f"{r['summary']['episodes']} ({r['episode_seeds'][0]}..{r['episode_seeds'][-1]})"
+        for r in reports])
+    widths = [max(len(str(row[i])) for row in [header, *rows]) for i in range(len(header))]
+
+    def line(cells: Sequence[str]) -> str:
+        return "| " + " | ".join(str(c).ljust(w) for c, w in zip(cells, widths, strict=True)) + " |"
+
+    separator = "|" + "|".join("-" * (w + 2) for w in widths) + "|"
+    return "\n".join([line(header), separator, *(line(r) for r in rows)])
+
+
+def default_out_dir(specs: Sequence[str], env_id: str | None) -> Path:
+    """``<run>/evaluation`` for one model of a training run, else ``runs/evaluation/<env>``."""
+    run_dirs = {runs.find_run_dir(model_file(spec)) for spec in specs
+                if spec not in POLICY_KEYWORDS}
+    if len(specs) == 1 and len(run_dirs) == 1 and None not in run_dirs:
+        return run_dirs.pop() / runs.EVALUATION_DIR
+    return Path("runs") / "evaluation" / (env_short_name(env_id) if env_id else "models")
+
+
+def write_comparison(out_dir: Path, reports: Sequence[dict]) -> Path:
+    """``out_dir/comparison.md``: the reports' table side by side."""
+    path = Path(out_dir) / COMPARISON_NAME
+    atomic_write_text(path, format_table(reports) + "\n")
+    return path
+
+
+def ensure_trace(run_dir: Path, seed: int | None = None) -> Path:
+    """The trace of one deterministic episode of a training run's final model, evaluated now
+    if ``<run_dir>/evaluation/<label>/trace.npz`` does not exist yet."""
+    run_dir = Path(run_dir)
+    existing = sorted((run_dir / runs.EVALUATION_DIR).glob(f"*/{TRACE_NAME}"))
+    if existing:
+        return existing[0]
+    manifest = runs.read_manifest(run_dir) or {}
+    seed = int(manifest.get("seed", 0)) if seed is None else seed
+    report, trace = evaluate(str(run_dir / runs.MODEL_NAME), None, episodes=1, seed=seed)
+    _json, trace_path = save_report(report, trace,
+                                    run_dir / runs.EVALUATION_DIR / report["policy"]["label"])
+    return trace_path

@@ -1,0 +1,80 @@
+"""The ``rehabbot`` command line: a thin layer over the libraries. Each subcommand parses its
+arguments, calls a library function and maps its exceptions to exit codes
+(:mod:`rehabbot.cli.errors`); nothing below this package imports it.
+
+Examples::
+
+    rehabbot list                                  # the registered env ids
+    rehabbot train rehab-reach-v0 --algo sac --hyperparams sac --seeds 0 1 2
+    rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random
+    rehabbot plot runs/rehab-reach-v0               # Figs. 3-6 of the paper for your runs
+    rehabbot render expert --env rehab-reach-v0 --out expert.mp4
+    rehabbot demo                                  # train, evaluate, plot, render (make demo)
+    rehabbot scenes
+    rehabbot view upper_right --seconds 5
+    rehabbot snapshot upper_right --out front.png --width 1280 --height 720
+
+Heavy imports (Stable-Baselines3, matplotlib) happen inside the command functions so that
+``rehabbot --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from rehabbot.cli.display import has_display, use_headless_gl_by_default
+from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, CliError
+
+__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "CliError", "build_parser", "has_display",
+           "main", "use_headless_gl_by_default"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``rehabbot`` command."""
+    from rehabbot.cli.demo import add_demo_parser
+    from rehabbot.cli.evaluate import add_evaluate_parser
+    from rehabbot.cli.listing import add_list_parser
+    from rehabbot.cli.plot import add_plot_parser
+    from rehabbot.cli.render import add_render_parser
+    from rehabbot.cli.scenes import add_scene_parsers
+    from rehabbot.cli.train import add_train_parser
+    from rehabbot.common.version import VERSION
+
+    parser = argparse.ArgumentParser(
+        prog="rehabbot",
+        description="RehabBot: a UR5e strapped to a humanoid patient, simulated in MuJoCo. "
+                    "Train, evaluate, plot and render RL agents on its therapy exercises.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="a typical session:\n"
+               "  rehabbot list\n"
+               "  rehabbot train rehab-reach-v0 --algo sac --hyperparams sac --seeds 0 1 2\n"
+               "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random\n"
+               "  rehabbot plot runs/rehab-reach-v0\n"
+               "  rehabbot render runs/rehab-reach-v0/sac/seed0/model.zip --out sac.mp4\n\n"
+               "`rehabbot COMMAND --help` describes each command. Exit codes: 0 success, "
+               "1 failure, 2 bad usage, 130/143 training interrupted (resumable).",
+    )
+    parser.add_argument("--version", action="version", version=f"rehabbot {VERSION}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_list_parser(commands)
+    add_train_parser(commands)
+    add_evaluate_parser(commands)
+    add_plot_parser(commands)
+    add_render_parser(commands)
+    add_demo_parser(commands)
+    add_scene_parsers(commands)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``rehabbot`` command; returns the process exit code."""
+    use_headless_gl_by_default()  # before anything imports mujoco
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except CliError as err:
+        one_line = " ".join(str(err).split())
+        print(f"rehabbot: error: {one_line}", file=sys.stderr)
+        return err.exit_code

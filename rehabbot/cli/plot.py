@@ -1,0 +1,117 @@
+"""``rehabbot plot RUN_DIR...``: the paper's Figs. 3-6 for the user's own runs
+(:mod:`rehabbot.analysis.plotting`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+from rehabbot.analysis.figures import DEFAULT_FORMATS, DEFAULT_SMOOTH, SOURCES, SUPPORTED_FORMATS
+from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, CliError
+
+PLOT_DESCRIPTION = """\
+Draw the paper's figures for your own runs:
+  Fig. 4  fig4_learning_curves.{png,pdf}    return / length / success vs. env steps,
+                                            mean ± std over seeds, one line per algorithm
+                                            (one file per env id, suffixed, for several)
+  Fig. 5  fig5_kinematics_<label>.{png,pdf} joint velocity, acceleration, jerk vs. time
+  Fig. 6  fig6_torques_<label>.{png,pdf}    joint torques with the torque limits
+  Fig. 3  fig3_tool_path_<label>.{png,pdf}  3-D tool path with the numbered targets
+<label> is <policy>_<env>. RUN_DIR may be a training run, any directory above runs
+(all manifest.json below it are used) or a directory holding trace.npz files. A run with
+model.zip but no evaluation/trace.npz is evaluated first (one deterministic episode; the
+command says so before it starts) unless --no-evaluate is given."""
+
+PLOT_EPILOG = """\
+examples:
+  rehabbot plot runs/rehab-reach-v0                  # all algorithms and seeds below it
+  rehabbot plot runs/rehab-reach-v0/sac/seed0 --out figures/
+  rehabbot plot runs/a runs/b --smooth 50 --formats png
+  rehabbot plot runs --source eval --no-evaluate     # Fig. 4 from eval/evaluations.npz
+
+exit codes: 0 success, 1 unreadable input file, unwritable output or missing matplotlib,
+2 bad usage (missing directory, nothing to plot, bad option value)"""
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
+    return value
+
+
+def add_plot_parser(commands: argparse._SubParsersAction) -> None:
+    """Add the ``plot`` subcommand to the ``rehabbot`` parser's subcommands."""
+    parser = commands.add_parser(
+        "plot",
+        help="draw the paper's figures (learning curves, kinematics, torques, tool path)",
+        description=PLOT_DESCRIPTION,
+        epilog=PLOT_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", type=Path,
+                        help="training run directories, their parents, or trace directories")
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="output directory (default: <first RUN_DIR>/figures)")
+    parser.add_argument("--smooth", type=_positive_int, default=DEFAULT_SMOOTH, metavar="N",
+                        help="rolling-mean window of the training curves, in episodes "
+                             f"(default: {DEFAULT_SMOOTH})")
+    parser.add_argument("--source", choices=SOURCES, default="train",
+                        help="Fig. 4 from the training episodes (monitor files, default) or "
+                             "from the deterministic evaluations (eval/evaluations.npz)")
+    parser.add_argument("--formats", nargs="+", choices=SUPPORTED_FORMATS,
+                        default=list(DEFAULT_FORMATS), metavar="FMT",
+                        help="file formats to write: png, pdf, svg (default: png pdf)")
+    parser.add_argument("--no-evaluate", dest="evaluate", action="store_false",
+                        help="do not evaluate runs that have model.zip but no trace.npz")
+    parser.set_defaults(func=cmd_plot)
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    """Run ``rehabbot plot``: write the figures, print each path, return 0."""
+    from rehabbot.analysis.plotting import plot_all
+    from rehabbot.analysis.traces import TRACE_NAME, find_files, find_traces
+    from rehabbot.rl.runs import MANIFEST_NAME
+
+    run_dirs = [Path(path) for path in args.run_dirs]
+    for path in run_dirs:
+        if not path.exists():
+            raise CliError(f"{path}: no such file or directory", EXIT_USAGE)
+    first = run_dirs[0] if run_dirs[0].is_dir() else run_dirs[0].parent
+    out_dir = Path(args.out) if args.out is not None else first / "figures"
+    if out_dir.exists() and not out_dir.is_dir():
+        raise CliError(f"--out {out_dir}: exists and is not a directory", EXIT_USAGE)
+    try:
+        runs_or_traces = [path for path in run_dirs
+                          if find_files([path], MANIFEST_NAME) or find_traces([path])]
+        if len(runs_or_traces) < len(run_dirs):
+            bad = next(path for path in run_dirs if path not in runs_or_traces)
+            raise CliError(
+                f"{bad}: no training runs ({MANIFEST_NAME}) or evaluated episodes "
+                f"({TRACE_NAME}) found there", EXIT_USAGE,
+            )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            written = plot_all(run_dirs, out_dir, smooth=args.smooth, source=args.source,
+                               formats=args.formats, evaluate=args.evaluate,
+                               announce=lambda text: print(f"rehabbot plot: {text}",
+                                                           flush=True))
+    except ImportError as err:
+        raise CliError(str(err)) from err
+    except ValueError as err:
+        raise CliError(str(err), EXIT_FAILURE) from err
+    except OSError as err:
+        where = err.filename or out_dir
+        raise CliError(f"cannot write {where}: {err.strerror or err}") from err
+    for warning in caught:
+        print(f"rehabbot plot: warning: {warning.message}", file=sys.stderr)
+    if not written:
+        raise CliError(f"nothing to plot under {', '.join(map(str, run_dirs))}", EXIT_USAGE)
+    for path in written:
+        print(path)
+    return EXIT_OK

@@ -1,0 +1,57 @@
+"""``rehabbot render MODEL|expert|random --out FILE.mp4|.gif``: a video of one episode with
+the tool's path in purple and the targets (:mod:`rehabbot.analysis.video`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from rehabbot.cli.errors import EXIT_OK, cli_command
+
+
+def add_render_parser(commands: argparse._SubParsersAction) -> None:
+    """Add ``render`` to the ``rehabbot`` subcommands."""
+    parser = commands.add_parser(
+        "render", help="render a video of one episode (tool path drawn in purple)",
+        description="A video of one episode: the tool's path in purple, the active target and "
+                    "the upcoming ones. Every --frame-every-th decision becomes a frame "
+                    "(default 2: 25 fps, real time at 50 Hz). Frames are streamed to the file: "
+                    ".mp4 through FFmpeg (imageio-ffmpeg), .gif through Pillow; both come with "
+                    'pip install "rehabbot[video]". The file appears only when complete.',
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n"
+               "  rehabbot render expert --env rehab-reach-v0 --out expert.mp4\n"
+               "  rehabbot render runs/rehab-reach-v0/sac/seed0/model.zip --out sac.gif "
+               "--width 480 --height 360")
+    parser.add_argument("policy", metavar="MODEL|expert|random",
+                        help="a model .zip saved by `rehabbot train`, 'expert' or 'random'")
+    parser.add_argument("--env", metavar="ENV",
+                        help="env id (default: the model's run manifest; required for expert "
+                             "and random)")
+    parser.add_argument("--out", type=Path, required=True, metavar="FILE.mp4|FILE.gif",
+                        help="video file to write")
+    parser.add_argument("--seed", type=int, default=0, metavar="S", help="reset seed (0)")
+    parser.add_argument("--width", type=int, default=640, metavar="W", help="pixels (640)")
+    parser.add_argument("--height", type=int, default=480, metavar="H", help="pixels (480)")
+    parser.add_argument("--camera", default="overview",
+                        help="overview, front or side (default: overview)")
+    parser.add_argument("--frame-every", type=int, default=2, metavar="K",
+                        help="keep every K-th decision as a frame (default: 2, 25 fps)")
+    parser.add_argument("--env-kwargs", type=json.loads, default=None, metavar="JSON",
+                        help="extra RehabEnv keyword arguments")
+    parser.set_defaults(func=cmd_render)
+
+
+@cli_command
+def cmd_render(args: argparse.Namespace) -> int:
+    """Run ``rehabbot render``."""
+    from rehabbot.analysis.video import render_episode
+
+    result = render_episode(args.policy, args.env, args.out, args.seed, args.width,
+                            args.height, args.camera, args.frame_every, args.env_kwargs)
+    outcome = "success" if result["success"] else (result["safety_violation"] or "time limit")
+    print(f"wrote {result['path']}: {result['frames']} frames at {result['fps']:.0f} fps, "
+          f"{result['policy']} on {result['env_id']} (seed {result['seed']}): "
+          f"{result['steps']} steps, return {result['return']:.1f}, {outcome}")
+    return EXIT_OK

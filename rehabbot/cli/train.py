@@ -1,0 +1,200 @@
+"""``rehabbot train``: parse the arguments, plan every seed's run, train them one after the
+other (:mod:`rehabbot.rl.training`), print a summary line per run and the command that
+resumes an interrupted one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import signal
+from collections.abc import Sequence
+from typing import Any
+
+from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command
+from rehabbot.envs.registration import ENV_SPECS, env_short_name
+from rehabbot.rl.algorithms import ALGORITHMS
+from rehabbot.rl.hyperparams import coerce_number, settings_names
+from rehabbot.rl.planning import (
+    DEFAULT_CHECKPOINT_FREQ,
+    DEFAULT_EVAL_EPISODES,
+    DEFAULT_EVAL_FREQ,
+    DEFAULT_TIMESTEPS,
+)
+
+DEFAULT_SEEDS = (0,)
+DEFAULT_OUT = "runs"
+
+
+def _count(text: str) -> int:
+    """A step count: 200000, 200_000 or 2e5."""
+    value = coerce_number(text)
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if not isinstance(value, int):
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}")
+    return value
+
+
+def _positive_count(text: str) -> int:
+    value = _count(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
+    return value
+
+
+def _non_negative_count(text: str) -> int:
+    value = _count(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
+    """``--env-kwargs`` as a dict (None if not given); :class:`CliError` (usage) otherwise."""
+    if text is None:
+        return None
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise CliError(f"--env-kwargs is not valid JSON: {err}", EXIT_USAGE) from err
+    if not isinstance(value, dict):
+        raise CliError(f"--env-kwargs must be a JSON object, got {text!r}", EXIT_USAGE)
+    return value
+
+
+TRAIN_EPILOG = """\
+examples:
+  rehabbot train rehab-reach-v0 --algo sac
+  rehabbot train rehabbot/rehab-knee-v0 --algo td3 --timesteps 500000 --seeds 0 1 2 \\
+      --hyperparams td3
+  rehabbot train rehab-hip-v0 --algo ppo --n-envs 8 --vec subproc --hyperparams ppo \\
+      --out runs/ppo-sweep
+  rehabbot train rehab-reach-v0 --algo sac --env-kwargs '{"weight_level": 2}'
+  rehabbot train rehab-reach-v0 --algo sac --timesteps 400000 --resume   # continue a run
+
+Each seed writes OUT/<env>/<algo>/seed<k>/ with manifest.json, monitor/train_<i>.monitor.csv,
+eval/evaluations.npz, tb/ (tensorboard --logdir OUT), checkpoints/ and, at the end, model.zip.
+Ctrl+C (or SIGTERM) saves a checkpoint and prints the command that resumes; exit code 130
+(143 for SIGTERM). --resume continues every seed from its newest checkpoint to --timesteps
+(default: the total it was started with); settings come from the run's manifest. SAC/TD3
+checkpoints keep the replay buffer of the newest checkpoint only (it can take hundreds of MB).
+Runs end at exactly N steps (with one env); PPO does not train on a last, partial rollout.
+
+Hyperparameter files are RL-Zoo-style YAML: env ids (full or short) mapped to hyperparameters,
+or one flat mapping. Keys: the SB3 constructor arguments of the algorithm, plus n_timesteps,
+n_envs, policy, normalize (true or VecNormalize arguments), noise_type (normal |
+ornstein-uhlenbeck) and noise_std (SAC/TD3). policy_kwargs may be a mapping or a string such
+as "dict(net_arch=[64, 64], activation_fn=nn.ReLU)"; learning_rate may be "lin_3e-4" (linear
+decay to 0). --hyperparams takes a path or the name of a file shipped with rehabbot: sac, td3
+and ppo hold the settings of the README results, sb3-defaults/<algo> spells out SB3's
+defaults as a template, ablations/<name> the README's ablations (`rehabbot train --help`
+lists them; the files are in rehabbot/rl/hyperparams/).
+
+exit codes: 0 done, 1 runtime failure, 2 bad usage, 130/143 interrupted (resumable)."""
+
+
+def add_train_parser(commands: argparse._SubParsersAction) -> None:
+    """Add the ``train`` subcommand (``func=cmd_train``) to ``commands``."""
+    parser = commands.add_parser(
+        "train",
+        help="train a Stable-Baselines3 agent (PPO, SAC, TD3) on an env",
+        description="Train a Stable-Baselines3 agent on a RehabBot env, one run per seed, "
+                    "with checkpoints, evaluation, TensorBoard logs and a manifest.",
+        epilog=TRAIN_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("env", metavar="ENV",
+                        help=f"env id, with or without 'rehabbot/': {', '.join(ENV_SPECS)}")
+    parser.add_argument("--algo", required=True, metavar="{" + ",".join(ALGORITHMS) + "}",
+                        help="the algorithm")
+    parser.add_argument("--timesteps", type=_positive_count, metavar="N",
+                        help="env steps per run (default: the hyperparameter file's "
+                             f"n_timesteps, else {DEFAULT_TIMESTEPS}; with --resume, the "
+                             "run's own total)")
+    parser.add_argument("--seeds", type=int, nargs="+", metavar="K",
+                        help="seeds, trained one after the other (default: 0)")
+    parser.add_argument("--n-envs", type=_positive_count, metavar="K",
+                        help="parallel training envs (default: the file's n_envs, else 1)")
+    parser.add_argument("--vec", choices=("dummy", "subproc"), default="dummy",
+                        help="vector env: in-process (dummy, default) or one process per env "
+                             "(started with 'spawn': safe after rendering or with threads)")
+    parser.add_argument("--hyperparams", metavar="FILE.yml|NAME",
+                        help="RL-Zoo-style hyperparameter file, or the name of one shipped "
+                             f"with rehabbot ({', '.join(settings_names())}); default: "
+                             "SB3's defaults")
+    parser.add_argument("--env-kwargs", metavar="JSON",
+                        help="keyword arguments for the env, as a JSON object")
+    parser.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+                        help=f"root of the run directories (default: {DEFAULT_OUT})")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue each seed's run from its newest checkpoint")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="delete an existing run directory and start again")
+    parser.add_argument("--checkpoint-freq", type=_non_negative_count, metavar="N",
+                        help=f"checkpoint every N env steps, 0: only at the end (default: "
+                             f"{DEFAULT_CHECKPOINT_FREQ})")
+    parser.add_argument("--eval-freq", type=_non_negative_count, metavar="N",
+                        help=f"evaluate every N env steps on a separate env, 0: never "
+                             f"(default: {DEFAULT_EVAL_FREQ})")
+    parser.add_argument("--eval-episodes", type=_positive_count, metavar="N",
+                        help=f"deterministic episodes per evaluation (default: "
+                             f"{DEFAULT_EVAL_EPISODES})")
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress bar")
+    parser.set_defaults(func=cmd_train)
+
+
+def _resume_command(args: argparse.Namespace, env_id: str, algo: str, seeds: Sequence[int],
+                    total: int) -> str:
+    return shlex.join(["rehabbot", "train", env_short_name(env_id), "--algo", algo,
+                       "--timesteps", str(total), "--seeds", *map(str, seeds),
+                       "--out", str(args.out), "--resume"])
+
+
+@cli_command
+def cmd_train(args: argparse.Namespace) -> int:
+    """Run ``rehabbot train``: each seed in turn; 0 when done, 130/143 when interrupted."""
+    from rehabbot.rl import runs
+    from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
+
+    plans = plan_seeds(args.env, args.algo, args.seeds or DEFAULT_SEEDS, args.timesteps,
+                       args.out, hyperparams=args.hyperparams,
+                       env_kwargs=parse_env_kwargs(args.env_kwargs), resume=args.resume,
+                       overwrite=args.overwrite, n_envs=args.n_envs,
+                       checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq,
+                       eval_episodes=args.eval_episodes, progress_bar=not args.no_progress,
+                       vec=args.vec)
+    for plan in plans:
+        if plan.skip is not None:
+            print(plan.skip, flush=True)
+            continue
+        if plan.resume:
+            action, source = "resuming", "the checkpoint's"
+            start = f"from {plan.resume.steps} "
+        else:
+            action, source, start = "training", plan.hp.source, ""
+        envs = f"{plan.n_envs} env{'s' if plan.n_envs > 1 else ''}"
+        print(f"{plan.run_dir}: {action} {plan.algo} on {plan.env_id}, seed {plan.seed}, "
+              f"{start}to {plan.total_timesteps} steps ({envs}, hyperparameters: {source})",
+              flush=True)
+        try:
+            run_dir = execute(plan)
+        except TrainingInterrupted as err:
+            command = _resume_command(args, plan.env_id, plan.algo, [p.seed for p in plans],
+                                      plan.total_timesteps)
+            print(f"{err.run_dir}: interrupted at {err.timesteps_done} steps, checkpoint "
+                  f"{err.checkpoint}; resume with: {command}", flush=True)
+            return err.exit_code
+        except KeyboardInterrupt:  # outside learn: while setting up or saving at the end
+            newest = runs.checkpoints(plan.run_dir)
+            if newest:
+                command = _resume_command(args, plan.env_id, plan.algo,
+                                          [p.seed for p in plans], plan.total_timesteps)
+                print(f"{plan.run_dir}: interrupted; newest checkpoint {newest[0][1]}; resume "
+                      f"with: {command}", flush=True)
+            else:
+                print(f"{plan.run_dir}: interrupted before the first checkpoint", flush=True)
+            return 128 + signal.SIGINT
+        print(runs.run_summary(run_dir), flush=True)
+    return EXIT_OK

@@ -1,0 +1,161 @@
+"""Assembling an env from its config: scene, robot limits, targets, controller, spaces, safety
+monitor and reward function, each resolved once (:func:`build_parts`).
+
+The observation and action spaces depend only on the id's limb, robot, control mode and
+exercise table, never on the patient profile or the weight level, so that a policy trained on
+one patient runs on another. The tighter, patient-specific box that a healthy observation
+stays in (``healthy_low``/``healthy_high``: the setpoint bounds and joint limits of this
+patient) is what the instability rule checks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from rehabbot.envs.config import RehabEnvConfig
+from rehabbot.envs.control import SETPOINT_SPACE_MARGIN_RAD, Controller, make_controller
+from rehabbot.sim.handles import RobotHandle
+from rehabbot.sim.scene import WEIGHT_LEVELS, Scene
+from rehabbot.sim.scene_build import build_scene
+from rehabbot.tasks import feasibility
+from rehabbot.tasks.observation import (
+    PHI_OBS_MARGIN_RAD,
+    POSITION_BOUND_M,
+    ObservationLayout,
+    paper_layout,
+)
+from rehabbot.tasks.reward import PaperReward
+from rehabbot.tasks.safety import SafetyMonitor
+from rehabbot.tasks.targets import TargetSequence, build_targets
+from rehabbot.tasks.workspace import setpoint_bounds
+
+JOINT_LIMIT_MARGIN_RAD = 0.3  # robot joint limits = setpoint bounds +- this
+THETA_OBS_MARGIN_RAD = 0.3  # a healthy theta stays within the joint limits +- this
+ROBOT_LIMIT_SOLREF = (0.004, 1.0)  # stiff joint limits (2 x the physics step)
+
+
+@dataclass
+class EnvParts:
+    """What :func:`build_parts` resolved for one env."""
+
+    scene: Scene
+    handle: RobotHandle
+    setpoint_low_rad: np.ndarray
+    setpoint_high_rad: np.ndarray
+    joint_low_rad: np.ndarray
+    joint_high_rad: np.ndarray
+    targets: tuple[TargetSequence, ...]
+    controller: Controller
+    layout: ObservationLayout
+    observation_space: spaces.Box
+    healthy_low: np.ndarray  # float32
+    healthy_high: np.ndarray  # float32
+    safety: SafetyMonitor
+    reward: PaperReward
+    unusable_levels: dict[int, str]
+
+
+def limit_robot_joints(scene: Scene, handle: RobotHandle, low_rad: np.ndarray,
+                       high_rad: np.ndarray) -> None:
+    """Set the robot's joint limits in the model (a safety-configured range, stiff)."""
+    model = scene.model
+    jnt = model.dof_jntid[handle.dof_adr]
+    model.jnt_range[jnt, 0] = low_rad
+    model.jnt_range[jnt, 1] = high_rad
+    model.jnt_solref[jnt] = ROBOT_LIMIT_SOLREF
+
+
+def observation_bounds(config: RehabEnvConfig, layout: ObservationLayout, scene: Scene,
+                       handle: RobotHandle) -> tuple[np.ndarray, np.ndarray]:
+    """The observation space's bounds: the same for every patient of an id."""
+    model = scene.model
+    joint_range = np.array(handle.robot.joint_range_rad)
+    target = joint_range + SETPOINT_SPACE_MARGIN_RAD
+    theta = target + JOINT_LIMIT_MARGIN_RAD + THETA_OBS_MARGIN_RAD
+    ex_jnt = [model.joint(n).id for n in scene.exercised_joints]
+    phi_low = model.jnt_range[ex_jnt, 0] - PHI_OBS_MARGIN_RAD
+    phi_high = model.jnt_range[ex_jnt, 1] + PHI_OBS_MARGIN_RAD
+    n_exercises = len(config.exercise_table)
+    low = layout.assemble({"theta_star": -target, "p_star": -POSITION_BOUND_M,
+                           "theta": -theta, "p": -POSITION_BOUND_M, "phi": phi_low,
+                           "e": 0, "l": 0})
+    high = layout.assemble({"theta_star": target, "p_star": POSITION_BOUND_M,
+                            "theta": theta, "p": POSITION_BOUND_M, "phi": phi_high,
+                            "e": n_exercises - 1, "l": max(WEIGHT_LEVELS)})
+    return low, high
+
+
+def build_parts(config: RehabEnvConfig) -> EnvParts:
+    """Build the scene and everything the env needs from it; refuse (``ValueError``) a
+    patient who cannot do the exercises there."""
+    scene = build_scene(config.preset, profile=config.profile,
+                        weight_level=config.weight_level or 0, **config.scene_options())
+    handle = scene.robots[0]
+    model = scene.model
+    setpoint_low, setpoint_high = setpoint_bounds(scene, config.limb)
+    joint_low = setpoint_low - JOINT_LIMIT_MARGIN_RAD
+    joint_high = setpoint_high + JOINT_LIMIT_MARGIN_RAD
+    limit_robot_joints(scene, handle, joint_low, joint_high)
+
+    targets = tuple(
+        build_targets(scene, exercise, config.task_type, segment_s=config.segment_s,
+                      waypoint_dt_s=config.waypoint_dt_s,
+                      min_spacing_rad=config.min_waypoint_spacing_rad)
+        for exercise in config.exercise_table)
+    controller = make_controller(config.control_mode, handle, setpoint_low, setpoint_high,
+                                 config.dt_s, config.max_speed_rad_s)
+    controller.configure(model)
+
+    layout = paper_layout(handle.n_joints)
+    low, high = observation_bounds(config, layout, scene, handle)
+    observation_space = spaces.Box(low.astype(np.float32), high.astype(np.float32),
+                                   (layout.size,), np.float32)
+    # The patient-specific box a healthy observation stays in (the instability rule).
+    healthy_low, healthy_high = low.copy(), high.copy()
+    theta, theta_star = layout.slice("theta"), layout.slice("theta_star")
+    healthy_low[theta_star], healthy_high[theta_star] = setpoint_low, setpoint_high
+    healthy_low[theta] = joint_low - THETA_OBS_MARGIN_RAD
+    healthy_high[theta] = joint_high + THETA_OBS_MARGIN_RAD
+    if np.any(healthy_low < low) or np.any(healthy_high > high):
+        raise ValueError(f"profile {config.profile}: this scene needs robot angles beyond the "
+                         "robot's joint ranges (README, Failure modes)")
+
+    safety = SafetyMonitor(scene, config.safety_thresholds())
+    # Worst reward one step can pay: the largest distance in the patient's box plus the
+    # extra terms' maxima.
+    worst_distance = np.maximum(healthy_high[theta] - healthy_low[theta_star],
+                                healthy_high[theta_star] - healthy_low[theta])
+    reward = PaperReward(
+        target_tolerance_rad=config.target_tolerance_rad,
+        intermediate_bonus=config.intermediate_bonus, final_bonus=config.final_bonus,
+        smoothness_weight=config.smoothness_weight, effort_weight=config.effort_weight,
+        safety_penalty=config.safety_penalty,
+        safety_penalty_steps=config.safety_penalty_steps,
+        max_episode_steps=config.max_episode_steps,
+        # The span of the box actions are clipped to (joint_position: the setpoint bounds).
+        action_range=controller.clip_high.astype(float) - controller.clip_low.astype(float),
+        torque_limit_nm=handle.robot.torque_limits(),
+        worst_step_reward=-(float(np.linalg.norm(worst_distance)) + config.smoothness_weight
+                            + config.effort_weight))
+
+    # Can this patient do these exercises here at all? (fails loudly, once)
+    feasibility.check_targets(targets, setpoint_low, setpoint_high, POSITION_BOUND_M,
+                              config.profile)
+    data = mujoco.MjData(model)
+    unusable = {} if not config.terminate_on_safety else feasibility.unusable_levels(
+        scene, data, safety, WEIGHT_LEVELS, config.profile)
+    for level in config.weight_levels:
+        if level in unusable:
+            feasibility.refuse(unusable, WEIGHT_LEVELS, level)
+    scene.set_weight_level(config.weight_level or 0)
+    return EnvParts(scene=scene, handle=handle, setpoint_low_rad=setpoint_low,
+                    setpoint_high_rad=setpoint_high, joint_low_rad=joint_low,
+                    joint_high_rad=joint_high, targets=targets, controller=controller,
+                    layout=layout, observation_space=observation_space,
+                    healthy_low=healthy_low.astype(np.float32),
+                    healthy_high=healthy_high.astype(np.float32), safety=safety,
+                    reward=reward, unusable_levels=unusable)

@@ -1,0 +1,178 @@
+"""The configuration of a :class:`rehabbot.envs.rehab_env.RehabEnv`: every keyword argument,
+validated once, frozen.
+
+``RehabEnvConfig(**kwargs)`` raises ``ValueError`` naming the bad value and its valid choices
+or range (and ``TypeError`` for an unknown keyword) before anything is built. Profiles and
+exercises given as dicts become :class:`PatientProfile` and :class:`Exercise` objects.
+The table of the arguments is in the docstring of :mod:`rehabbot.envs.rehab_env`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from rehabbot.common.checks import check_choice, check_number
+from rehabbot.sim.patient import PatientProfile
+from rehabbot.sim.robots.ur5e import MAX_JOINT_SPEED_RAD_S
+from rehabbot.sim.scene import CAMERA_NAMES, SIDES, WEIGHT_LEVELS, SceneOptions, check_weight_level
+from rehabbot.tasks.exercises import LIMBS, TASK_TYPES, Exercise, exercise_table
+from rehabbot.tasks.reward import SAFETY_PENALTIES, SAFETY_PENALTY_STEPS
+from rehabbot.tasks.safety import SafetyThresholds
+
+CONTROL_MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
+RENDER_MODES = ("human", "rgb_array", "depth_array")
+
+PRESET_OF: dict[tuple[str, str], str] = {
+    ("arm", "right"): "upper_right", ("arm", "left"): "upper_left",
+    ("hip", "right"): "hip", ("hip", "left"): "hip",
+    ("knee", "right"): "knee", ("knee", "left"): "knee",
+}
+
+# name -> (low, high, integer): the numeric arguments and their valid ranges.
+NUMBER_RANGES: dict[str, tuple[float, float, bool]] = {
+    "frame_skip": (1, 1000, True),
+    "max_episode_steps": (1, 10**9, True),
+    "target_tolerance_rad": (1e-6, 1.0, False),
+    "intermediate_bonus": (0.0, 1e6, False),
+    "final_bonus": (0.0, 1e6, False),
+    "smoothness_weight": (0.0, 1e6, False),
+    "effort_weight": (0.0, 1e6, False),
+    "segment_s": (0.1, 60.0, False),
+    "min_waypoint_spacing_rad": (0.0, 1.0, False),
+    "max_speed_rad_s": (1e-3, MAX_JOINT_SPEED_RAD_S, False),
+    "width": (1, 8192, True),
+    "height": (1, 8192, True),
+}
+
+
+@dataclass(frozen=True)
+class RehabEnvConfig:
+    """Every argument of a RehabEnv (see the table in :mod:`rehabbot.envs.rehab_env`)."""
+
+    limb: str = "arm"
+    side: str = "right"
+    task_type: str = "reaching"
+    control_mode: str = "joint_delta"
+    profile: PatientProfile | None = None
+    weight_level: int | None = None
+    exercise: int | None = None
+    exercises: tuple[Exercise, ...] | None = None
+    cuff: str = "connect"
+    base_reorientation_deg: float = 0.0
+    frame_skip: int = 10
+    timestep_s: float = 0.002
+    target_tolerance_rad: float = 0.05
+    intermediate_bonus: float = 10.0
+    final_bonus: float = 100.0
+    smoothness_weight: float = 0.0
+    effort_weight: float = 0.0
+    terminate_on_safety: bool = True
+    safety_penalty: str = "hold"
+    safety_penalty_steps: int | None = SAFETY_PENALTY_STEPS
+    rom_tolerance_deg: float = 2.0
+    cuff_force_limit_n: float | None = None
+    contact_tolerance_m: float = 0.002
+    max_episode_steps: int = 1000
+    segment_s: float = 3.0
+    waypoint_dt_s: float = 0.1
+    min_waypoint_spacing_rad: float = 0.1
+    max_speed_rad_s: float = 0.5
+    render_mode: str | None = None
+    width: int = 640
+    height: int = 480
+    camera_name: str | None = "overview"
+    # Derived in __post_init__: the exercise table actually used.
+    exercise_table: tuple[Exercise, ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        check_choice("limb", self.limb, LIMBS)
+        check_choice("side", self.side, SIDES)
+        check_choice("task_type", self.task_type, TASK_TYPES)
+        check_choice("control_mode", self.control_mode, CONTROL_MODES)
+        if self.render_mode is not None:
+            check_choice("render_mode", self.render_mode, RENDER_MODES)
+        set_(self, "profile", _as_profile(self.profile))
+        if self.weight_level is not None:
+            set_(self, "weight_level", check_weight_level(self.weight_level))
+        table = exercise_table(self.limb, self.exercises)
+        set_(self, "exercise_table", table)
+        if self.exercises is not None:
+            set_(self, "exercises", table)
+        if self.exercise is not None:
+            set_(self, "exercise", check_choice("exercise", self.exercise, range(len(table))))
+            set_(self, "exercise", int(self.exercise))
+        for name, (low, high, integer) in NUMBER_RANGES.items():
+            set_(self, name, check_number(name, getattr(self, name), low, high, integer))
+        set_(self, "waypoint_dt_s", check_number("waypoint_dt_s", self.waypoint_dt_s, 0.01,
+                                                 min(1.0, self.segment_s)))
+        if not isinstance(self.terminate_on_safety, bool):
+            raise ValueError(f"terminate_on_safety={self.terminate_on_safety!r} must be a bool")
+        check_choice("safety_penalty", self.safety_penalty, SAFETY_PENALTIES)
+        if self.safety_penalty_steps is not None:
+            set_(self, "safety_penalty_steps", check_number(
+                "safety_penalty_steps", self.safety_penalty_steps, 1, 10**9, integer=True))
+        if self.camera_name is not None and self.camera_name not in CAMERA_NAMES:
+            raise ValueError(f"camera_name={self.camera_name!r} is not one of "
+                             f"{list(CAMERA_NAMES)} or None")
+        self.safety_thresholds()  # ValueError naming a bad threshold
+        SceneOptions(**self.scene_options())  # ValueError naming a bad scene option
+
+    # -- derived -------------------------------------------------------------------------
+    @property
+    def preset(self) -> str:
+        """The scene preset of the limb and side."""
+        return PRESET_OF[(self.limb, self.side)]
+
+    @property
+    def dt_s(self) -> float:
+        """Seconds per decision: ``frame_skip x timestep_s``."""
+        return self.frame_skip * self.timestep_s
+
+    @property
+    def weight_levels(self) -> tuple[int, ...]:
+        """The weight levels episodes can use."""
+        return WEIGHT_LEVELS if self.weight_level is None else (self.weight_level,)
+
+    def scene_options(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`rehabbot.sim.scene_build.build_scene`."""
+        return {"cuff": self.cuff, "side": None if self.limb == "arm" else self.side,
+                "base_reorientation_deg": self.base_reorientation_deg,
+                "timestep_s": self.timestep_s}
+
+    def safety_thresholds(self) -> SafetyThresholds:
+        """The thresholds of the safety rules."""
+        return SafetyThresholds(rom_tolerance_deg=self.rom_tolerance_deg,
+                                cuff_force_limit_n=self.cuff_force_limit_n,
+                                contact_tolerance_m=self.contact_tolerance_m)
+
+    def to_kwargs(self) -> dict[str, Any]:
+        """The arguments as plain data (profile and exercises as dicts): JSON-able."""
+        kwargs = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+        kwargs["profile"] = dataclasses.asdict(self.profile)
+        if self.exercises is not None:
+            kwargs["exercises"] = [exercise.to_dict() for exercise in self.exercises]
+        return kwargs
+
+
+def kwarg_names() -> tuple[str, ...]:
+    """The keyword arguments a RehabEnv accepts."""
+    return tuple(f.name for f in dataclasses.fields(RehabEnvConfig) if f.init)
+
+
+def _as_profile(profile: Any) -> PatientProfile:
+    if profile is None:
+        return PatientProfile()
+    if isinstance(profile, PatientProfile):
+        return profile
+    if isinstance(profile, Mapping):
+        fields = [f.name for f in dataclasses.fields(PatientProfile)]
+        unknown = sorted(set(profile) - set(fields))
+        if unknown:
+            raise ValueError(f"profile has unknown field(s) {unknown}; valid: {fields}")
+        return PatientProfile(**profile)
+    raise ValueError(f"profile={profile!r} must be a PatientProfile, a dict of its fields "
+                     "(height_m, mass_kg, sex) or None")

@@ -1,0 +1,178 @@
+"""What an action means: one controller class per control mode.
+
+Every mode drives the same robot actuators (:mod:`rehabbot.sim.robots`): per joint an
+impedance servo (``ctrl`` = setpoint [rad]) and a feed-forward motor (``ctrl`` = N·m), on top
+of the gravity compensation of the robot's own links, with the joint's total torque saturated
+at the robot's limits (UR5e: 150 N·m base/shoulder/elbow, 28 N·m wrists). ``n`` is the
+robot's number of joints (6 for the UR5e).
+
+==================  ===================================  =====================================
+mode                action                               effect per decision (dt)
+==================  ===================================  =====================================
+``joint_delta``     Box(-pi/400, pi/400, (n,)) [rad]     servo setpoints += action (paper)
+``joint_position``  Box(-r - 0.5, r + 0.5, (n,)) [rad]   servo setpoints = action
+``joint_velocity``  Box(-v_max, v_max, (n,)) [rad/s]     servo setpoints += action * dt
+``torque``          Box(-1, 1, (n,)) (normalised)        motor torque = action * torque limit;
+                                                         servos switched off
+==================  ===================================  =====================================
+
+``r`` is each joint's hardware range, so every space is the same for every patient. In the
+three setpoint modes the setpoint is kept inside the setpoint bounds of the patient's
+workspace (the paper's Table 3 ranges in robot joint space,
+:func:`rehabbot.tasks.workspace.setpoint_bounds`); in ``joint_position`` mode an action
+outside them is clipped to them and counted in ``info["action_clipped"]``
+(:attr:`Controller.clip_low` / :attr:`Controller.clip_high`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from rehabbot.common.arrays import as_index
+from rehabbot.envs.config import CONTROL_MODES
+from rehabbot.sim.handles import RobotHandle
+
+PAPER_DELTA_RAD = math.pi / 400
+# joint_position actions and setpoints: the joints' hardware ranges plus this margin (the
+# setpoint bounds add 0.1 rad around the workspace, and the load-carrying setpoints of a
+# joint near its range can lie a little beyond it).
+SETPOINT_SPACE_MARGIN_RAD = 0.5
+
+
+class Controller:
+    """Base class: holds the setpoint state and writes ``data.ctrl``."""
+
+    mode = ""
+
+    def __init__(self, handle: RobotHandle, low_rad: np.ndarray, high_rad: np.ndarray,
+                 dt_s: float) -> None:
+        self.handle = handle
+        self.robot = handle.robot
+        self.n_joints = handle.robot.n_joints
+        self.low_rad = np.asarray(low_rad, dtype=float)
+        self.high_rad = np.asarray(high_rad, dtype=float)
+        self.dt_s = dt_s
+        self.setpoint_rad = np.zeros(self.n_joints)
+        self.action_space = self._make_space()
+        # The box an action is clipped to and counted against: the space, or tighter.
+        self.clip_low: np.ndarray = self.action_space.low
+        self.clip_high: np.ndarray = self.action_space.high
+        self._servo = as_index(handle.servo_ids)
+        self._motor = as_index(handle.motor_ids)
+        self._ctrl = np.zeros(0)
+
+    def _make_space(self) -> spaces.Box:
+        raise NotImplementedError
+
+    def configure(self, model: mujoco.MjModel) -> None:
+        """Switch the model's actuator groups for this mode (servos on, by default)."""
+        model.opt.disableactuator = 0
+
+    def reset(self, data: mujoco.MjData, home_setpoint_rad: np.ndarray) -> None:
+        """Start an episode from the home setpoints (already written into ``data.ctrl``)."""
+        self._ctrl = data.ctrl
+        self.setpoint_rad[:] = np.clip(home_setpoint_rad, self.low_rad, self.high_rad)
+        self._ctrl[self._servo] = self.setpoint_rad
+        self._ctrl[self._motor] = 0.0
+
+    def apply(self, action: np.ndarray, data: mujoco.MjData) -> None:
+        """Write the controls for ``action`` (already checked and clipped to the space)."""
+        raise NotImplementedError
+
+    def _set(self, setpoint: np.ndarray, data: mujoco.MjData) -> None:
+        np.clip(setpoint, self.low_rad, self.high_rad, out=self.setpoint_rad)
+        self._ctrl[self._servo] = self.setpoint_rad
+
+
+class JointDeltaController(Controller):
+    """The paper's action: increments of the impedance setpoints, at most ``delta_max_rad``."""
+
+    mode = "joint_delta"
+
+    def __init__(self, handle, low_rad, high_rad, dt_s, delta_max_rad: float = PAPER_DELTA_RAD):
+        self.delta_max_rad = delta_max_rad
+        super().__init__(handle, low_rad, high_rad, dt_s)
+
+    def _make_space(self) -> spaces.Box:
+        return spaces.Box(-self.delta_max_rad, self.delta_max_rad, (self.n_joints,), np.float32)
+
+    def apply(self, action, data):
+        setpoint = self.setpoint_rad
+        np.add(setpoint, action, out=setpoint)
+        np.maximum(setpoint, self.low_rad, out=setpoint)
+        np.minimum(setpoint, self.high_rad, out=setpoint)
+        self._ctrl[self._servo] = setpoint
+
+
+class JointPositionController(Controller):
+    """Absolute impedance setpoints; actions outside the setpoint bounds are clipped to them
+    (and counted as clipped)."""
+
+    mode = "joint_position"
+
+    def __init__(self, handle, low_rad, high_rad, dt_s):
+        super().__init__(handle, low_rad, high_rad, dt_s)
+        self.clip_low = self.low_rad.astype(np.float32)
+        self.clip_high = self.high_rad.astype(np.float32)
+
+    def _make_space(self) -> spaces.Box:
+        bound = np.array(self.robot.joint_range_rad) + SETPOINT_SPACE_MARGIN_RAD
+        return spaces.Box(-bound.astype(np.float32), bound.astype(np.float32),
+                          (self.n_joints,), np.float32)
+
+    def apply(self, action, data):
+        self._set(np.asarray(action, dtype=float), data)
+
+
+class JointVelocityController(Controller):
+    """Setpoint velocities [rad/s], at most ``max_speed_rad_s``."""
+
+    mode = "joint_velocity"
+
+    def __init__(self, handle, low_rad, high_rad, dt_s, max_speed_rad_s: float = 0.5):
+        self.max_speed_rad_s = max_speed_rad_s
+        super().__init__(handle, low_rad, high_rad, dt_s)
+
+    def _make_space(self) -> spaces.Box:
+        return spaces.Box(-self.max_speed_rad_s, self.max_speed_rad_s, (self.n_joints,),
+                          np.float32)
+
+    def apply(self, action, data):
+        self._set(self.setpoint_rad + self.dt_s * np.asarray(action, dtype=float), data)
+
+
+class TorqueController(Controller):
+    """Normalised joint torques added to the robot's gravity compensation; servos off."""
+
+    mode = "torque"
+
+    def __init__(self, handle, low_rad, high_rad, dt_s):
+        super().__init__(handle, low_rad, high_rad, dt_s)
+        self._torque_limit_nm = self.robot.torque_limits()
+
+    def _make_space(self) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (self.n_joints,), np.float32)
+
+    def configure(self, model):
+        model.opt.disableactuator = 1 << self.robot.servo_group
+
+    def apply(self, action, data):
+        self._ctrl[self._motor] = self._torque_limit_nm * np.asarray(action, dtype=float)
+
+
+def make_controller(mode: str, handle: RobotHandle, low_rad: np.ndarray, high_rad: np.ndarray,
+                    dt_s: float, max_speed_rad_s: float = 0.5) -> Controller:
+    """The controller of ``mode`` (one of :data:`CONTROL_MODES`)."""
+    if mode == "joint_delta":
+        return JointDeltaController(handle, low_rad, high_rad, dt_s)
+    if mode == "joint_position":
+        return JointPositionController(handle, low_rad, high_rad, dt_s)
+    if mode == "joint_velocity":
+        return JointVelocityController(handle, low_rad, high_rad, dt_s, max_speed_rad_s)
+    if mode == "torque":
+        return TorqueController(handle, low_rad, high_rad, dt_s)
+    raise ValueError(f"control_mode={mode!r} is not one of {list(CONTROL_MODES)}")

@@ -1,0 +1,69 @@
+"""The registered environment ids: one class (:class:`rehabbot.envs.rehab_env.RehabEnv`),
+variants by keyword arguments. ``import rehabbot`` calls :func:`register_envs`.
+
+Every id is registered with Gymnasium's ``TimeLimit`` (``max_episode_steps=1000``) and without
+its ``OrderEnforcing`` and ``PassiveEnvChecker`` wrappers: the env itself refuses ``step()``
+before ``reset()`` (``gymnasium.error.ResetNeeded``) and checks its actions, and the test suite
+runs Gymnasium's full ``check_env`` on every id. Gymnasium 1.4's passive checker also broke an
+env whose first ``reset()`` raised (the next ``step()`` failed with ``TypeError: cannot unpack
+non-iterable NoneType object``). ``gym.make(id, disable_env_checker=False)`` or
+``order_enforce=True`` add them back.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from rehabbot.common.errors import UsageError
+
+NAMESPACE = "rehabbot"
+ENTRY_POINT = "rehabbot.envs.rehab_env:RehabEnv"
+MAX_EPISODE_STEPS = 1000
+
+# id -> (kwargs, one-line description); the paper's Table 2.
+ENV_SPECS: dict[str, tuple[dict, str]] = {
+    "rehabbot/rehab-reach-v0": (
+        {"limb": "arm", "side": "right", "task_type": "reaching"},
+        "right arm, seated: reach 6 shoulder or elbow key poses in order",
+    ),
+    "rehabbot/rehab-reach-l-v0": (
+        {"limb": "arm", "side": "left", "task_type": "trajectory"},
+        "left arm, seated: follow dense waypoints of a minimum-jerk shoulder or elbow path",
+    ),
+    "rehabbot/rehab-hip-v0": (
+        {"limb": "hip", "side": "right", "task_type": "reaching"},
+        "right leg, supine: reach 6 hip flexion/extension key poses in order",
+    ),
+    "rehabbot/rehab-knee-v0": (
+        {"limb": "knee", "side": "right", "task_type": "trajectory"},
+        "right leg, seated: follow dense waypoints of a minimum-jerk knee flexion/extension path",
+    ),
+}
+
+
+def register_envs() -> None:
+    """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""
+    for env_id, (kwargs, _description) in ENV_SPECS.items():
+        if env_id in gym.registry:
+            continue
+        gym.register(id=env_id, entry_point=ENTRY_POINT, kwargs=dict(kwargs),
+                     max_episode_steps=MAX_EPISODE_STEPS, order_enforce=False,
+                     disable_env_checker=True)
+
+
+def resolve_env_id(name: str) -> str:
+    """The full registered id for ``name`` (full, or without the ``rehabbot/`` prefix).
+
+    Raises:
+        UsageError: ``name`` is not a RehabBot id (the message lists the valid ones).
+    """
+    for candidate in (name, f"{NAMESPACE}/{name}"):
+        if candidate in ENV_SPECS:
+            return candidate
+    raise UsageError(f"unknown env id {name!r}; valid ids: {', '.join(ENV_SPECS)} "
+                     f"(the '{NAMESPACE}/' prefix may be left out)")
+
+
+def env_short_name(env_id: str) -> str:
+    """``rehabbot/rehab-reach-v0`` -> ``rehab-reach-v0``."""
+    return env_id.split("/", 1)[-1]

@@ -1,0 +1,503 @@
+"""``RehabEnv``: a UR5e strapped to a patient's hand or leg moves the limb through a therapy
+exercise (Gymnasium API). The four registered ids of the paper are this class with different
+keyword arguments (:mod:`rehabbot.envs.registration`).
+
+## Description
+A seated (arm, knee) or supine (hip) patient, sized from a :class:`PatientProfile`, has one
+hand or shank strapped to the cuff of a UR5e. The agent moves the robot's joints; the
+patient's relaxed limb follows the cuff. Each episode runs one exercise of the limb's table
+(:data:`rehabbot.tasks.exercises.EXERCISES`, or the ``exercises`` kwarg), defined in the
+patient's joint space; the robot's targets are the joint angles that hold the limb at each key
+pose (reaching) or along a minimum-jerk path (trajectory following). The agent must reach the
+targets in order, within ``target_tolerance_rad`` on every joint, without hurting the patient.
+
+## Action space
+``control_mode="joint_delta"`` (the paper's ids): ``Box(-pi/400, pi/400, (6,), float32)``.
+
+| index | robot joint | unit |
+|---|---|---|
+| 0 | shoulder_pan | rad added to the joint's impedance setpoint |
+| 1 | shoulder_lift | rad |
+| 2 | elbow | rad |
+| 3 | wrist_1 | rad |
+| 4 | wrist_2 | rad |
+| 5 | wrist_3 | rad |
+
+A setpoint drives a gravity-compensated joint impedance controller whose torque is saturated
+at the UR5e limits (150 / 28 N·m); setpoints are kept inside the setpoint bounds (the paper's
+Table 3 ranges in robot joint space). Other modes (:mod:`rehabbot.envs.control`):
+``"joint_position"`` (``Box(-r - 0.5, r + 0.5)`` with ``r`` the joints' hardware ranges, rad;
+actions outside this patient's setpoint bounds are clipped to them), ``"joint_velocity"``
+(``Box(-max_speed_rad_s, max_speed_rad_s)``, rad/s), ``"torque"`` (``Box(-1, 1)``, fraction
+of each joint's torque limit, added to gravity compensation, servos off). Finite actions
+outside the box are clipped (counted in ``info["action_clipped"]``); NaN/inf (the error names
+the indices), a wrong shape, or a dtype that is not a real number (bool, complex, str, object)
+raise ``ValueError``. float64, integer and list actions are accepted.
+
+## Observation space
+``Box(low, high, (23,), float32)`` in the paper's order (:mod:`rehabbot.tasks.observation`).
+Positions are in the robot base frame (origin on the base's mounting face, z up the base
+axis, x along the zero of shoulder_pan). The bounds are the same for every patient profile and
+weight level of an id (``r``: each robot joint's hardware range, 2 pi or pi for the elbow).
+
+| index | observation | unit | bounds |
+|---|---|---|---|
+| 0-5 | theta*: target robot joint angles (pan, lift, elbow, wrist 1-3) | rad | +-(r + 0.5) |
+| 6-8 | p*: target tool (flange) position x, y, z, base frame | m | +-1.35 |
+| 9-14 | theta: robot joint angles | rad | +-(r + 1.1) |
+| 15-17 | p: tool (flange) position, base frame | m | +-1.35 |
+| 18-20 | phi: the patient's exercised joints (shoulder flexion, shoulder abduction, elbow flexion; or hip flexion, hip abduction, knee flexion), flexion positive | rad | anatomical range +- 0.5 |
+| 21 | e: exercise (0, 1, ...) | - | [0, number of exercises - 1] |
+| 22 | l: weight level (0..4) | - | [0, 4] |
+
+## Rewards
+Named terms (:mod:`rehabbot.tasks.reward`), each reported as ``info["reward_<name>"]``; the
+reward is their sum. Eq. (5) of the paper: ``reward_distance = -||theta - theta*_i||_2`` and
+``reward_bonus = B_i`` when ``||theta - theta*_i||_inf < target_tolerance_rad`` (``B_i =
+intermediate_bonus``, or ``final_bonus`` for the last target). Optional terms, 0 by default:
+``reward_smoothness = -smoothness_weight * mean(((a_t - a_{t-1}) / (high - low))^2)``,
+``reward_effort = -effort_weight * mean((tau / tau_limit)^2)``. On a safety termination
+(``safety_penalty="hold"``, the default) ``reward_safety = -min(steps left + 1, H) * (this
+step's distance + the extra terms' maxima)`` with ``H = safety_penalty_steps`` (default 100 =
+1 / (1 - gamma) for the usual gamma = 0.99): what holding still at the current error would
+cost an agent that discounts with gamma, so stopping never pays better than holding still.
+``safety_penalty_steps=None`` counts every step left until the time limit (a penalty of up to
+-1000 x the distance, which dwarfs the discounted values and stops SAC and TD3 from learning;
+README, Results). ``safety_penalty="worst_case"`` uses the worst per-step reward that this
+patient's joint limits allow instead of the current distance (up to about -7600 uncapped).
+
+A profile that cannot do the exercises in its scene (the robot cannot reach the cuff, a target
+outside the setpoint bounds, or a home state that already breaks a safety rule at a weight
+level the env may use) is refused with a ``ValueError`` when the env is built
+(:mod:`rehabbot.tasks.feasibility`).
+
+## Starting state
+The home posture of the scene (cuff satisfied, static equilibrium), no noise. The exercise and
+the weight level are drawn from ``np_random`` unless fixed by the constructor or by
+``reset(options={"exercise": e, "weight_level": l})``.
+
+## Episode end
+* terminated, success: the last target is reached (``info["is_success"]``);
+* terminated, safety: a rule of :mod:`rehabbot.tasks.safety` fires
+  (``info["safety_violation"]``): ``"instability"``, ``"range_of_motion"``, ``"cuff_force"``
+  or ``"unintended_contact"``;
+* truncated: ``max_episode_steps`` (1000 = 20 s), applied by the registration's ``TimeLimit``.
+
+``step()`` before the first ``reset()`` or after a termination raises
+``gymnasium.error.ResetNeeded``; after ``close()`` it raises ``RuntimeError``; ``close()`` twice
+is a no-op. An ``"instability"`` always ends the episode (even with
+``terminate_on_safety=False``) and returns the last healthy observation; the next ``reset()``
+starts from the healthy home state.
+
+## Arguments
+All are fields of :class:`rehabbot.envs.config.RehabEnvConfig`, validated before anything is
+built (``ValueError`` naming the value and its valid choices or range). ``RehabEnv(config)``
+takes a config instead.
+
+| kwarg | default | meaning |
+|---|---|---|
+| ``limb`` | ``"arm"`` | ``"arm"`` (seated, shoulder + elbow), ``"hip"`` (supine), ``"knee"`` (seated) |
+| ``side`` | ``"right"`` | ``"right"`` or ``"left"`` arm / leg |
+| ``task_type`` | ``"reaching"`` | ``"reaching"`` (the key poses) or ``"trajectory"`` (dense min-jerk waypoints) |
+| ``control_mode`` | ``"joint_delta"`` | see Action space |
+| ``profile`` | ``None`` | :class:`PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
+| ``weight_level`` | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
+| ``exercise`` | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
+| ``exercises`` | ``None`` | the exercise table: :class:`Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
+| ``cuff`` | ``"connect"`` | ``"connect"`` (strap: position only) or ``"weld"`` |
+| ``base_reorientation_deg`` | 0.0 | rotation of the robot base about its vertical axis |
+| ``frame_skip`` | 10 | physics steps per decision |
+| ``timestep_s`` | 0.002 | physics step; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
+| ``target_tolerance_rad`` | 0.05 | epsilon of eq. (5) |
+| ``intermediate_bonus`` | 10.0 | B_i for i < N - 1 |
+| ``final_bonus`` | 100.0 | B_{N-1} |
+| ``smoothness_weight`` | 0.0 | weight of ``reward_smoothness`` |
+| ``effort_weight`` | 0.0 | weight of ``reward_effort`` |
+| ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
+| ``safety_penalty`` | ``"hold"`` | ``"hold"`` (steps left x current per-step loss) or ``"worst_case"`` (steps left x worst per-step loss); see Rewards |
+| ``safety_penalty_steps`` | 100 | count at most this many steps in the safety penalty (None: all steps left until the time limit); see Rewards |
+| ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range |
+| ``cuff_force_limit_n`` | None | cuff force rule: limit in N for every cuff (None = ISO/TS 15066 quasi-static limit of the region each cuff holds) |
+| ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact |
+| ``max_episode_steps`` | 1000 | horizon used by the safety penalty (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` takes the name for its TimeLimit and never passes it to the env, which keeps 1000: with the default ``safety_penalty_steps=100`` this only over-counts the penalty in the last 100 steps before m. Build ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` to change both |
+| ``segment_s`` | 3.0 | trajectory: duration of each min-jerk segment between key poses |
+| ``waypoint_dt_s`` | 0.1 | trajectory: sampling period of the min-jerk path |
+| ``min_waypoint_spacing_rad`` | 0.1 | trajectory: minimum distance (inf-norm, robot joints) between waypoints |
+| ``max_speed_rad_s`` | 0.5 | ``joint_velocity`` mode: action bound |
+| ``render_mode`` | None | ``"human"``, ``"rgb_array"`` or ``"depth_array"`` |
+| ``width``, ``height`` | 640, 480 | image size in pixels |
+| ``camera_name`` | ``"overview"`` | ``"overview"``, ``"front"``, ``"side"`` or None (free camera) |
+
+``depth_array`` images hold the distance from the camera in metres; pixels that see no geometry
+hold the camera's far-plane distance. ``env.dt`` is the seconds per step, as in Gymnasium's
+MuJoCo envs.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from rehabbot.common.arrays import as_index
+from rehabbot.envs.build import build_parts
+from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig, kwarg_names
+from rehabbot.envs.env_rendering import EnvRendering
+from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
+from rehabbot.tasks import feasibility
+from rehabbot.tasks.exercises import Exercise
+from rehabbot.tasks.reward import StepOutcome, total
+from rehabbot.tasks.targets import TargetSequence
+
+RESET_OPTIONS = ("exercise", "weight_level")
+
+
+class RehabEnv(gym.Env):
+    """A UR5e moves a patient's limb through a therapy exercise (see the module docstring)."""
+
+    metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
+
+    def __init__(self, config: RehabEnvConfig | None = None, **kwargs: Any) -> None:
+        if config is None:
+            unknown = sorted(set(kwargs) - set(kwarg_names()))
+            if unknown:
+                raise TypeError(f"RehabEnv got unknown keyword argument(s) {unknown}; valid: "
+                                f"{list(kwarg_names())}")
+            config = RehabEnvConfig(**kwargs)
+        elif kwargs:
+            raise TypeError("pass either a RehabEnvConfig or keyword arguments, not both")
+        elif not isinstance(config, RehabEnvConfig):
+            raise TypeError(f"config must be a RehabEnvConfig, got {type(config).__name__}")
+        self.config = config
+        parts = build_parts(config)  # ValueError for a patient who cannot do the exercises
+        self.scene = parts.scene
+        self.model = self.scene.model
+        self.data = mujoco.MjData(self.model)
+        self.handle = parts.handle
+        self.robot = self.handle.robot
+        self.setpoint_low_rad, self.setpoint_high_rad = parts.setpoint_low_rad, \
+            parts.setpoint_high_rad
+        self.joint_low_rad, self.joint_high_rad = parts.joint_low_rad, parts.joint_high_rad
+        self.targets: tuple[TargetSequence, ...] = parts.targets
+        self.exercises: tuple[Exercise, ...] = config.exercise_table
+        self.controller = parts.controller
+        self.safety = parts.safety
+        self.reward_function = parts.reward
+        self.layout = parts.layout
+        self.action_space = self.controller.action_space
+        self.observation_space = parts.observation_space
+        # The tighter box of this patient that a healthy observation stays in (float32): its
+        # setpoint bounds and joint limits; leaving it is an "instability".
+        self.healthy_obs_low: np.ndarray
+        self.healthy_obs_high: np.ndarray
+        self.render_mode = config.render_mode
+        self.frame_skip = config.frame_skip
+        self.max_episode_steps = config.max_episode_steps
+        self.dt_s = self.frame_skip * self.model.opt.timestep
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
+        self._unusable_levels = parts.unusable_levels
+
+        # -- ids, slices and buffers (resolved once) -----------------------------------------
+        layout = self.layout
+        self._theta_star, self._p_star = layout.slice("theta_star"), layout.slice("p_star")
+        self._theta_obs, self._p_obs = layout.slice("theta"), layout.slice("p")
+        self._phi_obs, self._e_obs, self._l_obs = (layout.slice("phi"), layout.index("e"),
+                                                   layout.index("l"))
+        self.healthy_obs_low, self.healthy_obs_high = parts.healthy_low, parts.healthy_high
+        self._clip_low = self.controller.clip_low.astype(float)
+        self._clip_high = self.controller.clip_high.astype(float)
+        self._clip_bounds = tuple(zip(self.controller.clip_low.tolist(),
+                                      self.controller.clip_high.tolist(), strict=True))
+        self._action_shape = self.action_space.shape
+        base = self.handle.base_body_id
+        mujoco.mj_kinematics(self.model, self.data)
+        self._base_pos = self.data.xpos[base].copy()
+        self._base_rot = self.data.xmat[base].reshape(3, 3).copy()
+        self._qpos_adr = as_index(self.handle.qpos_adr)
+        self._dof_adr = as_index(self.handle.dof_adr)
+        self._tool_site = self.handle.tool_site_id
+        self._exercised_qpos_adr = as_index(self.scene.exercised_qpos_adr)
+        self._patient_qpos_adr = as_index(self.scene.patient_qpos_adr)
+        n = self.robot.n_joints
+        self._obs = np.zeros(layout.size, np.float32)  # working vector
+        self._healthy_obs = np.zeros(layout.size, np.float32)  # the last one in bounds
+        self._tool_rel = np.zeros(3)
+        self._theta = np.zeros(n)
+        self._error = np.zeros(n)
+        self._abs_error = np.zeros(n)
+        self._prev_action = np.zeros(n)
+        self._outcome = StepOutcome(previous_action=self._prev_action)
+        self._reward_keys = tuple(f"reward_{name}" for name in self.reward_function.names)
+        self._tolerance = self.reward_function.target_tolerance_rad
+        self._steps = 0
+        self._target_index = 0
+        self._exercise = 0
+        self._sequence = self.targets[0]
+        self._needs_reset = True  # before the first reset, after a termination, after close
+        self._closed = False
+        self._rendering = EnvRendering(self.model, self.render_mode, config.width,
+                                       config.height, config.camera_name,
+                                       self.max_episode_steps, self.dt_s, self._base_pos,
+                                       self._base_rot)
+        self._record = self.render_mode is not None
+        self._bind_views()
+        self.scene.reset_data(self.data)
+
+    # ------------------------------------------------------------------------------------------
+    # Gymnasium API
+    # ------------------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - set(RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; valid: "
+                             f"{list(RESET_OPTIONS)}")
+        drawn_exercise = int(self.np_random.integers(len(self.targets)))
+        drawn_level = int(self.np_random.integers(len(WEIGHT_LEVELS)))
+        exercise = options.get("exercise", self.config.exercise)
+        if exercise is None:
+            exercise = drawn_exercise
+        if isinstance(exercise, bool) or exercise not in range(len(self.targets)):
+            raise ValueError(f"exercise={exercise!r} is not one of "
+                             f"{list(range(len(self.targets)))}")
+        level = options.get("weight_level", self.config.weight_level)
+        level = drawn_level if level is None else check_weight_level(level)
+        if level in self._unusable_levels:
+            feasibility.refuse(self._unusable_levels, WEIGHT_LEVELS, level)
+
+        if level != self.scene.weight_level:
+            self.scene.set_weight_level(level)
+        self._exercise = int(exercise)
+        self._sequence = self.targets[self._exercise]
+        self._target_index = 0
+        self._steps = 0
+        data = self.data
+        self.scene.reset_data(data)
+        self.controller.reset(data, self.scene.home_setpoints[0])
+        self.safety.reset(data)
+        self._prev_action[:] = 0.0
+        self._rendering.clear_trace()
+        self._record_trace()
+        obs = self._obs
+        obs[self._e_obs] = self._exercise
+        obs[self._l_obs] = self.scene.weight_level
+        self._write_target()
+        self._observe()
+        self._healthy_obs[:] = obs
+        self._theta[:] = self._qpos[self._qpos_adr]
+        info = self._info(None, False, self.safety.cuff_force_n(data),
+                          self.reward_function.zero_terms(), 0)
+        self._needs_reset = False
+        if self.render_mode == "human":
+            self.render()
+        return obs.copy(), info
+
+    def step(self, action):
+        if self._needs_reset:
+            self._refuse_step()
+        action, clipped = self._check_action(action)
+        data = self.data
+        self.controller.apply(action, data)
+        mujoco.mj_step(self.model, data, nstep=self.frame_skip)
+        self._steps += 1
+
+        force_n = self.safety.cuff_force_n(data)
+        violation = self.safety.check(data, force_n)
+        healthy = violation != "instability"
+        if healthy:
+            self._observe()
+            if not self._inside(self._obs):
+                violation, healthy = "instability", False
+        if healthy:
+            self._healthy_obs[:] = self._obs
+            self._theta[:] = self._qpos[self._qpos_adr]
+            self._record_trace()
+        else:  # keep the last healthy observation and joint angles
+            self._obs[:] = self._healthy_obs
+            force_n = 0.0 if not math.isfinite(force_n) else force_n
+
+        # Distance to the target that was active during the step.
+        i = self._target_index
+        error = np.subtract(self._theta, self._sequence.robot_rad[i], out=self._error)
+        outcome = self._outcome
+        outcome.distance_rad = math.sqrt(float(error @ error))
+        reached = float(np.abs(error, out=self._abs_error).max()) < self._tolerance
+        safety_stop = violation is not None and (self.config.terminate_on_safety
+                                                 or violation == "instability")
+        last = i == len(self._sequence) - 1
+        outcome.reached = reached and not safety_stop
+        outcome.last_target = last
+        outcome.safety_stop = safety_stop
+        outcome.steps_done = self._steps
+        outcome.action = action
+        terms = self.reward_function(outcome)
+        self._prev_action[:] = action
+
+        terminated = is_success = False
+        if safety_stop:
+            terminated = True
+        elif reached:
+            if last:
+                terminated = is_success = True
+            else:
+                self._target_index += 1
+                self._write_target()  # the observation shows the next target
+                self._healthy_obs[:] = self._obs
+        self._needs_reset = terminated
+        info = self._info(violation, is_success, force_n, terms, clipped)
+        if self.render_mode == "human":
+            self.render()
+        return self._obs.copy(), total(terms), terminated, False, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode="
+                            "'human', 'rgb_array' or 'depth_array' to the constructor")
+            return None
+        if self._closed:
+            raise RuntimeError("render() called after close()")
+        targets = self._sequence.tool_pos_base_m
+        if self.render_mode == "human":
+            self._rendering.human(self.data, targets, self._target_index)
+            return None
+        return self._rendering.offscreen(self.data, self.render_mode == "depth_array",
+                                         targets, self._target_index)
+
+    def close(self) -> None:
+        self._rendering.close()
+        self._closed = True
+        self._needs_reset = True
+
+    # ------------------------------------------------------------------------------------------
+    # Properties
+    # ------------------------------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Seconds per step (``frame_skip x timestep``), as in Gymnasium's MuJoCo envs."""
+        return self.dt_s
+
+    @property
+    def worst_step_reward(self) -> float:
+        """The per-step loss of the ``"worst_case"`` safety penalty (this patient's bounds)."""
+        return self.reward_function.worst_step_reward
+
+    @property
+    def target_index(self) -> int:
+        """Index of the active target in the episode's sequence."""
+        return self._target_index
+
+    @property
+    def exercise(self) -> int:
+        """The episode's exercise (an index into :attr:`exercises`)."""
+        return self._exercise
+
+    @property
+    def target_sequence(self) -> TargetSequence:
+        """The episode's targets (patient and robot joint space)."""
+        return self._sequence
+
+    def __getattr__(self, name: str) -> Any:
+        # The config's settings read as attributes (env.limb, env.target_tolerance_rad, ...).
+        config = self.__dict__.get("config")
+        if config is not None and name in kwarg_names():
+            return getattr(config, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    # ------------------------------------------------------------------------------------------
+    # Helpers
+    # ------------------------------------------------------------------------------------------
+    def _refuse_step(self) -> None:
+        if self._closed:
+            raise RuntimeError("step() called after close(); make a new env")
+        if self._steps == 0:
+            raise gym.error.ResetNeeded("step() called before reset(); call env.reset() first")
+        raise gym.error.ResetNeeded("step() called after the episode terminated; call "
+                                    "env.reset() to start the next one")
+
+    def _check_action(self, action) -> tuple[np.ndarray, int]:
+        if type(action) is np.ndarray and action.dtype == np.float32 \
+                and action.shape == self._action_shape:
+            for value, (low, high) in zip(action.tolist(), self._clip_bounds):  # noqa: B905
+                if not low <= value <= high:  # also for NaN
+                    break
+            else:
+                return action, 0  # the common case: float32, inside the box
+        try:
+            a = np.asarray(action)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"action {action!r} cannot be read as {self.action_space.shape} "
+                             f"floats: {err}") from None
+        if a.dtype.kind not in "iuf":  # no silent casts of bool, complex, str or objects
+            raise ValueError(f"action {action!r} has dtype {a.dtype}; expected "
+                             f"{self.action_space.shape} real numbers (float32 preferred)")
+        a = a.astype(float)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action has shape {a.shape}; expected {self.action_space.shape}")
+        bad = ~np.isfinite(a)
+        if bad.any():
+            raise ValueError(f"action has non-finite values at indices "
+                             f"{np.flatnonzero(bad).tolist()}: {a.tolist()}")
+        clipped_mask = (a < self._clip_low) | (a > self._clip_high)
+        clipped = int(np.count_nonzero(clipped_mask))
+        if clipped:
+            a = np.clip(a, self._clip_low, self._clip_high)
+        return a, clipped
+
+    def _write_target(self) -> None:
+        """The active target's fields of the observation (theta*, p*)."""
+        obs, i = self._obs, self._target_index
+        obs[self._theta_star] = self._sequence.robot_rad[i]
+        obs[self._p_star] = self._sequence.tool_pos_base_m[i]
+
+    def _observe(self) -> None:
+        """The fields that change every step (theta, p, phi), written into ``self._obs``."""
+        obs, qpos = self._obs, self._qpos
+        obs[self._theta_obs] = qpos[self._qpos_adr]
+        rel = np.subtract(self._site_xpos[self._tool_site], self._base_pos, out=self._tool_rel)
+        obs[self._p_obs] = rel @ self._base_rot
+        obs[self._phi_obs] = qpos[self._exercised_qpos_adr]
+
+    def _inside(self, obs: np.ndarray) -> bool:
+        # NaN fails both comparisons, so this also rejects non-finite values.
+        return bool(np.logical_and.reduce((obs >= self.healthy_obs_low)
+                                          & (obs <= self.healthy_obs_high)))
+
+    def _info(self, safety_violation, is_success, force_n, terms, clipped) -> dict:
+        info = {
+            "is_success": is_success,
+            "target_index": self._target_index,
+            "num_targets": len(self._sequence),
+            "safety_violation": safety_violation,
+        }
+        for key, value in zip(self._reward_keys, terms.values()):  # noqa: B905
+            info[key] = value
+        info["interaction_force_n"] = float(force_n)
+        info["robot_torque_nm"] = self._qfrc_actuator[self._dof_adr].copy()
+        info["patient_qpos"] = self._qpos[self._patient_qpos_adr].copy()
+        info["exercise"] = self._exercise
+        info["weight_level"] = self.scene.weight_level
+        info["action_clipped"] = clipped
+        return info
+
+    def _record_trace(self) -> None:
+        if self._record:
+            self._rendering.record(self._site_xpos[self._tool_site])
+
+    def _bind_views(self) -> None:
+        """Cache views of ``self.data``'s arrays (again after unpickling: views do not
+        survive a pickle round trip)."""
+        data = self.data
+        self._qpos = data.qpos
+        self._site_xpos = data.site_xpos
+        self._qfrc_actuator = data.qfrc_actuator
+        self.controller._ctrl = data.ctrl
+        self.safety.bind(data)
+        self._outcome.torque_nm = self._qfrc_actuator[self._dof_adr]  # a view
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind_views()

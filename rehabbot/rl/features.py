@@ -1,0 +1,64 @@
+"""A Stable-Baselines3 features extractor for the RehabBot observation: the observation itself
+plus the tracking errors that the reward is made of.
+
+The paper's 23-D observation holds the target and the current joint angles (theta*, theta)
+and tool positions (p*, p) side by side; the reward and every good action depend on their
+differences. :class:`TrackingErrorFeatures` appends ``theta* - theta`` (6) and ``p* - p`` (3)
+to the observation (32 features), so that the first layer of the actor and of the critic
+sees the error directly instead of having to learn to subtract. It has no parameters and
+leaves the env's spaces untouched: it is a choice of the agent's network, made in a
+hyperparameter file::
+
+    policy_kwargs: "dict(features_extractor_class=TrackingErrorFeatures, net_arch=[64, 64])"
+
+(``rehabbot train`` resolves the name; in Python pass the class itself.) The extractor needs
+the unnormalised observation layout of :mod:`rehabbot.tasks.observation` (23 values); VecNormalize'd
+observations still work, since normalisation is affine per entry, but the errors are then in
+normalised units.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import torch
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+from rehabbot.tasks.observation import OBS_SIZE, P_STAR, THETA, THETA_STAR, P
+
+ERROR_FEATURES = (THETA_STAR.stop - THETA_STAR.start) + (P_STAR.stop - P_STAR.start)
+JOINT_ERROR_SCALE_RAD = 0.5  # errors of a few key-pose spacings map to O(1) features
+TOOL_ERROR_SCALE_M = 0.1
+
+
+class TrackingErrorFeatures(BaseFeaturesExtractor):
+    """``[obs scaled to [-1, 1], (theta* - theta) / 0.5 rad, (p* - p) / 0.1 m]``: 23 + 6 + 3 =
+    32 features, no parameters. With ``fine_scale_rad`` (e.g. the target tolerance, 0.05 rad)
+    six more: ``tanh((theta* - theta) / fine_scale_rad)``, which resolve the last few
+    hundredths of a radian that decide whether a target counts as reached."""
+
+    def __init__(self, observation_space: gym.spaces.Box, scale_to_bounds: bool = True,
+                 fine_scale_rad: float | None = None) -> None:
+        if observation_space.shape != (OBS_SIZE,):
+            raise ValueError(f"TrackingErrorFeatures needs the RehabBot observation of shape "
+                             f"({OBS_SIZE},), got {observation_space.shape}")
+        if fine_scale_rad is not None and not fine_scale_rad > 0:
+            raise ValueError(f"fine_scale_rad={fine_scale_rad!r} must be > 0 or None")
+        fine = 0 if fine_scale_rad is None else THETA.stop - THETA.start
+        super().__init__(observation_space, features_dim=OBS_SIZE + ERROR_FEATURES + fine)
+        self.fine_scale_rad = fine_scale_rad
+        low = torch.as_tensor(observation_space.low, dtype=torch.float32)
+        high = torch.as_tensor(observation_space.high, dtype=torch.float32)
+        if not scale_to_bounds:
+            low, high = -torch.ones_like(low), torch.ones_like(high)
+        self.register_buffer("_center", (high + low) / 2)
+        self.register_buffer("_half_range", (high - low) / 2)
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        joint_error = (observations[:, THETA_STAR] - observations[:, THETA]) \
+            / JOINT_ERROR_SCALE_RAD
+        tool_error = (observations[:, P_STAR] - observations[:, P]) / TOOL_ERROR_SCALE_M
+        scaled = (observations - self._center) / self._half_range
+        if self.fine_scale_rad is None:
+            return torch.cat((scaled, joint_error, tool_error), dim=1)
+        fine = torch.tanh(joint_error * (JOINT_ERROR_SCALE_RAD / self.fine_scale_rad))
+        return torch.cat((scaled, joint_error, tool_error, fine), dim=1)

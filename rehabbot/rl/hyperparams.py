@@ -1,0 +1,527 @@
+"""Hyperparameters of the training runs: RL-Zoo-style YAML files and Python mappings,
+validated against Stable-Baselines3's constructors, and the settings files that ship with the
+package (:func:`settings_path`).
+
+A file holds either env ids (full, or without ``rehabbot/``) mapped to hyperparameters, a
+``default`` entry for every other id (as RL Zoo reads it), or one flat mapping. Keys: the SB3
+constructor arguments of the algorithm plus the zoo keys ``n_timesteps``, ``n_envs``,
+``policy``, ``normalize``, ``noise_type`` and ``noise_std``; ``policy_kwargs`` may be a mapping
+or a zoo string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``, parsed without
+``eval``; ``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import inspect
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from rehabbot.common.errors import RehabbotError, UsageError
+from rehabbot.envs.registration import ENV_SPECS, env_short_name, resolve_env_id
+from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
+
+DEFAULT_POLICY = "MlpPolicy"
+DEFAULT_NOISE_STD = 0.1
+HYPERPARAMS_DEFAULT_SOURCE = "sb3 defaults"
+SETTINGS_FOLDER = "hyperparams"  # package data of rehabbot.rl
+DEFAULT_ENTRY = "default"  # RL Zoo's entry for every env id without its own
+
+
+class HyperparameterError(UsageError):
+    """A bad hyperparameter file, key or value; the message names the file and the key."""
+
+
+def _check_algo(algo: str) -> str:
+    try:
+        return check_algo(algo)
+    except UsageError as err:
+        raise HyperparameterError(str(err)) from None
+
+
+def _resolve_env_id(env_id: str) -> str:
+    try:
+        return resolve_env_id(env_id)
+    except UsageError as err:
+        raise HyperparameterError(str(err)) from None
+
+
+def _settings_root():
+    return resources.files("rehabbot.rl").joinpath(SETTINGS_FOLDER)
+
+
+def settings_names() -> list[str]:
+    """The settings files shipped with the package, by name (``sac``, ``ablations/sac-gsde``,
+    ``sb3-defaults/ppo``, ...)."""
+    root = _settings_root()
+    names = []
+    for entry in sorted(root.iterdir(), key=lambda e: e.name):
+        if entry.is_file() and entry.name.endswith(".yml"):
+            names.append(entry.name[:-4])
+        elif entry.is_dir():
+            names += [f"{entry.name}/{sub.name[:-4]}" for sub in sorted(
+                entry.iterdir(), key=lambda e: e.name) if sub.name.endswith(".yml")]
+    return names
+
+
+def settings_path(name: str | Path) -> Path:
+    """The file ``name`` stands for: an existing path, or the name of a settings file
+    shipped with the package (``"sac"`` -> ``.../rehabbot/rl/hyperparams/sac.yml``).
+
+    Raises:
+        HyperparameterError: neither (lists the shipped names).
+    """
+    path = Path(name)
+    if path.is_file():
+        return path
+    text = str(name)
+    if path.is_dir():
+        raise HyperparameterError(f"hyperparameter file {text!r} is a directory")
+    stem = text[:-4] if text.endswith(".yml") else text
+    if stem in settings_names():
+        return Path(str(_settings_root().joinpath(f"{stem}.yml")))
+    raise HyperparameterError(f"hyperparameter file {text!r} not found (a path, or one of the "
+                              f"settings shipped with rehabbot: {', '.join(settings_names())})")
+
+
+# Keys of RL-Zoo-style files that are not SB3 constructor arguments.
+ZOO_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "noise_type", "noise_std")
+# Constructor arguments that `rehabbot train` sets itself.
+MANAGED_KEYS = {
+    "env": "the env is the ENV argument",
+    "seed": "use --seeds",
+    "tensorboard_log": "TensorBoard logs go to RUN_DIR/tb",
+    "_init_setup_model": "internal to Stable-Baselines3",
+}
+# Constructor arguments that need Python objects, which a YAML file cannot hold.
+OBJECT_KEYS = {
+    "action_noise": "use noise_type and noise_std",
+    "replay_buffer_class": "not supported in hyperparameter files",
+    "rollout_buffer_class": "not supported in hyperparameter files",
+}
+SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
+NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
+# Names a zoo string may use, and the torch classes they stand for.
+TORCH_NAMES = {
+    **{f"{prefix}{name}": ("torch.nn", name)
+       for prefix in ("nn.", "th.nn.", "torch.nn.")
+       for name in ("ReLU", "Tanh", "ELU", "LeakyReLU", "SiLU", "GELU")},
+    **{f"{prefix}{name}": ("torch.optim", name)
+       for prefix in ("optim.", "th.optim.", "torch.optim.")
+       for name in ("Adam", "AdamW", "RMSprop", "SGD")},
+    # RehabBot's own features extractor (observation + tracking errors).
+    **{name: ("rehabbot.rl.features", "TrackingErrorFeatures")
+       for name in ("TrackingErrorFeatures", "rehabbot.rl.features.TrackingErrorFeatures",
+                    "rehabbot.features.TrackingErrorFeatures")},
+}
+_NUMBER_RE = re.compile(r"^[+-]?(?:\d[\d_]*(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$")
+_INT_RE = re.compile(r"^[+-]?\d[\d_]*$")
+
+
+# --------------------------------------------------------------------------- safe zoo strings
+
+
+def parse_python_expression(text: str) -> Any:
+    """Evaluate a zoo-style string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``
+    without ``eval``: only ``dict(key=value, ...)`` calls, ``{...}`` dicts, lists, tuples,
+    numbers, strings, booleans, ``None`` and the torch names of :data:`TORCH_NAMES` are
+    accepted.
+
+    Raises:
+        ValueError: anything else (names the offending part).
+    """
+    try:
+        tree = ast.parse(str(text).strip(), mode="eval")
+    except SyntaxError as err:
+        raise ValueError(f"not a valid expression: {text!r} ({err.msg})") from err
+    return _literal(tree.body)
+
+
+def _dotted_name(node: ast.AST) -> str | None:
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        base = _dotted_name(node.value)
+        return None if base is None else f"{base}.{node.attr}"
+    return None
+
+
+def _literal(node: ast.AST) -> Any:
+    if isinstance(node, ast.Constant) and (
+        node.value is None or isinstance(node.value, (bool, int, float, str))
+    ):
+        return node.value
+    if isinstance(node, ast.List):
+        return [_literal(item) for item in node.elts]
+    if isinstance(node, ast.Tuple):
+        return tuple(_literal(item) for item in node.elts)
+    if isinstance(node, ast.Dict) and all(key is not None for key in node.keys):
+        return {_literal(key): _literal(value) for key, value in zip(node.keys, node.values,
+                                                                      strict=True)}
+    if (isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd))
+            and isinstance(node.operand, ast.Constant)
+            and isinstance(node.operand.value, (int, float))
+            and not isinstance(node.operand.value, bool)):
+        value = node.operand.value
+        return -value if isinstance(node.op, ast.USub) else value
+    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+            and node.func.id == "dict" and not node.args
+            and all(keyword.arg is not None for keyword in node.keywords)):
+        return {keyword.arg: _literal(keyword.value) for keyword in node.keywords}
+    dotted = _dotted_name(node)
+    if dotted is not None and dotted in TORCH_NAMES:
+        return _torch_object(dotted)
+    allowed = sorted({name for name in TORCH_NAMES if name.startswith(("nn.", "optim."))})
+    raise ValueError(
+        f"{ast.unparse(node)!r} is not allowed: only dict(...), literals, lists, tuples and "
+        f"the names {', '.join(allowed)}"
+    )
+
+
+def _torch_object(name: str) -> Any:
+    module_name, attr = TORCH_NAMES[name]
+    return getattr(importlib.import_module(module_name), attr)
+
+
+def _resolve_torch_names(value: Any) -> Any:
+    """Replace strings like ``"nn.ReLU"`` (from a YAML mapping) by the torch classes."""
+    if isinstance(value, str) and value.strip() in TORCH_NAMES:
+        return _torch_object(value.strip())
+    if isinstance(value, dict):
+        return {key: _resolve_torch_names(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_resolve_torch_names(item) for item in value]
+    return value
+
+
+# --------------------------------------------------------------------------- hyperparameters
+
+
+@dataclass
+class Hyperparameters:
+    """The resolved contents of one hyperparameter entry for one algorithm.
+
+    ``kwargs`` holds the SB3 constructor arguments ready to pass (schedules and torch classes
+    resolved); ``given`` the same as JSON-able values, as written in the file.
+    """
+
+    algo: str
+    source: str = HYPERPARAMS_DEFAULT_SOURCE
+    entry: str | None = None
+    policy: str = DEFAULT_POLICY
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    given: dict[str, Any] = field(default_factory=dict)
+    n_timesteps: int | None = None
+    n_envs: int | None = None
+    normalize: dict[str, Any] | None = None
+    noise_type: str | None = None
+    noise_std: float | None = None
+
+    def effective_kwargs(self) -> dict[str, Any]:
+        """Every constructor argument (SB3 defaults filled in) as JSON-able values."""
+        cls = algo_class(self.algo)
+        effective: dict[str, Any] = {}
+        for name, param in inspect.signature(cls.__init__).parameters.items():
+            if name in ("self", "env", "_init_setup_model", "tensorboard_log", "seed"):
+                continue
+            if name == "policy":
+                effective[name] = self.policy
+            elif name in self.kwargs:
+                given = self.given.get(name)
+                effective[name] = given if (name in SCHEDULE_KEYS and isinstance(given, str)) \
+                    else jsonable(self.kwargs[name])
+            elif param.default is not inspect.Parameter.empty:
+                effective[name] = jsonable(param.default)
+        if self.noise_type is not None:
+            effective["action_noise"] = {"type": self.noise_type, "std": self.noise_std}
+        return effective
+
+    def to_manifest(self) -> dict[str, Any]:
+        """The ``hyperparameters`` block of ``manifest.json``."""
+        return {
+            "source": self.source,
+            "entry": self.entry,
+            "given": jsonable(self.given),
+            "kwargs": self.effective_kwargs(),
+            "policy": self.policy,
+            "normalize": jsonable(self.normalize) if self.normalize is not None else False,
+            "noise_type": self.noise_type,
+            "noise_std": self.noise_std,
+            "n_timesteps": self.n_timesteps,
+            "n_envs": self.n_envs,
+        }
+
+
+def coerce_number(value: Any) -> Any:
+    """``"3e-4"`` -> 0.0003 and ``"1_000"`` -> 1000 (PyYAML reads ``3e-4`` as a string)."""
+    if isinstance(value, str) and _NUMBER_RE.match(value.strip()):
+        text = value.strip().replace("_", "")
+        return int(text) if _INT_RE.match(text) else float(text)
+    return value
+
+
+def _as_count(value: Any, key: str, where: str, minimum: int = 1) -> int:
+    value = coerce_number(value)
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise HyperparameterError(f"{where}: {key} must be an integer >= {minimum}, got {value!r}")
+    return value
+
+
+def _parse_normalize(value: Any, where: str) -> dict[str, Any] | None:
+    if isinstance(value, str):
+        lowered = value.strip().lower()
+        if lowered in ("true", "false", "yes", "no"):
+            value = lowered in ("true", "yes")
+        else:
+            try:
+                value = parse_python_expression(value)
+            except ValueError as err:
+                raise HyperparameterError(f"{where}: normalize: {err}") from err
+    if value is None or value is False:
+        return None
+    if value is True:
+        return {}
+    if not isinstance(value, dict):
+        raise HyperparameterError(f"{where}: normalize must be true, false or a mapping of "
+                            f"VecNormalize arguments, got {value!r}")
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    valid = [name for name in inspect.signature(VecNormalize.__init__).parameters
+             if name not in ("self", "venv", "training")]
+    for key in value:
+        if key not in valid:
+            raise HyperparameterError(f"{where}: unknown normalize key {key!r}; valid: "
+                                f"{', '.join(valid)}")
+    return {key: coerce_number(item) for key, item in value.items()}
+
+
+def _parse_policy_kwargs(value: Any, where: str) -> dict[str, Any]:
+    if value is None:
+        return {}
+    if isinstance(value, str):
+        try:
+            value = parse_python_expression(value)
+        except ValueError as err:
+            raise HyperparameterError(f"{where}: policy_kwargs: {err}") from err
+    if not isinstance(value, dict):
+        raise HyperparameterError(f"{where}: policy_kwargs must be a mapping or a 'dict(...)' "
+                            f"string, got {value!r}")
+    return {str(key): _resolve_torch_names(item) for key, item in value.items()}
+
+
+def _parse_schedule(value: Any, key: str, where: str) -> Any:
+    if isinstance(value, str) and value.strip().startswith("lin_"):
+        try:
+            start = float(value.strip()[len("lin_"):])
+        except ValueError as err:
+            raise HyperparameterError(f"{where}: {key}: bad linear schedule {value!r} "
+                                "(expected lin_<float>, e.g. lin_3e-4)") from err
+        if not math.isfinite(start):
+            raise HyperparameterError(f"{where}: {key}: bad linear schedule {value!r}")
+        from stable_baselines3.common.utils import LinearSchedule
+
+        # progress_remaining goes 1 -> 0 over the run: start -> 0, linearly.
+        return LinearSchedule(start, 0.0, 1.0)
+    return value
+
+
+def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
+                                 source: str = "python mapping",
+                                 entry: str | None = None) -> Hyperparameters:
+    """Validate a flat mapping of hyperparameters for ``algo``.
+
+    Accepted keys: the SB3 constructor arguments of the algorithm (checked against its
+    signature) and the zoo keys ``n_timesteps``, ``n_envs``, ``policy``, ``normalize``,
+    ``noise_type`` and ``noise_std``. ``policy_kwargs`` may be a mapping or a zoo string,
+    ``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``.
+
+    Raises:
+        HyperparameterError: an unknown key (named, with the algorithm) or a bad value.
+    """
+    algo = _check_algo(algo)
+    where = source if entry is None else f"{source} [{entry}]"
+    hp = Hyperparameters(algo=algo, source=source, entry=entry)
+    if mapping is None:
+        return hp
+    if not isinstance(mapping, Mapping):
+        raise HyperparameterError(f"{where}: hyperparameters must be a mapping, got "
+                            f"{type(mapping).__name__}")
+    cls = algo_class(algo)
+    params = inspect.signature(cls.__init__).parameters
+    noise_std_given = False
+    for key, raw in mapping.items():
+        if not isinstance(key, str):
+            raise HyperparameterError(f"{where}: hyperparameter names must be strings, got {key!r}")
+        if key == "n_timesteps":
+            hp.n_timesteps = _as_count(raw, key, where)
+        elif key == "n_envs":
+            hp.n_envs = _as_count(raw, key, where)
+        elif key == "policy":
+            if not isinstance(raw, str) or raw not in cls.policy_aliases:
+                raise HyperparameterError(f"{where}: policy must be one of "
+                                    f"{', '.join(cls.policy_aliases)}, got {raw!r}")
+            hp.policy = raw
+        elif key == "normalize":
+            hp.normalize = _parse_normalize(raw, where)
+        elif key == "noise_type":
+            if raw is not None and raw not in NOISE_TYPES:
+                raise HyperparameterError(f"{where}: noise_type must be one of "
+                                    f"{', '.join(NOISE_TYPES)}, got {raw!r}")
+            hp.noise_type = raw
+        elif key == "noise_std":
+            value = coerce_number(raw)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not (value > 0 and math.isfinite(value)):
+                raise HyperparameterError(f"{where}: noise_std must be a positive number, got "
+                                    f"{raw!r}")
+            hp.noise_std = float(value)
+            noise_std_given = True
+        elif key in MANAGED_KEYS:
+            raise HyperparameterError(f"{where}: {key!r} cannot be set in a hyperparameter "
+                                      f"file ({MANAGED_KEYS[key]})")
+        elif key not in params or key == "self":
+            valid = [name for name in params
+                     if name not in ("self", *MANAGED_KEYS, *OBJECT_KEYS)]
+            raise HyperparameterError(
+                f"{where}: unknown hyperparameter {key!r} for {ALGO_NAMES[algo]}; valid keys: "
+                f"{', '.join([*valid, *(k for k in ZOO_KEYS if k not in valid)])}")
+        elif key in OBJECT_KEYS:
+            if raw is not None:
+                raise HyperparameterError(f"{where}: {key!r} cannot be set in a hyperparameter "
+                                          f"file ({OBJECT_KEYS[key]})")
+        elif key == "policy_kwargs":
+            hp.kwargs[key] = _parse_policy_kwargs(raw, where)
+        else:
+            value = coerce_number(raw)
+            default = params[key].default
+            if (isinstance(default, int) and not isinstance(default, bool)
+                    and isinstance(value, float) and value.is_integer()):
+                value = int(value)
+            if key == "train_freq" and isinstance(value, list):
+                value = tuple(value)
+            if key in SCHEDULE_KEYS:
+                value = _parse_schedule(value, key, where)
+            hp.kwargs[key] = value
+        hp.given[key] = jsonable(raw)
+    if noise_std_given and hp.noise_type is None:
+        raise HyperparameterError(f"{where}: noise_std needs noise_type "
+                                  f"({' or '.join(NOISE_TYPES)})")
+    if hp.noise_type is not None:
+        if algo not in OFF_POLICY:
+            raise HyperparameterError(f"{where}: noise_type applies to SAC and TD3 only, not "
+                                f"{ALGO_NAMES[algo]}")
+        if hp.noise_std is None:
+            hp.noise_std = DEFAULT_NOISE_STD
+    return hp
+
+
+def _looks_like_env_key(key: Any) -> bool:
+    if not isinstance(key, str):
+        return False
+    if key in ENV_SPECS or f"rehabbot/{key}" in ENV_SPECS:
+        return True
+    return "/" in key or re.search(r"-v\d+$", key) is not None
+
+
+def load_hyperparameters(path: str | Path, env_id: str, algo: str) -> Hyperparameters:
+    """Read an RL-Zoo-style YAML file: either env ids (full or short) mapped to mappings of
+    hyperparameters, or one flat mapping of hyperparameters.
+
+    Raises:
+        HyperparameterError: missing or unreadable file, invalid YAML, no entry for ``env_id``,
+            unknown key or bad value (the message names the file and the key).
+    """
+    env_id = _resolve_env_id(env_id)
+    algo = _check_algo(algo)
+    file = settings_path(path)
+    try:
+        import yaml
+    except ImportError as err:
+        raise RehabbotError("reading hyperparameter files needs PyYAML: pip install pyyaml"
+                            ) from err
+    try:
+        text = file.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise HyperparameterError(f"cannot read hyperparameter file {str(path)!r}: "
+                                  f"{err}") from err
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        detail = " ".join(str(err).split())
+        raise HyperparameterError(f"hyperparameter file {str(path)!r} is not valid YAML: "
+                                  f"{detail}") from err
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise HyperparameterError(f"hyperparameter file {str(path)!r} must hold a mapping, "
+                                  f"not a {type(data).__name__}")
+    source = str(path)
+    env_keys = [key for key in data if key == DEFAULT_ENTRY or _looks_like_env_key(key)]
+    if not env_keys:
+        return hyperparameters_from_mapping(data, algo, source=source)
+    others = [key for key in data if key not in env_keys]
+    if others:
+        raise HyperparameterError(
+            f"hyperparameter file {source!r} mixes env ids ({', '.join(map(str, env_keys))}) "
+            f"with other top-level keys ({', '.join(map(str, others))})")
+    matches = [key for key in data if key in (env_id, env_short_name(env_id))]
+    if not matches and DEFAULT_ENTRY in data:
+        matches = [DEFAULT_ENTRY]
+    if not matches:
+        raise HyperparameterError(f"hyperparameter file {source!r} has no entry for {env_id} "
+                                  f"and no {DEFAULT_ENTRY!r} entry (entries: "
+                                  f"{', '.join(map(str, data))})")
+    if len(matches) > 1:
+        raise HyperparameterError(f"hyperparameter file {source!r} has two entries for "
+                                  f"{env_id}: {', '.join(matches)}")
+    entry = data[matches[0]]
+    if entry is not None and not isinstance(entry, dict):
+        raise HyperparameterError(f"{source} [{matches[0]}]: must be a mapping of "
+                                  "hyperparameters")
+    return hyperparameters_from_mapping(entry, algo, source=source, entry=matches[0])
+
+
+def as_hyperparameters(hyperparams: Any, env_id: str, algo: str) -> Hyperparameters:
+    if hyperparams is None:
+        return Hyperparameters(algo=algo)
+    if isinstance(hyperparams, Hyperparameters):
+        if hyperparams.algo != algo:
+            raise HyperparameterError(f"the hyperparameters are for {hyperparams.algo}, not "
+                                      f"{algo}")
+        return hyperparams
+    if isinstance(hyperparams, (str, Path)):
+        return load_hyperparameters(hyperparams, env_id, algo)
+    if isinstance(hyperparams, Mapping):
+        return hyperparameters_from_mapping(hyperparams, algo)
+    raise HyperparameterError(f"hyperparams must be a file path, a settings name or a "
+                              f"mapping, got {type(hyperparams).__name__}")
+
+
+def jsonable(value: Any) -> Any:
+    """A JSON-able version of a hyperparameter value (classes by dotted name)."""
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, int):
+        return int(value)
+    if isinstance(value, float):
+        return value if math.isfinite(value) else repr(value)
+    if isinstance(value, Mapping):
+        return {str(key): jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(item) for item in value]
+    if isinstance(value, type):
+        return f"{value.__module__}.{value.__qualname__}"
+    item = getattr(value, "item", None)
+    if callable(item) and getattr(value, "shape", None) == ():
+        return jsonable(item())
+    return repr(value)
+
+

@@ -1,0 +1,177 @@
+"""Planning a training run: validate the arguments, find what to resume, work out every
+setting, before anything is written (:func:`plan_run`)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rehabbot.common.errors import RehabbotError, UsageError
+from rehabbot.rl import runs
+from rehabbot.rl.hyperparams import Hyperparameters, jsonable
+
+DEFAULT_TIMESTEPS = 200_000
+DEFAULT_CHECKPOINT_FREQ = 10_000
+DEFAULT_EVAL_FREQ = 10_000
+DEFAULT_EVAL_EPISODES = 5
+VEC_ENV_KINDS = ("dummy", "subproc")
+
+
+class TrainingError(RehabbotError):
+    """Training cannot go on: a damaged checkpoint, an existing run, nothing to resume."""
+
+
+class TrainingUsageError(TrainingError, UsageError):
+    """A bad training argument (seed, step count, resume settings that differ)."""
+
+
+class NothingToResumeError(TrainingError):
+    """``resume`` was asked for a run that has no checkpoint."""
+
+
+def mapping_equal(a: Any, b: Any) -> bool:
+    """Whether two JSON-able mappings hold the same values."""
+    return json.dumps(jsonable(a), sort_keys=True) == json.dumps(jsonable(b), sort_keys=True)
+
+
+@dataclass
+class ResumePoint:
+    checkpoint: Path
+    steps: int
+    replay_buffer: Path | None
+    vecnormalize: Path | None
+
+
+@dataclass
+class RunPlan:
+    env_id: str
+    algo: str
+    seed: int
+    total_timesteps: int
+    out_dir: Path
+    run_dir: Path
+    n_envs: int
+    env_kwargs: dict[str, Any]
+    hp: Hyperparameters
+    normalize: dict[str, Any] | None
+    checkpoint_freq: int
+    eval_freq: int
+    eval_episodes: int
+    progress_bar: bool
+    vec: str = "dummy"
+    overwrite: bool = False
+    resume: ResumePoint | None = None
+    manifest: dict[str, Any] | None = None
+    skip: str | None = None
+
+
+def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumePoint | None:
+    """The newest checkpoint (by step count); model.zip of a finished run without any."""
+    found = runs.checkpoints(run_dir)
+    if found:
+        steps, path = found[0]
+        replay_buffer, vecnormalize = runs.companions(path.parent, steps)
+        return ResumePoint(path, steps, replay_buffer if replay_buffer.is_file() else None,
+                           vecnormalize if vecnormalize.is_file() else None)
+    model = run_dir / runs.MODEL_NAME
+    if model.is_file() and manifest and manifest.get("status") == "finished":
+        vecnormalize = run_dir / runs.VECNORMALIZE_NAME
+        return ResumePoint(model, int(manifest.get("timesteps_done", 0)), None,
+                           vecnormalize if vecnormalize.is_file() else None)
+    return None
+
+
+def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
+             out_dir: str | Path, *, n_envs: int | None, hp: Hyperparameters,
+             env_kwargs: dict[str, Any] | None, resume: bool, overwrite: bool,
+             checkpoint_freq: int | None, eval_freq: int | None, eval_episodes: int | None,
+             progress_bar: bool, vec: str) -> RunPlan:
+    """Validate one run and work out its settings; writes nothing."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise TrainingUsageError(f"seed must be an integer >= 0, got {seed!r}")
+    out = Path(out_dir)
+    run_dir = runs.run_directory(out, env_id, algo, seed)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise TrainingError(f"run directory {run_dir} exists and is not a directory")
+    for name, value, minimum in (("total_timesteps", total_timesteps, 1),
+                                 ("n_envs", n_envs, 1),
+                                 ("checkpoint_freq", checkpoint_freq, 0),
+                                 ("eval_freq", eval_freq, 0),
+                                 ("eval_episodes", eval_episodes, 1)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)
+                                  or value < minimum):
+            raise TrainingUsageError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if vec not in VEC_ENV_KINDS:
+        raise TrainingUsageError(f"vec must be 'dummy' or 'subproc', got {vec!r}")
+
+    if resume:
+        if overwrite:
+            raise TrainingUsageError("--resume and --overwrite exclude each other")
+        manifest = runs.read_manifest(run_dir) if run_dir.is_dir() else None
+        point = find_resume_point(run_dir, manifest) if run_dir.is_dir() else None
+        if point is None:
+            if run_dir.is_dir() and any(run_dir.iterdir()):
+                raise NothingToResumeError(
+                    f"nothing to resume in {run_dir} (no checkpoint yet; "
+                    f"{runs.describe(run_dir)}); start it again with --overwrite")
+            raise NothingToResumeError(f"nothing to resume: {run_dir} does not hold a run; "
+                                       "train without --resume first")
+        if manifest is None:
+            raise TrainingError(f"cannot resume {run_dir}: its {runs.MANIFEST_NAME} is "
+                                "missing")
+        for key, mine in (("env_id", env_id), ("algo", algo)):
+            if str(manifest.get(key)) != mine:
+                raise TrainingUsageError(
+                    f"cannot resume {run_dir}: it was trained with {key} "
+                    f"{manifest.get(key)!r}, not {mine!r}")
+        saved_n_envs = int(manifest.get("n_envs", 1))
+        if n_envs is not None and n_envs != saved_n_envs:
+            raise TrainingUsageError(f"cannot resume {run_dir} with {n_envs} envs: it was "
+                                     f"trained with n_envs={saved_n_envs}")
+        saved_kwargs = manifest.get("env_kwargs") or {}
+        if env_kwargs is not None and not mapping_equal(env_kwargs, saved_kwargs):
+            raise TrainingUsageError(f"cannot resume {run_dir} with env kwargs "
+                                     f"{json.dumps(env_kwargs)}: it was trained with "
+                                     f"{json.dumps(saved_kwargs)}")
+        saved_hp = manifest.get("hyperparameters") or {}
+        saved_normalize = saved_hp.get("normalize", False)  # False, or VecNormalize kwargs
+        normalize = None if saved_normalize in (None, False) else (
+            dict(saved_normalize) if isinstance(saved_normalize, dict) else {})
+        if normalize is not None and point.vecnormalize is None:
+            raise TrainingError(f"cannot resume {run_dir}: checkpoint {point.checkpoint.name} "
+                                "lacks its VecNormalize statistics")
+        total = total_timesteps if total_timesteps is not None \
+            else int(manifest.get("total_timesteps", DEFAULT_TIMESTEPS))
+        plan = RunPlan(
+            env_id=env_id, algo=algo, seed=seed, total_timesteps=total, out_dir=out,
+            run_dir=run_dir, n_envs=saved_n_envs, env_kwargs=dict(saved_kwargs), hp=hp,
+            normalize=normalize,
+            checkpoint_freq=checkpoint_freq if checkpoint_freq is not None
+            else int(manifest.get("checkpoint_freq", DEFAULT_CHECKPOINT_FREQ)),
+            eval_freq=eval_freq if eval_freq is not None
+            else int(manifest.get("eval_freq", DEFAULT_EVAL_FREQ)),
+            eval_episodes=eval_episodes if eval_episodes is not None
+            else int(manifest.get("eval_episodes", DEFAULT_EVAL_EPISODES)),
+            progress_bar=progress_bar, vec=str(manifest.get("vec_env", vec)), resume=point,
+            manifest=manifest)
+        if point.steps >= total:
+            status = manifest.get("status")
+            plan.skip = (f"{run_dir}: already {'finished' if status == 'finished' else 'at'} "
+                         f"{point.steps} steps (requested {total}); nothing to do")
+        return plan
+
+    if run_dir.is_dir() and any(run_dir.iterdir()) and not overwrite:
+        raise TrainingError(f"{run_dir} already holds a run ({runs.describe(run_dir)}); "
+                            "continue it with --resume or start over with --overwrite")
+    total = total_timesteps if total_timesteps is not None \
+        else (hp.n_timesteps or DEFAULT_TIMESTEPS)
+    return RunPlan(
+        env_id=env_id, algo=algo, seed=seed, total_timesteps=total, out_dir=out,
+        run_dir=run_dir, n_envs=n_envs if n_envs is not None else (hp.n_envs or 1),
+        env_kwargs=dict(env_kwargs or {}), hp=hp, normalize=hp.normalize,
+        checkpoint_freq=DEFAULT_CHECKPOINT_FREQ if checkpoint_freq is None else checkpoint_freq,
+        eval_freq=DEFAULT_EVAL_FREQ if eval_freq is None else eval_freq,
+        eval_episodes=DEFAULT_EVAL_EPISODES if eval_episodes is None else eval_episodes,
+        progress_bar=progress_bar, vec=vec, overwrite=overwrite)

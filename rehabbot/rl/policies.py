@@ -1,0 +1,216 @@
+"""The policies that ``rehabbot evaluate`` and ``rehabbot render`` run: a model saved by
+Stable-Baselines3 (``rehabbot train``), the scripted expert, or uniform random actions.
+
+=============================== =========================================================
+``load_policy(spec, env)``      ``spec`` is ``"expert"``, ``"random"`` or the path of an SB3
+                                ``.zip`` (the ``.zip`` suffix may be left out, as SB3 allows)
+``env_for(specs, env_id, ...)`` the env to run the policies in: ``env_id``, or the id and
+                                kwargs of the models' training runs; every spec is checked
+                                before any work starts
+``RandomPolicy``                uniform actions from the action space, seeded
+=============================== =========================================================
+
+A model is checked against the env before it runs: its observation and action spaces must
+equal the env's (:class:`PolicyError` names both otherwise). If the run directory holds
+VecNormalize statistics (``vecnormalize.pkl``), observations are normalised with them.
+Stable-Baselines3 is imported only when a model is loaded.
+"""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from rehabbot.common.errors import UsageError
+from rehabbot.envs.registration import resolve_env_id
+from rehabbot.rl import runs
+from rehabbot.rl.algorithms import PolicyError, algo_class, detect_algo
+
+POLICY_KEYWORDS = ("expert", "random")
+
+__all__ = ["POLICY_KEYWORDS", "LoadedPolicy", "PolicyError", "RandomPolicy", "check_spaces",
+           "detect_algo", "env_for", "load_model", "load_policy", "model_file"]
+
+
+class RandomPolicy:
+    """Uniform random actions from ``action_space``, seeded; SB3's ``predict`` signature."""
+
+    def __init__(self, action_space: gym.spaces.Box, seed: int | None = None) -> None:
+        self.action_space = action_space
+        self.action_space.seed(seed)
+
+    def predict(self, observation: np.ndarray, state=None, episode_start=None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        obs = np.asarray(observation)
+        if obs.ndim == 1:
+            return self.action_space.sample(), state
+        return np.stack([self.action_space.sample() for _ in range(obs.shape[0])]), state
+
+
+@dataclass
+class LoadedPolicy:
+    """A policy ready to act, and where it came from."""
+
+    policy: Any  # has SB3's predict(obs, state, episode_start, deterministic)
+    label: str  # "expert", "random", or "<algo>" / "<algo>-seed<k>" for a model
+    kind: str  # "expert", "random" or "model"
+    algo: str | None = None
+    model_path: Path | None = None
+    run_dir: Path | None = None
+    manifest: dict = field(default_factory=dict)
+    normalize_obs: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def act(self, observation: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        """One action for one observation."""
+        if self.normalize_obs is not None:
+            observation = self.normalize_obs(observation)
+        action, _ = self.policy.predict(observation, deterministic=deterministic)
+        return action
+
+    def describe(self) -> dict:
+        """JSON-ready provenance of the policy."""
+        return {"label": self.label, "kind": self.kind, "algo": self.algo,
+                "model_path": str(self.model_path) if self.model_path else None,
+                "run_dir": str(self.run_dir) if self.run_dir else None,
+                "train_seed": self.manifest.get("seed"),
+                "train_timesteps": self.manifest.get("timesteps_done"),
+                "obs_normalized": self.normalize_obs is not None}
+
+
+def model_file(spec: str | Path) -> Path:
+    """The zip file a model spec names (SB3 accepts the path without ``.zip``)."""
+    path = Path(spec)
+    if path.is_dir():
+        if (path / runs.MODEL_NAME).is_file():
+            return path / runs.MODEL_NAME
+        raise PolicyError(f"{str(path)!r} is a directory without a model.zip")
+    if path.is_file():
+        return path
+    with_zip = path.with_name(path.name + ".zip")
+    if with_zip.is_file():
+        return with_zip
+    raise PolicyError(f"model file {str(path)!r} not found (give 'expert', 'random' or the path "
+                      "of a model .zip saved by `rehabbot train` or Stable-Baselines3)")
+
+
+def _manifest(run_dir: Path | None) -> dict:
+    if run_dir is None:
+        return {}
+    try:
+        return runs.read_manifest(run_dir) or {}
+    except ValueError as err:
+        raise PolicyError(str(err)) from err
+
+
+def check_spaces(model_obs: gym.Space, model_act: gym.Space, env: gym.Env, what: str) -> None:
+    """Raise :class:`PolicyError` unless the model's spaces are the env's."""
+    for name, mine, theirs in (("observation", model_obs, env.observation_space),
+                               ("action", model_act, env.action_space)):
+        if mine != theirs:
+            env_id = env.spec.id if env.spec is not None else type(env.unwrapped).__name__
+            raise PolicyError(f"{what} does not fit {env_id}: its {name} space is {mine}, the "
+                              f"env's is {theirs}")
+
+
+def _load_normalizer(run_dir: Path | None) -> Callable[[np.ndarray], np.ndarray] | None:
+    if run_dir is None or not (run_dir / runs.VECNORMALIZE_NAME).is_file():
+        return None
+    try:
+        with open(run_dir / runs.VECNORMALIZE_NAME, "rb") as handle:
+            stats = pickle.load(handle)
+        stats.training = False
+        return stats.normalize_obs
+    except Exception as err:
+        raise PolicyError(f"corrupt normalisation statistics "
+                          f"{str(run_dir / runs.VECNORMALIZE_NAME)!r}: {err}") from err
+
+
+def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
+    """An SB3 model from ``path``, checked against ``env``."""
+    algo = detect_algo(path)
+    run_dir = runs.find_run_dir(path)
+    manifest = _manifest(run_dir)
+    try:
+        with warnings.catch_warnings():
+            # SB3 warns that a saved n-step replay buffer class overrides ``n_steps``; acting
+            # needs no replay buffer.
+            warnings.filterwarnings("ignore", message=".*n_steps.*is ignored because a custom")
+            model = algo_class(algo).load(path, device="cpu")
+    except Exception as err:  # SB3 raises many kinds on a damaged file
+        raise PolicyError(f"cannot load model {str(path)!r}: {type(err).__name__}: "
+                          f"{err}") from err
+    check_spaces(model.observation_space, model.action_space, env, f"model {str(path)!r}")
+    seed = manifest.get("seed")
+    label = algo if seed is None else f"{algo}-seed{seed}"
+    return LoadedPolicy(policy=model, label=label, kind="model", algo=algo, model_path=path,
+                        run_dir=run_dir, manifest=manifest,
+                        normalize_obs=_load_normalizer(run_dir))
+
+
+def load_policy(spec: str | Path, env: gym.Env, seed: int | None = None) -> LoadedPolicy:
+    """``"expert"``, ``"random"`` (seeded with ``seed``) or a model file, for ``env``."""
+    if str(spec) == "expert":
+        from rehabbot.rl.experts import ScriptedExpert
+
+        try:
+            expert = ScriptedExpert(env)
+        except ValueError as err:
+            raise PolicyError(str(err)) from err
+        return LoadedPolicy(policy=expert, label="expert", kind="expert")
+    if str(spec) == "random":
+        return LoadedPolicy(policy=RandomPolicy(env.action_space, seed), label="random",
+                            kind="random")
+    return load_model(model_file(spec), env)
+
+
+def env_for(specs: Sequence[str], env_id: str | None = None,
+            env_kwargs: dict | None = None) -> tuple[str, dict]:
+    """The full env id and kwargs to run every policy of ``specs`` in, checked before any
+    work starts: ``env_id`` if given (with or without ``rehabbot/``), else the id of the
+    models' ``rehabbot train`` runs, with their env kwargs (``env_kwargs`` override them).
+
+    Raises:
+        UsageError: an unknown id; ``expert``/``random`` alone without ``env_id``; models of
+            runs on different envs without ``env_id``.
+        PolicyError: a model file that is missing or not in a run directory (without
+            ``env_id``), or whose manifest is damaged.
+    """
+    kwargs = dict(env_kwargs or {})
+    if env_id is not None:
+        resolved = resolve_env_id(env_id)
+        for spec in specs:
+            if spec not in POLICY_KEYWORDS:
+                model_file(spec)  # PolicyError for a missing file, now
+        return resolved, kwargs
+    found: dict[str, tuple[str, dict]] = {}
+    for spec in specs:
+        if spec in POLICY_KEYWORDS:
+            continue
+        path = model_file(spec)
+        run_dir = runs.find_run_dir(path)
+        if run_dir is None:
+            raise PolicyError(f"{spec!r} is not in a `rehabbot train` run directory; give "
+                              "--env ENV")
+        manifest = _manifest(run_dir)
+        found[spec] = (str(manifest["env_id"]), dict(manifest.get("env_kwargs") or {}))
+    if not found:
+        raise UsageError(f"{' and '.join(repr(s) for s in specs)} need(s) --env ENV (or a "
+                         "model of a `rehabbot train` run to take it from)")
+    ids = {env for env, _ in found.values()}
+    if len(ids) > 1:
+        listing = ", ".join(f"{spec}: {env}" for spec, (env, _) in found.items())
+        raise UsageError(f"the models were trained on different envs ({listing}); give --env "
+                         "ENV to run them all in one")
+    saved = [saved for _, saved in found.values()]
+    if env_kwargs is None and any(other != saved[0] for other in saved[1:]):
+        listing = ", ".join(f"{spec}: {kw}" for spec, (_, kw) in found.items())
+        raise UsageError(f"the models were trained with different env kwargs ({listing}); "
+                         "give --env-kwargs to run them all in the same env")
+    return resolve_env_id(ids.pop()), {**saved[0], **kwargs}

@@ -1,0 +1,90 @@
+"""Running a policy for one episode and keeping what happened, step by step
+(:func:`run_episode`). The analysis layer turns an :class:`Episode` into clinical figures
+(:mod:`rehabbot.analysis.evaluation`) and a trace file (:mod:`rehabbot.analysis.traces`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from rehabbot.rl.policies import LoadedPolicy
+
+
+@dataclass
+class Episode:
+    """One episode of a policy: its outcome and its time series (row 0: after ``reset``)."""
+
+    env_id: str
+    policy: str
+    seed: int
+    dt_s: float
+    joint_names: tuple[str, ...]
+    torque_limit_nm: np.ndarray  # (n_joints,)
+    target_tool_pos_m: np.ndarray  # (N, 3) p* of every target, robot base frame
+    target_robot_rad: np.ndarray  # (N, n_joints) theta* of every target
+    robot_qpos_rad: np.ndarray  # (T + 1, n_joints)
+    tool_pos_m: np.ndarray  # (T + 1, 3) robot base frame
+    patient_qpos_rad: np.ndarray  # (T + 1, 3) the exercised joints
+    robot_torque_nm: np.ndarray  # (T + 1, n_joints)
+    interaction_force_n: np.ndarray  # (T + 1,)
+    target_index: np.ndarray  # (T + 1,)
+    total_return: float
+    success: bool
+    safety_violation: str | None
+    truncated: bool
+    exercise: int
+    weight_level: int
+    targets_reached: int
+    num_targets: int
+
+    @property
+    def length(self) -> int:
+        """Steps taken."""
+        return len(self.robot_qpos_rad) - 1
+
+
+def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
+                deterministic: bool = True) -> Episode:
+    """Reset ``env`` with ``seed`` and run ``policy`` until the episode ends."""
+    base = env.unwrapped
+    layout = base.layout
+    theta, p, phi = layout.slice("theta"), layout.slice("p"), layout.slice("phi")
+    obs, info = env.reset(seed=seed)
+    sequence = base.target_sequence
+    qpos, tool, patient, torque, force, index = [], [], [], [], [], []
+
+    def record(observation: np.ndarray, step_info: dict) -> None:
+        qpos.append(np.array(observation[theta], dtype=float))
+        tool.append(np.array(observation[p], dtype=float))
+        patient.append(np.array(observation[phi], dtype=float))
+        torque.append(np.array(step_info["robot_torque_nm"], dtype=float))
+        force.append(float(step_info["interaction_force_n"]))
+        index.append(int(step_info["target_index"]))
+
+    record(obs, info)
+    total, truncated = 0.0, False
+    while True:
+        action = policy.act(obs, deterministic=deterministic)
+        obs, reward, terminated, truncated, info = env.step(action)
+        total += float(reward)
+        record(obs, info)
+        if terminated or truncated:
+            break
+    success = bool(info["is_success"])
+    return Episode(
+        env_id=env.spec.id if env.spec else type(base).__name__,
+        policy=policy.label, seed=seed, dt_s=float(base.dt),
+        joint_names=tuple(base.robot.joint_names),
+        torque_limit_nm=base.robot.torque_limits(),
+        target_tool_pos_m=np.array(sequence.tool_pos_base_m, dtype=float),
+        target_robot_rad=np.array(sequence.robot_rad, dtype=float),
+        robot_qpos_rad=np.array(qpos), tool_pos_m=np.array(tool),
+        patient_qpos_rad=np.array(patient), robot_torque_nm=np.array(torque),
+        interaction_force_n=np.array(force), target_index=np.array(index),
+        total_return=total, success=success, safety_violation=info["safety_violation"],
+        truncated=bool(truncated), exercise=int(info["exercise"]),
+        weight_level=int(info["weight_level"]),
+        targets_reached=int(info["target_index"]) + int(success),
+        num_targets=int(info["num_targets"]))

@@ -1,0 +1,535 @@
+"""Train Stable-Baselines3 agents (PPO, SAC, TD3) on the RehabBot envs: :func:`train_run`
+(one run, one seed), written to the run folder of :mod:`rehabbot.rl.runs`.
+
+Checkpoints, ``model.zip`` and ``manifest.json`` are written to a temporary file first and
+renamed into place, so a file with its final name is always complete. SIGINT or SIGTERM
+during training stops at the next env step, saves a checkpoint, marks the manifest
+"interrupted" and raises :class:`TrainingInterrupted` (exit code 130 / 143 in the CLI);
+``resume=True`` continues from the newest checkpoint to the requested step count, appending to
+the monitor files, the evaluation log and the TensorBoard run.
+
+Stable-Baselines3 and PyTorch are imported only inside functions, so that importing this
+module stays cheap.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import functools
+import json
+import os
+import shutil
+import signal
+import sys
+import time
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from rehabbot.common.files import (
+    atomic_save,
+    atomic_write,
+    atomic_write_json,
+    check_writable_dir,
+    make_dirs,
+)
+from rehabbot.common.provenance import git_commit, now_iso, package_versions
+from rehabbot.common.signals import handling_signals
+from rehabbot.envs.registration import resolve_env_id
+from rehabbot.rl import runs
+from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
+from rehabbot.rl.callbacks import callback_classes
+from rehabbot.rl.hyperparams import Hyperparameters, as_hyperparameters, jsonable
+from rehabbot.rl.planning import (
+    DEFAULT_CHECKPOINT_FREQ,
+    DEFAULT_EVAL_EPISODES,
+    DEFAULT_EVAL_FREQ,
+    NothingToResumeError,
+    RunPlan,
+    TrainingError,
+    TrainingUsageError,
+    plan_run,
+)
+from rehabbot.rl.replay_buffer_io import load_replay_buffer
+
+EVAL_SEED_OFFSET = 10_000
+MONITOR_INFO_KEYWORDS = ("is_success", "safety_violation")
+SUBPROC_START_METHOD = "spawn"
+
+
+class TrainingInterrupted(Exception):  # noqa: N818  (not an error)
+    """Training was stopped by a signal after saving a checkpoint (raised by ``train_run``)."""
+
+    def __init__(self, run_dir: Path, timesteps_done: int, checkpoint: Path, signum: int) -> None:
+        try:
+            name = signal.Signals(signum).name
+        except ValueError:
+            name = f"signal {signum}"
+        super().__init__(f"training in {run_dir} interrupted by {name} at {timesteps_done} "
+                         f"steps; checkpoint {checkpoint}")
+        self.run_dir = run_dir
+        self.timesteps_done = timesteps_done
+        self.checkpoint = checkpoint
+        self.signum = int(signum)
+
+    @property
+    def exit_code(self) -> int:
+        """128 + the signal number: 130 for SIGINT, 143 for SIGTERM."""
+        return 128 + self.signum
+
+
+def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
+    """Build the env once so that bad ``env_kwargs`` fail before anything is written."""
+    import gymnasium as gym
+
+    try:
+        env = gym.make(env_id, **env_kwargs)
+    except (TypeError, ValueError) as err:
+        raise TrainingUsageError(f"cannot make {env_id} with env kwargs "
+                                 f"{json.dumps(env_kwargs)}: {err}") from err
+    env.close()
+
+
+def _make_env(env_id: str, env_kwargs: dict[str, Any], monitor_file: str | None,
+              append: bool, time_offset_s: float, parent_pid: int) -> Any:
+    """One Monitor-wrapped env (runs in the worker process for SubprocVecEnv)."""
+    import gymnasium as gym
+    from stable_baselines3.common.monitor import Monitor
+
+    if os.getpid() != parent_pid:
+        # Ctrl+C (and a scheduler's SIGTERM) may reach the whole process group; only the
+        # trainer handles them. Workers exit when the trainer closes their pipes.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    env = gym.make(env_id, **env_kwargs)
+    override = not (append and monitor_file is not None and os.path.isfile(monitor_file))
+    env = Monitor(env, filename=monitor_file, allow_early_resets=True,
+                  info_keywords=MONITOR_INFO_KEYWORDS if monitor_file is not None else (),
+                  override_existing=override)
+    if time_offset_s:
+        # Keep the monitor's "t" column running on from the previous segment.
+        env.t_start = time.time() - time_offset_s
+    return env
+
+
+def _make_vec_env(plan: RunPlan, n_envs: int, seed: int, monitor_dir: Path | None,
+                  append: bool = False, time_offsets: Sequence[float] = (),
+                  vec: str = "dummy") -> Any:
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    factories = [
+        functools.partial(
+            _make_env, plan.env_id, dict(plan.env_kwargs),
+            str(monitor_dir / f"train_{i}.monitor.csv") if monitor_dir is not None else None,
+            append, time_offsets[i] if i < len(time_offsets) else 0.0, os.getpid())
+        for i in range(n_envs)
+    ]
+    # Worker processes start fresh ("spawn"): a process that forks after rendering or with
+    # threads running (OpenGL, PyTorch) can hang.
+    venv = SubprocVecEnv(factories, start_method=SUBPROC_START_METHOD) \
+        if vec == "subproc" and n_envs > 1 else DummyVecEnv(factories)
+    venv.seed(seed)
+    return venv
+
+
+def action_noise(hp_block: Mapping[str, Any], n_actions: int) -> Any:
+    import numpy as np
+    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+
+    noise_type, std = hp_block.get("noise_type"), hp_block.get("noise_std")
+    if noise_type is None:
+        return None
+    mean, sigma = np.zeros(n_actions), float(std) * np.ones(n_actions)
+    if noise_type == "normal":
+        return NormalActionNoise(mean=mean, sigma=sigma)
+    return OrnsteinUhlenbeckActionNoise(mean=mean, sigma=sigma)
+
+
+@contextlib.contextmanager
+def _stop_on_signals(stopper: Any):
+    """SIGINT/SIGTERM ask ``stopper`` to stop at the next step; a second one raises
+    KeyboardInterrupt. The previous handlers come back afterwards."""
+
+    def handler(signum: int, _frame: Any) -> None:
+        if stopper.stop_signal is None:
+            stopper.stop_signal = signum
+            print(f"\nreceived {signal.Signals(signum).name}: stopping at the next step and "
+                  "saving a checkpoint (send it again to stop at once)", file=sys.stderr,
+                  flush=True)
+        else:
+            raise KeyboardInterrupt
+
+    with handling_signals(handler):
+        yield
+
+
+def _progress_bar_available() -> bool:
+    try:
+        import rich  # noqa: F401
+        import tqdm  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class _Run:
+    """The state of one executing run: its manifest and wall-clock bookkeeping."""
+
+    def __init__(self, plan: RunPlan) -> None:
+        self.plan = plan
+        self.segment_start = time.monotonic()
+        self.segment_started_at = now_iso()
+        self.prior_wall_s = float((plan.manifest or {}).get("wall_clock_s", 0.0)) \
+            if plan.resume else 0.0
+        self.manifest: dict[str, Any] = {}
+
+    def wall_clock_s(self) -> float:
+        return round(self.prior_wall_s + time.monotonic() - self.segment_start, 3)
+
+    def rel(self, path: Path) -> str:
+        try:
+            return path.relative_to(self.plan.run_dir).as_posix()
+        except ValueError:
+            return str(path)
+
+    def write(self, **updates: Any) -> None:
+        self.manifest.update(updates)
+        self.manifest["wall_clock_s"] = self.wall_clock_s()
+        segment = self.manifest["segments"][-1]
+        segment["end_timesteps"] = self.manifest["timesteps_done"]
+        segment["status"] = self.manifest["status"]
+        segment["wall_clock_s"] = round(time.monotonic() - self.segment_start, 3)
+        if self.manifest["status"] != "running":
+            segment["ended_at"] = now_iso()
+        atomic_write_json(self.plan.run_dir / runs.MANIFEST_NAME, self.manifest)
+
+    def start_manifest(self, seeds: dict[str, int], done: int) -> None:
+        plan = self.plan
+        segment = {
+            "started_at": self.segment_started_at, "ended_at": None,
+            "start_timesteps": done, "end_timesteps": done, "status": "running",
+            "resumed_from": self.rel(plan.resume.checkpoint) if plan.resume else None,
+            "seeds": seeds, "wall_clock_s": 0.0, "command": list(sys.argv),
+            "versions": package_versions(), "git_commit": git_commit(),
+        }
+        if plan.resume is None:
+            self.manifest = {
+                "format_version": runs.MANIFEST_FORMAT,
+                "env_id": plan.env_id,
+                "algo": plan.algo,
+                "seed": plan.seed,
+                "seeds": seeds,
+                "total_timesteps": plan.total_timesteps,
+                "timesteps_done": 0,
+                "n_envs": plan.n_envs,
+                "vec_env": plan.vec,
+                "env_kwargs": jsonable(plan.env_kwargs),
+                "hyperparameters": plan.hp.to_manifest(),
+                "checkpoint_freq": plan.checkpoint_freq,
+                "eval_freq": plan.eval_freq,
+                "eval_episodes": plan.eval_episodes,
+                "eval_deterministic": True,
+                "versions": package_versions(),
+                "git_commit": git_commit(),
+                "command": list(sys.argv),
+                "status": "running",
+                "started_at": self.segment_started_at,
+                "finished_at": None,
+                "wall_clock_s": 0.0,
+                "resumed_from": None,
+                "model": runs.MODEL_NAME,
+                "vecnormalize": runs.VECNORMALIZE_NAME if plan.normalize is not None else None,
+                "last_checkpoint": None,
+                "segments": [segment],
+            }
+        else:
+            self.manifest = dict(plan.manifest or {})
+            self.manifest.pop("error", None)
+            segments = [dict(old) for old in self.manifest.get("segments", [])]
+            if segments and segments[-1].get("status") == "running":
+                segments[-1]["status"] = "killed"  # ended without a word: SIGKILL, crash
+            self.manifest["segments"] = [*segments, segment]
+            self.manifest.update(
+                total_timesteps=plan.total_timesteps, timesteps_done=done,
+                checkpoint_freq=plan.checkpoint_freq, eval_freq=plan.eval_freq,
+                eval_episodes=plan.eval_episodes, versions=package_versions(),
+                git_commit=git_commit(), command=list(sys.argv), status="running",
+                finished_at=None, resumed_from=self.rel(plan.resume.checkpoint),
+                last_checkpoint=self.rel(plan.resume.checkpoint)
+                if plan.resume.checkpoint.parent.name == runs.CHECKPOINT_DIR
+                else self.manifest.get("last_checkpoint"))
+        self.write()
+
+
+def _setup(plan: RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any] | None]:
+    """Envs and model (new or loaded) for ``plan``; returns (model, venv, eval_venv, done,
+    previous evaluations)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    cls = algo_class(plan.algo)
+    run_dir = plan.run_dir
+    done = plan.resume.steps if plan.resume else 0
+    n_envs = plan.n_envs
+    time_offsets: list[float] = []
+    previous_evals = None
+    if plan.resume:
+        per_env = done // n_envs
+        time_offsets = [runs.truncate_monitor(run_dir / runs.MONITOR_DIR / f"train_{i}.monitor.csv",
+                                          per_env) for i in range(n_envs)]
+        previous_evals = runs.load_evaluations(run_dir / runs.EVALUATIONS_PATH, done)
+    # Resumed segments use shifted env seeds so that they do not replay the same episodes.
+    seeds = {"model": plan.seed + done, "train_env": plan.seed + done,
+             "eval_env": plan.seed + EVAL_SEED_OFFSET + done}
+    venv = _make_vec_env(plan, n_envs, seeds["train_env"], run_dir / runs.MONITOR_DIR,
+                         append=plan.resume is not None, time_offsets=time_offsets,
+                         vec=plan.vec)
+    eval_venv = None
+    try:
+        if plan.eval_freq > 0:
+            eval_venv = _make_vec_env(plan, 1, seeds["eval_env"], None)
+        if plan.normalize is not None:
+            if plan.resume is not None and plan.resume.vecnormalize is not None:
+                venv = VecNormalize.load(str(plan.resume.vecnormalize), venv)
+                venv.training = True
+            else:
+                venv = VecNormalize(venv, **plan.normalize)
+            if eval_venv is not None:
+                eval_venv = VecNormalize(eval_venv, training=False, norm_obs=venv.norm_obs,
+                                         norm_reward=False, clip_obs=venv.clip_obs,
+                                         gamma=venv.gamma, epsilon=venv.epsilon)
+        tb_dir = str(run_dir / runs.TB_DIR)
+        if plan.resume is None:
+            # A copy: SB3 writes into policy_kwargs (e.g. SAC adds use_sde).
+            kwargs = copy.deepcopy(plan.hp.kwargs)
+            noise = action_noise(plan.hp.to_manifest(), int(venv.action_space.shape[0]))
+            if noise is not None:
+                kwargs["action_noise"] = noise
+            kwargs.setdefault("verbose", 0)
+            try:
+                model = cls(plan.hp.policy, venv, seed=plan.seed, tensorboard_log=tb_dir,
+                            **kwargs)
+            except (TypeError, ValueError, AssertionError, KeyError) as err:
+                raise TrainingUsageError(f"invalid hyperparameters for "
+                                         f"{ALGO_NAMES[plan.algo]} ({plan.hp.source}): "
+                                         f"{err}") from err
+        else:
+            try:
+                with warnings.catch_warnings():
+                    # The saved n-step replay buffer class makes SB3 warn that ``n_steps`` is
+                    # ignored; the buffer loaded below keeps its n-step returns.
+                    warnings.filterwarnings("ignore", message=".*n_steps.*is ignored because")
+                    model = cls.load(str(plan.resume.checkpoint), env=venv, device="auto",
+                                     tensorboard_log=tb_dir, verbose=0)
+            except Exception as err:  # SB3 raises many kinds on a damaged or foreign file
+                raise TrainingError(f"cannot load checkpoint {plan.resume.checkpoint}: "
+                                    f"{type(err).__name__}: {err}") from err
+            model.set_random_seed(seeds["model"])
+            if plan.algo in OFF_POLICY:
+                if plan.resume.replay_buffer is not None:
+                    load_replay_buffer(model, plan.resume.replay_buffer)  # DataError if bad
+                else:
+                    print(f"warning: no replay buffer saved with {plan.resume.checkpoint}; "
+                          "continuing with an empty one", file=sys.stderr)
+        run.start_manifest(seeds, done)
+    except BaseException:
+        venv.close()
+        if eval_venv is not None:
+            eval_venv.close()
+        raise
+    return model, venv, eval_venv, done, previous_evals
+
+
+def execute(plan: RunPlan) -> Path:
+    """Train ``plan``; returns the run dir, raises :class:`TrainingInterrupted` on a signal."""
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+
+    torch.set_num_threads(1)
+    run_dir = plan.run_dir
+    run = _Run(plan)
+    created_root: Path | None = None
+    if plan.resume is not None:  # temporary files of a process that was killed mid-write
+        for stale in (*run_dir.glob(".*.tmp"), *(run_dir / runs.CHECKPOINT_DIR).glob(".*.tmp")):
+            with contextlib.suppress(OSError):
+                stale.unlink()
+    try:
+        if plan.resume is None:
+            if plan.overwrite and run_dir.exists():
+                shutil.rmtree(run_dir)
+            created_root = make_dirs(run_dir)
+            for sub in (runs.MONITOR_DIR, runs.CHECKPOINT_DIR):
+                (run_dir / sub).mkdir(exist_ok=True)
+        model, venv, eval_venv, done, previous_evals = _setup(plan, run)
+    except BaseException:
+        if plan.resume is None:  # leave nothing half-written behind
+            if created_root is not None:
+                shutil.rmtree(created_root, ignore_errors=True)
+            elif run_dir.is_dir():
+                for child in run_dir.iterdir():
+                    if child.is_dir():
+                        shutil.rmtree(child, ignore_errors=True)
+                    else:
+                        child.unlink(missing_ok=True)
+        raise
+
+    checkpointer_cls, stopper_cls = callback_classes()
+    n_envs = plan.n_envs
+
+    def on_saved(steps: int, path: Path) -> None:
+        run.write(timesteps_done=steps, last_checkpoint=run.rel(path))
+
+    checkpointer = checkpointer_cls(
+        max(plan.checkpoint_freq // n_envs, 1) if plan.checkpoint_freq > 0 else sys.maxsize,
+        str(run_dir / runs.CHECKPOINT_DIR), on_saved)
+    stopper = stopper_cls(plan.total_timesteps, exact_rollouts=plan.algo not in OFF_POLICY)
+    callbacks: list[Any] = [checkpointer]
+    if eval_venv is not None:
+        evaluator = EvalCallback(eval_venv, n_eval_episodes=plan.eval_episodes,
+                                 eval_freq=max(plan.eval_freq // n_envs, 1),
+                                 log_path=str(run_dir / runs.EVAL_DIR), deterministic=True,
+                                 verbose=0, warn=False)
+        if previous_evals:
+            evaluator.evaluations_timesteps = previous_evals["timesteps"]
+            evaluator.evaluations_results = previous_evals["results"]
+            evaluator.evaluations_length = previous_evals["ep_lengths"]
+            evaluator.evaluations_successes = previous_evals["successes"]
+        callbacks.append(evaluator)
+    callbacks.append(stopper)
+    # Keep the step-based triggers aligned with the run's total step count after a resume.
+    for callback in callbacks:
+        callback.n_calls = done // n_envs
+
+    progress = plan.progress_bar and _progress_bar_available()
+    try:
+        with _stop_on_signals(stopper), warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Training and eval env are not of the "
+                                    "same type")
+            try:
+                model.learn(plan.total_timesteps - done, callback=CallbackList(callbacks),
+                            reset_num_timesteps=plan.resume is None,
+                            tb_log_name=ALGO_NAMES[plan.algo], progress_bar=progress)
+            except KeyboardInterrupt:
+                stopper.stop_signal = stopper.stop_signal or signal.SIGINT
+        done = int(model.num_timesteps)
+        if stopper.stop_signal is not None:
+            checkpoint = checkpointer.save_now()
+            run.write(status="interrupted", timesteps_done=done,
+                      last_checkpoint=run.rel(checkpoint))
+            raise TrainingInterrupted(run_dir, done, checkpoint, stopper.stop_signal)
+        checkpoint = checkpointer.save_now()  # final checkpoint, so that --resume can extend
+        atomic_write(run_dir / runs.MODEL_NAME, model.save)
+        vec_normalize = model.get_vec_normalize_env()
+        if vec_normalize is not None:
+            atomic_save(run_dir / runs.VECNORMALIZE_NAME, vec_normalize.save)
+        run.write(status="finished", timesteps_done=done, finished_at=now_iso(),
+                  last_checkpoint=run.rel(checkpoint))
+    except (TrainingInterrupted, TrainingError):
+        raise
+    except BaseException as err:
+        with contextlib.suppress(Exception):  # record what happened, then re-raise
+            if isinstance(err, KeyboardInterrupt):  # e.g. Ctrl+C while saving after learn
+                run.write(status="interrupted")
+            else:
+                run.write(status="failed", error=f"{type(err).__name__}: {err}")
+        raise
+    finally:
+        venv.close()
+        if eval_venv is not None:
+            eval_venv.close()
+    return run_dir
+
+
+def train_run(env_id: str, algo: str, seed: int, total_timesteps: int, out_dir: str | Path,
+              *, n_envs: int = 1, hyperparams: str | Path | Mapping[str, Any] | Hyperparameters
+              | None = None, env_kwargs: Mapping[str, Any] | None = None, resume: bool = False,
+              checkpoint_freq: int = DEFAULT_CHECKPOINT_FREQ,
+              eval_freq: int = DEFAULT_EVAL_FREQ, eval_episodes: int = DEFAULT_EVAL_EPISODES,
+              progress_bar: bool = True, overwrite: bool = False, vec: str = "dummy") -> Path:
+    """Train one agent and return its run directory ``out_dir/<env-short>/<algo>/seed<k>``.
+
+    ``hyperparams`` is a YAML file path, the name of a settings file shipped with the package
+    (``"sac"``), a flat mapping or a :class:`Hyperparameters`;
+    ``checkpoint_freq``/``eval_freq`` count env steps (0 turns them off). With ``resume``, the
+    run continues from its newest checkpoint until ``total_timesteps`` (n_envs and env_kwargs
+    must match the manifest; the saved model's hyperparameters apply); a run that is already
+    there is left alone.
+
+    Raises:
+        UsageError: a bad id, algorithm, hyperparameter or value (``HyperparameterError``,
+            ``TrainingUsageError``); nothing is written.
+        TrainingError: an existing run without ``resume`` or ``overwrite``, nothing to resume,
+            a damaged checkpoint; nothing is left behind for a new run.
+        OutputError: ``out_dir`` cannot be written.
+        TrainingInterrupted: SIGINT/SIGTERM stopped training; a checkpoint was saved.
+    """
+    env_id = resolve_env_id(env_id)
+    algo = check_algo(algo)
+    hp = as_hyperparameters(hyperparams, env_id, algo)
+    kwargs = None if env_kwargs is None else dict(env_kwargs)
+    check_writable_dir(Path(out_dir))
+    plan = plan_run(env_id, algo, seed, total_timesteps, out_dir, n_envs=n_envs, hp=hp,
+                    env_kwargs=kwargs, resume=resume, overwrite=overwrite,
+                    checkpoint_freq=checkpoint_freq, eval_freq=eval_freq,
+                    eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec)
+    if plan.skip is not None:
+        return plan.run_dir
+    check_env_kwargs(env_id, plan.env_kwargs)
+    return execute(plan)
+
+
+def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: int | None,
+               out_dir: str | Path, *, hyperparams: str | Path | Mapping[str, Any]
+               | Hyperparameters | None = None, env_kwargs: Mapping[str, Any] | None = None,
+               resume: bool = False, overwrite: bool = False, n_envs: int | None = None,
+               checkpoint_freq: int | None = None, eval_freq: int | None = None,
+               eval_episodes: int | None = None, progress_bar: bool = True,
+               vec: str = "dummy") -> list[RunPlan]:
+    """Plan one run per seed and check everything (ids, settings, resume points, the output
+    folder, the env kwargs) before any of them starts; writes nothing.
+
+    With ``resume``, seeds that have no run yet are started afresh (``--resume`` with more
+    seeds than were started); it is an error only if no seed has anything to resume.
+    """
+    env_id = resolve_env_id(env_id)
+    algo = check_algo(algo)
+    hp = as_hyperparameters(hyperparams, env_id, algo)
+    if resume and overwrite:
+        raise TrainingUsageError("--resume and --overwrite exclude each other")
+    seeds = list(dict.fromkeys(seeds))
+    for seed in seeds:
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise TrainingUsageError(f"seeds must be integers >= 0, got {seed!r}")
+    check_writable_dir(Path(out_dir))
+    kwargs = None if env_kwargs is None else dict(env_kwargs)
+    common = dict(n_envs=n_envs, hp=hp, env_kwargs=kwargs, overwrite=overwrite,
+                  checkpoint_freq=checkpoint_freq, eval_freq=eval_freq,
+                  eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec)
+    plans: list[RunPlan | None] = []
+    missing: list[NothingToResumeError] = []
+    for seed in seeds:
+        try:
+            plans.append(plan_run(env_id, algo, seed, total_timesteps, out_dir, resume=resume,
+                                  **common))
+        except NothingToResumeError as err:
+            plans.append(None)
+            missing.append(err)
+    if missing and len(missing) == len(seeds):
+        raise TrainingError(str(missing[0]) if len(seeds) == 1 else
+                            f"nothing to resume for any of the seeds {seeds} under "
+                            f"{runs.run_directory(out_dir, env_id, algo, seeds[0]).parent}")
+    resolved: list[RunPlan] = []
+    for seed, plan in zip(seeds, plans, strict=True):
+        if plan is None:
+            run_dir = runs.run_directory(out_dir, env_id, algo, seed)
+            if run_dir.is_dir() and any(run_dir.iterdir()):
+                raise TrainingError(f"nothing to resume in {run_dir} (no checkpoint yet); "
+                                    "start it again with --overwrite")
+            plan = plan_run(env_id, algo, seed, total_timesteps, out_dir, resume=False,
+                            **common)
+        resolved.append(plan)
+    for checked in {json.dumps(p.env_kwargs, sort_keys=True) for p in resolved
+                    if p.skip is None}:
+        check_env_kwargs(env_id, json.loads(checked))
+    return resolved

@@ -1,0 +1,103 @@
+"""Reward terms, named: a reward function turns what happened in a step
+(:class:`StepOutcome`) into a dict of terms; the env pays their sum and reports each as
+``info["reward_<name>"]``. A later env version adds or replaces terms by giving the env
+another reward function, without touching ``step``.
+
+:class:`PaperReward` is eq. (5) of the paper with two optional terms and the safety penalty:
+
+==================  ===========================================================================
+term                value
+==================  ===========================================================================
+``distance``        ``-||theta - theta*_i||_2`` [rad]
+``bonus``           ``B_i`` when ``||theta - theta*_i||_inf < target_tolerance_rad``:
+                    ``intermediate_bonus`` (10), or ``final_bonus`` (100) for the last target
+``safety``          on a safety stop: ``-min(steps left + 1, H) x c``, ``H =
+                    safety_penalty_steps`` (100 = 1 / (1 - gamma) for gamma = 0.99; ``None``:
+                    every step left), ``c`` = this step's distance plus the extra terms' maxima
+                    (``safety_penalty="hold"``) or the worst per-step loss the bounds allow
+                    (``"worst_case"``): what holding still would have cost, so stopping never
+                    pays better than holding still for an agent with that gamma
+``smoothness``      ``-smoothness_weight x mean(((a_t - a_{t-1}) / (high - low))^2)`` (0 by default)
+``effort``          ``-effort_weight x mean((tau / tau_limit)^2)`` (0 by default)
+==================  ===========================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SAFETY_PENALTIES = ("hold", "worst_case")
+SAFETY_PENALTY_STEPS = 100  # 1 / (1 - gamma) for gamma = 0.99: the horizon of the agent's values
+
+
+@dataclass
+class StepOutcome:
+    """What happened in one step, as the reward terms see it; the env owns one and fills it
+    in every step (no allocation)."""
+
+    distance_rad: float = 0.0  # ||theta - theta*_i||_2 for the target active during the step
+    reached: bool = False  # the target was reached (and no safety rule ended the episode)
+    last_target: bool = False  # the target is the sequence's last
+    safety_stop: bool = False  # a safety rule ended the episode
+    steps_done: int = 0  # steps of the episode so far, this one included
+    action: np.ndarray | None = None  # the action applied (inside the action space)
+    previous_action: np.ndarray | None = None
+    torque_nm: np.ndarray | None = None  # the robot's actuator torques after the step
+
+
+@dataclass(frozen=True)
+class PaperReward:
+    """Eq. (5) of the paper plus the optional smoothness and effort terms and the safety
+    penalty (module docstring). ``action_range`` and ``torque_limit_nm`` scale the optional
+    terms; ``worst_step_reward`` is the ``"worst_case"`` penalty's per-step loss."""
+
+    target_tolerance_rad: float = 0.05
+    intermediate_bonus: float = 10.0
+    final_bonus: float = 100.0
+    smoothness_weight: float = 0.0
+    effort_weight: float = 0.0
+    safety_penalty: str = "hold"
+    safety_penalty_steps: int | None = SAFETY_PENALTY_STEPS
+    max_episode_steps: int = 1000
+    action_range: np.ndarray | None = None
+    torque_limit_nm: np.ndarray | None = None
+    worst_step_reward: float = 0.0
+
+    names: tuple[str, ...] = ("distance", "bonus", "safety", "smoothness", "effort")
+
+    def __call__(self, outcome: StepOutcome) -> dict[str, float]:
+        distance = -outcome.distance_rad
+        smoothness = effort = safety = bonus = 0.0
+        if self.smoothness_weight:
+            change = (outcome.action - outcome.previous_action) / self.action_range
+            smoothness = -self.smoothness_weight * float(change @ change) / len(change)
+        if self.effort_weight:
+            torque = outcome.torque_nm / self.torque_limit_nm
+            if np.all(np.isfinite(torque)):
+                effort = -self.effort_weight * float(torque @ torque) / len(torque)
+        if outcome.safety_stop:
+            steps_left = max(self.max_episode_steps - outcome.steps_done, 0) + 1
+            if self.safety_penalty_steps is not None:
+                steps_left = min(steps_left, self.safety_penalty_steps)
+            per_step = (self.worst_step_reward if self.safety_penalty == "worst_case"
+                        else distance - self.smoothness_weight - self.effort_weight)
+            safety = steps_left * per_step
+        elif outcome.reached:
+            bonus = self.final_bonus if outcome.last_target else self.intermediate_bonus
+        return {"distance": distance, "bonus": bonus, "safety": safety,
+                "smoothness": smoothness, "effort": effort}
+
+    def zero_terms(self) -> dict[str, float]:
+        """Every term at 0 (the ``info`` of ``reset``)."""
+        return dict.fromkeys(self.names, 0.0)
+
+
+def total(terms: dict[str, float]) -> float:
+    """The reward: the terms added in their order."""
+    values = iter(terms.values())
+    reward = next(values)
+    for value in values:
+        reward += value
+    return reward

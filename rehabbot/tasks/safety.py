@@ -1,0 +1,214 @@
+"""Safety rules that end an episode, and their thresholds.
+
+=========================  ====================================================================
+rule (``info`` name)       fires when
+=========================  ====================================================================
+``"instability"``          MuJoCo met a non-finite or huge state (its bad qpos/qvel/qacc
+                           warnings: it then resets the state), a joint moved faster than
+                           ``BLOWUP_SPEED_RAD_S``, the cuff force is non-finite or beyond
+                           ``BLOWUP_FORCE_N`` (constraint blow-up), or an observation left
+                           its bounds (checked by the env). Always ends the episode.
+``"range_of_motion"``      a patient joint is more than ``rom_tolerance_deg`` beyond its
+                           anatomical range (hyperextension)
+``"cuff_force"``           the force in a cuff exceeds the ISO/TS 15066 quasi-static limit of
+                           the body region it holds (hand 140 N, lower leg 130 N), or
+                           ``cuff_force_limit_n`` when given (every cuff is checked)
+``"unintended_contact"``   a robot geom touches the patient's body or the furniture, deeper
+                           than ``contact_tolerance_m``
+=========================  ====================================================================
+
+Rules are checked in this order; the first that fires is reported.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from rehabbot.common.arrays import as_index
+from rehabbot.sim.scene import Scene
+
+RULES = ("instability", "range_of_motion", "cuff_force", "unintended_contact")
+
+# MuJoCo's warnings for a diverging simulation; on each it resets the state to the model's.
+UNSTABLE_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                     mujoco.mjtWarning.mjWARN_BADQACC)
+# Speeds and forces no motion of these scenes reaches: random torques at the UR5e limits with
+# the safety rules switched off peak at about 64 rad/s and 6.4 kN (benchmarks/soak.py).
+BLOWUP_SPEED_RAD_S = 1000.0
+BLOWUP_FORCE_N = 1.0e5
+
+# ISO/TS 15066 Table A.2, quasi-static contact force limits [N] (domain-facts §4.1).
+ISO_TS_15066_QUASI_STATIC_N: dict[str, float] = {
+    "hands_and_fingers": 140.0,
+    "lower_arms_and_wrists": 160.0,
+    "upper_arms_and_elbows": 150.0,
+    "thighs_and_knees": 220.0,
+    "lower_legs": 130.0,
+}
+# Body region under the cuff: the hand for arm exercises, the shank (above the ankle) for legs.
+CUFF_BODY_REGION: dict[str, str] = {"arm": "hands_and_fingers", "leg": "lower_legs"}
+
+
+@dataclass(frozen=True)
+class SafetyThresholds:
+    """Thresholds of the safety rules (see the module docstring)."""
+
+    rom_tolerance_deg: float = 2.0
+    cuff_force_limit_n: float | None = None
+    contact_tolerance_m: float = 0.002
+
+    def __post_init__(self) -> None:
+        for name in ("rom_tolerance_deg", "contact_tolerance_m"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name}={value!r} must be a finite number >= 0")
+        limit = self.cuff_force_limit_n
+        if limit is not None and not (isinstance(limit, (int, float)) and math.isfinite(limit)
+                                      and limit > 0):
+            raise ValueError(f"cuff_force_limit_n={limit!r} must be a finite number > 0 or None")
+
+
+def cuff_force_limits_n(scene: Scene, thresholds: SafetyThresholds) -> np.ndarray:
+    """The force limit [N] of each cuff (one per robot): ``cuff_force_limit_n`` when given,
+    else the ISO/TS 15066 quasi-static limit of the body region under that cuff."""
+    if thresholds.cuff_force_limit_n is not None:
+        return np.full(len(scene.robots), float(thresholds.cuff_force_limit_n))
+    return np.array([ISO_TS_15066_QUASI_STATIC_N[CUFF_BODY_REGION[h.limb.split("_")[0]]]
+                     for h in scene.robots])
+
+
+def _equality_rows(model: mujoco.MjModel, eq_id: int) -> int:
+    """Constraint rows of an equality: 3 for a connect, 6 for a weld (force first), ..."""
+    kind = model.eq_type[eq_id]
+    if kind == mujoco.mjtEq.mjEQ_CONNECT:
+        return 3
+    if kind == mujoco.mjtEq.mjEQ_WELD:
+        return 6
+    return 1
+
+
+class SafetyMonitor:
+    """Checks the rules on a ``MjData`` after each control step (ids resolved once).
+
+    Every cuff is checked against its own limit: the force of cuff ``k`` is the magnitude of
+    the first three rows (the force) of its equality constraint, which MuJoCo puts first in
+    the constraint arrays, in the order of the equalities.
+    """
+
+    def __init__(self, scene: Scene, thresholds: SafetyThresholds) -> None:
+        model = scene.model
+        self.scene = scene
+        self.thresholds = thresholds
+        self.force_limits_n = cuff_force_limits_n(scene, thresholds)
+        jnt = [model.joint(n).id for n in scene.patient_joint_names]
+        tol = math.radians(thresholds.rom_tolerance_deg)
+        self._patient_qpos_adr = as_index(scene.patient_qpos_adr)
+        self._rom_low = model.jnt_range[jnt, 0] - tol
+        self._rom_high = model.jnt_range[jnt, 1] + tol
+        self._is_robot = np.zeros(model.ngeom, dtype=bool)
+        self._is_robot[scene.robot_geom_ids] = True
+        self._is_other = np.zeros(model.ngeom, dtype=bool)
+        self._is_other[scene.patient_geom_ids] = True
+        self._is_other[scene.furniture_geom_ids] = True
+        # Constraint row where each cuff's force starts (equalities come first, in id order).
+        first_row = np.cumsum([0, *(_equality_rows(model, e) for e in range(model.neq))])
+        self._cuff_rows = tuple(int(first_row[h.equality_id]) for h in scene.robots)
+        self._cuff_rows_needed = max(self._cuff_rows) + 3
+        self._single_cuff = len(self._cuff_rows) == 1
+        self._forces_n = np.zeros(len(self._cuff_rows))
+        self._warning_idx = tuple(int(w) for w in UNSTABLE_WARNINGS)
+        self._warnings0 = 0
+        self._blowup_speed2 = BLOWUP_SPEED_RAD_S**2
+        self._qpos = np.zeros(model.nq)
+        self._qvel = np.zeros(model.nv)
+        self._speed = np.zeros(model.nv)
+
+    @property
+    def force_limit_n(self) -> float:
+        """The lowest cuff force limit [N] (the only one, with one robot)."""
+        return float(self.force_limits_n.min())
+
+    def bind(self, data: mujoco.MjData) -> None:
+        """Cache views of ``data``'s arrays (again after a pickle round trip)."""
+        self._qpos = data.qpos
+        self._qvel = data.qvel
+
+    def reset(self, data: mujoco.MjData) -> None:
+        """Start an episode on ``data`` (its views are cached and its warnings counted)."""
+        self.bind(data)
+        self._warnings0 = self._warning_count(data)
+
+    def _warning_count(self, data: mujoco.MjData) -> int:
+        number = data.warning.number
+        i, j, k = self._warning_idx
+        return int(number[i]) + int(number[j]) + int(number[k])
+
+    def cuff_forces_n(self, data: mujoco.MjData) -> np.ndarray:
+        """Magnitude of each cuff's constraint force [N] (0 when the cuffs are not active);
+        the returned array is reused by the next call."""
+        forces = self._forces_n
+        if data.ne < self._cuff_rows_needed:
+            forces[:] = 0.0
+            return forces
+        efc_force = data.efc_force
+        for k, row in enumerate(self._cuff_rows):
+            f = efc_force[row:row + 3]
+            forces[k] = math.sqrt(float(f @ f))
+        return forces
+
+    def cuff_force_n(self, data: mujoco.MjData) -> float:
+        """The largest cuff force [N] (the cuff's force, with one robot)."""
+        if self._single_cuff:
+            if data.ne < 3:
+                return 0.0
+            f = data.efc_force[:3]
+            return math.sqrt(float(f @ f))
+        return float(self.cuff_forces_n(data).max())
+
+    def unstable(self, data: mujoco.MjData, force_n: float) -> bool:
+        """Whether the simulation diverged since :meth:`reset`: MuJoCo warned of a bad
+        qpos/qvel/qacc (and reset the state), a joint speed or the cuff force ``force_n`` is
+        non-finite or beyond its blow-up bound. Out-of-bounds observations are checked by the
+        env."""
+        if self._warning_count(data) != self._warnings0:
+            return True
+        if not force_n <= BLOWUP_FORCE_N:  # also true for NaN
+            return True
+        qvel = self._qvel
+        if qvel @ qvel <= self._blowup_speed2:  # no |v| can exceed the bound (NaN fails)
+            return False
+        speed = np.abs(qvel, out=self._speed)
+        return not float(speed.max()) <= BLOWUP_SPEED_RAD_S
+
+    def check(self, data: mujoco.MjData, force_n: float) -> str | None:
+        """The first rule that fires for ``data`` (its largest cuff force ``force_n``, from
+        :meth:`cuff_force_n`), or None."""
+        if self.unstable(data, force_n):
+            return "instability"
+        q = self._qpos[self._patient_qpos_adr]
+        if np.logical_or.reduce((q < self._rom_low) | (q > self._rom_high)):
+            return "range_of_motion"
+        if self._single_cuff:
+            if force_n > self.force_limits_n[0]:
+                return "cuff_force"
+        elif (self.cuff_forces_n(data) > self.force_limits_n).any():
+            return "cuff_force"
+        if data.ncon:
+            contact = data.contact
+            geom = contact.geom
+            robot = self._is_robot[geom]
+            other = self._is_other[geom]
+            hit = (robot[:, 0] & other[:, 1]) | (robot[:, 1] & other[:, 0])
+            if hit.any() and (contact.dist[hit] < -self.thresholds.contact_tolerance_m).any():
+                return "unintended_contact"
+        return None
+
+    def violated_rom_joints(self, data: mujoco.MjData) -> list[str]:
+        """Names of the patient joints beyond range (for diagnostics)."""
+        q = data.qpos[self._patient_qpos_adr]
+        bad = (q < self._rom_low) | (q > self._rom_high)
+        return [n for n, b in zip(self.scene.patient_joint_names, bad, strict=True) if b]

@@ -1,0 +1,29 @@
+"""The benchmark scripts run and report what they claim (their figures are measured by hand
+and quoted in the README; here only that the tables are produced and consistent)."""
+
+from __future__ import annotations
+
+import re
+
+from benchmarks import step_throughput
+
+ENV = "rehabbot/rehab-reach-v0"
+
+
+def test_step_throughput_measures_the_env_as_users_make_it(capsys) -> None:
+    assert step_throughput.main(["--steps", "30", "--rounds", "3", "--warmup", "5",
+                                 "--ids", "rehab-reach-v0"]) == 0
+    out = capsys.readouterr().out
+    # gym.make's own wrappers: the registration's TimeLimit only.
+    assert "wrappers: TimeLimit;" in out
+    row = next(line for line in out.splitlines() if line.startswith(f"| {ENV} "))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    env_rate, physics_rate = float(cells[1]), float(cells[2])
+    share = float(re.match(r"([0-9.]+)%", cells[3]).group(1)) / 100
+    assert env_rate > 0 and physics_rate > 0
+    assert 0.0 < share <= 1.5  # physics time / env time, noisy at 30 steps
+
+
+def test_step_throughput_refuses_unknown_ids(capsys) -> None:
+    assert step_throughput.main(["--ids", "rehab-elbow-v9"]) == 2
+    assert "unknown id(s) rehabbot/rehab-elbow-v9" in capsys.readouterr().err
