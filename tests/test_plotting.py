@@ -17,6 +17,7 @@ import pytest
 pytest.importorskip("matplotlib")
 
 from matplotlib.collections import PolyCollection
+from mpl_toolkits.mplot3d import proj3d
 
 from rehabbot.analysis import figures, learning_curves, plotting, traces
 from rehabbot.cli import EXIT_FAILURE, EXIT_USAGE, CliError
@@ -339,6 +340,98 @@ def test_fig3_tool_path(trace_file: Path) -> None:
     spans = [np.diff(lim)[0] for lim in (ax.get_xlim(), ax.get_ylim(), ax.get_zlim())]
     np.testing.assert_allclose(spans, spans[0])
     assert ax.get_xlabel() == "x [m]" and ax.get_zlabel() == "z [m]"
+
+
+def make_target_trace(path: Path, targets_m: np.ndarray) -> Path:
+    """:func:`make_trace` with the given targets (N, 3)."""
+    data = make_trace(path)
+    data["target_tool_pos_m"] = np.asarray(targets_m, dtype=float)
+    data["target_robot_rad"] = np.zeros((len(targets_m), 6))
+    np.savez(path, **data)
+    return path
+
+
+def drawn_labels(figure) -> tuple[list[str], np.ndarray]:
+    """Fig. 3's label texts and where they land on the page [pt] once drawn."""
+    figure.canvas.draw()
+    ax = figure.axes[0]
+    xyz = np.array([text.get_position_3d() for text in ax.texts]).reshape(-1, 3)
+    return [text.get_text().strip() for text in ax.texts], figures._page_points_pt(ax, xyz)
+
+
+def target_markers(ax):
+    return next(c for c in ax.collections if c.get_label().startswith("targets"))
+
+
+def test_fig3_coinciding_targets_share_one_label(tmp_path: Path) -> None:
+    # out 1..5, then back to (1 mm from) target 2, as a reaching exercise revisits a pose
+    targets = np.array([[0.5, 0.0, 0.3], [0.45, 0.05, 0.35], [0.4, 0.1, 0.4],
+                        [0.35, 0.05, 0.45], [0.3, 0.0, 0.5], [0.451, 0.05, 0.35]])
+    figure = figures.build_tool_path(make_target_trace(tmp_path / "trace.npz", targets))
+    texts, _ = drawn_labels(figure)
+    assert texts == ["1", "2, 6", "3", "4", "5"]
+    assert len(target_markers(figure.axes[0]).get_offsets()) == 6
+    # the pure rule: within 2 % of the plot's extent shares a label, beyond it does not
+    extent_m = 0.5
+    near = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.0099]])
+    far = near + np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0002]])
+    spread_pt = np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 50.0]])  # no label collisions
+    labels = figures.choose_target_labels(near, spread_pt, extent_m)
+    assert [label.text for label in labels] == ["1, 3", "2"]
+    assert labels[0].numbers == (1, 3) and labels[0].position_m == (0.0, 0.0, 0.0)
+    assert [label.text for label in figures.choose_target_labels(far, spread_pt, extent_m)] == [
+        "1", "2", "3"]
+
+
+def test_fig3_dense_trajectory_labels_do_not_collide(tmp_path: Path) -> None:
+    s = np.linspace(0.0, 1.0, 36)  # 36 waypoints along a ~20 cm path, ~6 mm apart
+    targets = np.stack([0.3 + 0.2 * s, 0.02 * np.sin(np.pi * s), 0.35 + 0.05 * s], axis=1)
+    path = make_target_trace(tmp_path / "trace.npz", targets)
+    figure = figures.build_tool_path(path)
+    texts, anchors_pt = drawn_labels(figure)
+    ax = figure.axes[0]
+    assert len(target_markers(ax).get_offsets()) == 36  # every target keeps its marker
+    assert texts[0].split(", ")[0] == "1" and texts[-1].split(", ")[-1] == "36"
+    assert 2 <= len(texts) < 36
+    numbers = [int(n) for text in texts for n in text.split(", ")]
+    assert numbers == sorted(set(numbers))
+    gaps_pt = [np.linalg.norm(a - b) for i, a in enumerate(anchors_pt) for b in anchors_pt[i + 1:]]
+    # 0.5 pt: the layout engine settles the axes a fraction of a point further on a redraw
+    assert min(gaps_pt) >= figures.LABEL_MIN_SEPARATION_PT - 0.5
+    # the rendered text boxes, not only the anchors, stay apart
+    renderer = figure.canvas.get_renderer()
+    boxes = []
+    for text in ax.texts:
+        x, y, z = text.get_position_3d()
+        xs, ys, _ = proj3d.proj_transform(x, y, z, ax.get_proj())
+        text.set_position((xs, ys))
+        boxes.append(text.get_window_extent(renderer))
+    assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "targets, labelled by number (some omitted where crowded)" in legend
+    # deterministic
+    assert drawn_labels(figures.build_tool_path(path))[0] == texts
+
+
+def test_fig3_sparse_targets_keep_every_label(tmp_path: Path) -> None:
+    # 6 targets 10 cm apart, zig-zagging upwards
+    targets = np.array([[0.3 + 0.1 * (i % 2), 0.0, 0.3 + 0.0866 * i] for i in range(6)])
+    figure = figures.build_tool_path(make_target_trace(tmp_path / "trace.npz", targets))
+    texts, _ = drawn_labels(figure)
+    assert texts == ["1", "2", "3", "4", "5", "6"]
+    legend = [t.get_text() for t in figure.axes[0].get_legend().get_texts()]
+    assert legend[-1] == "targets, labelled by number"
+
+
+def test_target_labels_first_and_last_kept_when_they_collide() -> None:
+    # a closed loop on the page: the last target's label folds into the first's
+    targets = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.2, 0.0, 0.0], [0.05, 0.0, 0.0]])
+    anchors_pt = np.array([[0.0, 0.0], [100.0, 0.0], [200.0, 0.0], [3.0, 3.0]])
+    labels = figures.choose_target_labels(targets, anchors_pt, extent_m=0.3)
+    assert [label.text for label in labels] == ["1, 4", "2", "3"]
+    assert figures.choose_target_labels(np.zeros((0, 3)), np.zeros((0, 2)), 1.0) == []
+    with pytest.raises(ValueError, match="anchors"):
+        figures.choose_target_labels(targets, anchors_pt[:2], 0.3)
 
 
 def test_trace_figures_written(trace_file: Path, tmp_path: Path) -> None:

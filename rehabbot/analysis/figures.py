@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -33,6 +34,19 @@ TOOL_PATH_COLOR = "#8000c0"
 TARGET_PATH_COLOR = "0.5"
 LIMIT_COLOR = "#d62728"
 DPI = 150
+
+# Fig. 3 target labels (see :func:`choose_target_labels`)
+TARGET_MERGE_FRACTION = 0.02
+LABEL_FONTSIZE_PT = 10.0
+LABEL_CHAR_WIDTH_EM = 0.7
+LABEL_HEIGHT_EM = 1.2
+LABEL_DESCENT_EM = 0.3
+LABEL_GAP_PT = 3.0
+LABEL_OFFSET_PT = (4.0, 4.0)  # right of and above the target: its "X" (s=50 pt²) is 7 pt wide
+LABEL_ZORDER = 10.0
+# what the no-overlap rule guarantees between any two labels' anchors on the page
+LABEL_MIN_SEPARATION_PT = (LABEL_FONTSIZE_PT * min(LABEL_HEIGHT_EM, LABEL_CHAR_WIDTH_EM)
+                           + LABEL_GAP_PT)
 
 ALGO_ORDER: tuple[str, ...] = ("ppo", "sac", "td3")
 ALGO_COLORS: dict[str, str] = {"ppo": "#1f77b4", "sac": "#ff7f0e", "td3": "#2ca02c"}
@@ -165,6 +179,107 @@ def plot_torques(trace_path: Trace | Path | str, out_dir: Path | str,
     return _plot_trace(build_torques, "fig6_torques", trace_path, out_dir, formats)
 
 
+@dataclass(frozen=True)
+class TargetLabel:
+    """One number label of Fig. 3: the 1-based numbers of the targets it names (ascending) and
+    the tool position it is drawn at (that of its first target)."""
+
+    numbers: tuple[int, ...]
+    position_m: tuple[float, float, float]
+
+    @property
+    def text(self) -> str:
+        return ", ".join(str(number) for number in self.numbers)
+
+
+def group_coincident_targets(targets_m: np.ndarray, radius_m: float) -> list[tuple[int, ...]]:
+    """0-based target indices grouped by place, in order of first visit: each target joins the
+    first group whose first target lies within ``radius_m``, else starts a group (no chaining:
+    a group never spans more than ``2 * radius_m``)."""
+    targets_m = np.asarray(targets_m, dtype=float).reshape(-1, 3)
+    groups: list[list[int]] = []
+    for i, point in enumerate(targets_m):
+        for group in groups:
+            if np.linalg.norm(point - targets_m[group[0]]) <= radius_m:
+                group.append(i)
+                break
+        else:
+            groups.append([i])
+    return [tuple(group) for group in groups]
+
+
+def _label_box_pt(anchor_pt: np.ndarray, text: str,
+                  fontsize_pt: float) -> tuple[float, float, float, float]:
+    """Estimated extent (x0, y0, x1, y1) [pt] of left/baseline-aligned ``text`` at ``anchor_pt``:
+    every character as wide as a bold digit or wider, the line's full height."""
+    x0 = float(anchor_pt[0])
+    y0 = float(anchor_pt[1]) - LABEL_DESCENT_EM * fontsize_pt
+    return (x0, y0, x0 + LABEL_CHAR_WIDTH_EM * fontsize_pt * len(text),
+            y0 + LABEL_HEIGHT_EM * fontsize_pt)
+
+
+def _boxes_collide(a: tuple[float, float, float, float], b: tuple[float, float, float, float],
+                   gap_pt: float) -> bool:
+    """Whether two boxes (x0, y0, x1, y1) [pt] come closer than ``gap_pt``."""
+    return (a[0] < b[2] + gap_pt and b[0] < a[2] + gap_pt
+            and a[1] < b[3] + gap_pt and b[1] < a[3] + gap_pt)
+
+
+def choose_target_labels(targets_m: np.ndarray, anchors_pt: np.ndarray, extent_m: float, *,
+                         merge_fraction: float = TARGET_MERGE_FRACTION,
+                         fontsize_pt: float = LABEL_FONTSIZE_PT,
+                         gap_pt: float = LABEL_GAP_PT) -> list[TargetLabel]:
+    """Which target number labels Fig. 3 draws, so that none overlap (pure; no rendering).
+
+    ``targets_m`` (N, 3): the targets; ``anchors_pt`` (N, 2): where each projects on the page
+    [pt]; ``extent_m``: the plot's axis span. Targets within ``merge_fraction × extent_m`` of a
+    group's first target share one label ("2, 6"): Fig. 3 draws the span about 230-265 pt long,
+    so 2 % of it is at most ~5 pt on the page in any view, less than the 7 pt "X" markers,
+    which then overlap into one spot. Labels are then placed greedily: the first target's, the
+    last target's (folded into the first label if the two would collide), then the others in
+    order, each only if its estimated text box stays ``gap_pt`` clear of those already placed;
+    any two placed labels' anchors are then :data:`LABEL_MIN_SEPARATION_PT` apart or more.
+    Deterministic.
+    """
+    targets_m = np.asarray(targets_m, dtype=float).reshape(-1, 3)
+    anchors_pt = np.asarray(anchors_pt, dtype=float).reshape(-1, 2)
+    if len(anchors_pt) != len(targets_m):
+        raise ValueError(f"{len(targets_m)} targets but {len(anchors_pt)} anchors")
+    if not len(targets_m):
+        return []
+    groups = group_coincident_targets(targets_m, merge_fraction * extent_m)
+    last = next(k for k, group in enumerate(groups) if len(targets_m) - 1 in group)
+    order = list(dict.fromkeys([0, last, *range(len(groups))]))
+    placed: list[tuple[tuple[int, ...], tuple[float, float, float, float]]] = []
+    for k in order:
+        box = _label_box_pt(anchors_pt[groups[k][0]], _numbers_text(groups[k]), fontsize_pt)
+        if not any(_boxes_collide(box, other, gap_pt) for _, other in placed):
+            placed.append((groups[k], box))
+        elif k == last:  # only the first label is placed yet: name both there
+            merged = tuple(sorted(placed[0][0] + groups[k]))
+            placed[0] = (merged, _label_box_pt(anchors_pt[merged[0]],
+                                               _numbers_text(merged), fontsize_pt))
+    labels = []
+    for group, _ in sorted(placed, key=lambda item: item[0]):
+        x, y, z = (float(v) for v in targets_m[group[0]])
+        labels.append(TargetLabel(tuple(i + 1 for i in group), (x, y, z)))
+    return labels
+
+
+def _numbers_text(indices: Sequence[int]) -> str:
+    return ", ".join(str(i + 1) for i in indices)
+
+
+def _page_points_pt(ax, points_m: np.ndarray) -> np.ndarray:
+    """Where 3-D points land on the page [pt], with the axes' current view and layout."""
+    from mpl_toolkits.mplot3d import proj3d
+
+    xs, ys, _ = proj3d.proj_transform(points_m[:, 0], points_m[:, 1], points_m[:, 2],
+                                      ax.get_proj())
+    pixels = ax.transData.transform(np.column_stack([xs, ys]))
+    return pixels * 72.0 / ax.figure.dpi
+
+
 def build_tool_path(trace: Trace | Path | str) -> Figure:
     """Fig. 3: 3-D tool path (purple) and numbered targets, equal axes, robot base frame."""
     trace = _as_trace(trace)
@@ -182,11 +297,8 @@ def build_tool_path(trace: Trace | Path | str) -> Figure:
     if len(targets):
         ax.plot(targets[:, 0], targets[:, 1], targets[:, 2], color=TARGET_PATH_COLOR,
                 linestyle="--", linewidth=1.0, label="target sequence")
-        ax.scatter(targets[:, 0], targets[:, 1], targets[:, 2], color="black", marker="X",
-                   s=50, depthshade=False, label="targets")
-        for i, point in enumerate(targets, start=1):
-            ax.text(point[0], point[1], point[2], f" {i}", color="black", fontsize=10,
-                    fontweight="bold")
+        markers = ax.scatter(targets[:, 0], targets[:, 1], targets[:, 2], color="black",
+                             marker="X", s=50, depthshade=False, label="targets")
     points = np.vstack([path, targets]) if len(targets) else path
     low, high = points.min(axis=0), points.max(axis=0)
     center = (low + high) / 2
@@ -198,9 +310,31 @@ def build_tool_path(trace: Trace | Path | str) -> Figure:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
-    ax.legend(loc="upper left", fontsize="small")
     ax.set_title(f"Tool path (robot base frame): {trace.policy} on {trace.env_id}")
+    if len(targets):
+        markers.set_label(_draw_target_labels(ax, targets, extent_m=2 * half))
+    ax.legend(loc="upper left", fontsize="small")
     return figure
+
+
+def _draw_target_labels(ax, targets_m: np.ndarray, extent_m: float) -> str:
+    """Draw Fig. 3's target number labels (:func:`choose_target_labels`) once the view, limits
+    and layout are final; returns the targets' legend entry."""
+    from matplotlib.transforms import offset_copy
+
+    ax.figure.draw_without_rendering()  # resolve the layout: where the axes sit on the page
+    labels = choose_target_labels(targets_m, _page_points_pt(ax, targets_m), extent_m)
+    dx_pt, dy_pt = LABEL_OFFSET_PT
+    beside = offset_copy(ax.transData, fig=ax.figure, x=dx_pt, y=dy_pt, units="points")
+    for label in labels:  # every label offset alike: their spacing is what was chosen
+        ax.text(*label.position_m, label.text, color="black",
+                fontsize=LABEL_FONTSIZE_PT, fontweight="bold", transform=beside,
+                zorder=LABEL_ZORDER,  # over the markers, which mplot3d sorts by depth
+                bbox={"boxstyle": "square,pad=0.05", "facecolor": "white", "edgecolor": "none",
+                      "alpha": 0.7})
+    if sum(len(label.numbers) for label in labels) < len(targets_m):
+        return "targets, labelled by number (some omitted where crowded)"
+    return "targets, labelled by number"
 
 
 def plot_tool_path(trace_path: Trace | Path | str, out_dir: Path | str,
