@@ -1,4 +1,5 @@
-"""``rehabbot.features.TrackingErrorFeatures``: the agent-side features of the tuned settings."""
+"""``rehabbot.rl.features``: TrackingErrorFeatures, the agent-side features of the tuned settings,
+and the SB3 policies that use it."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from rehabbot.rl.features import (
     TOOL_ERROR_SCALE_M,
     TrackingErrorFeatures,
 )
-from rehabbot.rl.hyperparams import load_hyperparameters
+from rehabbot.rl.hyperparams import hyperparameters_from_mapping, load_hyperparameters
 from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
 
 ID = "rehabbot/rehab-reach-v0"
@@ -69,16 +70,32 @@ def test_other_observation_shapes_are_refused() -> None:
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
 def test_shipped_settings_build_the_extractor_into_each_algorithm(env, algo: str) -> None:
     from rehabbot.rl.algorithms import algo_class
+    from rehabbot.rl.features import TRACKING_ERROR_POLICIES
 
     hp = load_hyperparameters(algo, ID, algo)  # the settings file shipped with the package
-    kwargs = hp.kwargs["policy_kwargs"]
-    assert kwargs["features_extractor_class"] is TrackingErrorFeatures
-    model = algo_class(algo)("MlpPolicy", env, policy_kwargs=kwargs, seed=0,
+    assert hp.policy is TRACKING_ERROR_POLICIES[algo]
+    assert issubclass(hp.policy, algo_class(algo).policy_aliases["MlpPolicy"])
+    kwargs = hp.kwargs.get("policy_kwargs", {})
+    assert "features_extractor_class" not in kwargs  # the policy's default: RL Zoo reads it
+    model = algo_class(algo)(hp.policy, env, policy_kwargs=kwargs, seed=0,
                              **({"n_steps": 64, "batch_size": 32} if algo == "ppo" else
                                 {"buffer_size": 100}))
     extractor = (model.policy.actor.features_extractor if algo != "ppo"
                  else model.policy.features_extractor)
     assert isinstance(extractor, TrackingErrorFeatures)
+    if algo != "ppo":  # the critics have their own extractor, of the same kind
+        assert isinstance(model.policy.critic.features_extractor, TrackingErrorFeatures)
     obs, _ = env.reset(seed=0)
     action, _ = model.predict(obs, deterministic=True)
     assert env.action_space.contains(action)
+
+
+def test_old_spelling_still_names_the_extractor() -> None:
+    """Users' own files may name the extractor in policy_kwargs, as the shipped ones did."""
+    for name in ("TrackingErrorFeatures", "rehabbot.rl.features.TrackingErrorFeatures",
+                 "rehabbot.features.TrackingErrorFeatures"):
+        hp = hyperparameters_from_mapping(
+            {"policy_kwargs": f"dict(features_extractor_class={name}, net_arch=[64, 64])"},
+            "sac")
+        assert hp.policy == "MlpPolicy"
+        assert hp.kwargs["policy_kwargs"]["features_extractor_class"] is TrackingErrorFeatures

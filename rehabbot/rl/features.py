@@ -1,5 +1,5 @@
 """A Stable-Baselines3 features extractor for the RehabBot observation: the observation itself
-plus the tracking errors that the reward is made of.
+plus the tracking errors that the reward is made of, and the SB3 policies that use it.
 
 The paper's 23-D observation holds the target and the current joint angles (theta*, theta)
 and tool positions (p*, p) side by side; the reward and every good action depend on their
@@ -7,21 +7,31 @@ differences. :class:`TrackingErrorFeatures` appends ``theta* - theta`` (6) and `
 to the observation (32 features), so that the first layer of the actor and of the critic
 sees the error directly instead of having to learn to subtract. It has no parameters and
 leaves the env's spaces untouched: it is a choice of the agent's network, made in a
-hyperparameter file::
+hyperparameter file by naming one of the policies below, which are SB3's own with this
+extractor as their default::
 
-    policy_kwargs: "dict(features_extractor_class=TrackingErrorFeatures, net_arch=[64, 64])"
+    policy: rehabbot.rl.features.TrackingErrorSACPolicy
+    policy_kwargs: "dict(features_extractor_kwargs=dict(fine_scale_rad=0.05), net_arch=[64, 64])"
 
-(``rehabbot train`` resolves the name; in Python pass the class itself.) The extractor needs
-the unnormalised observation layout of :mod:`rehabbot.tasks.observation` (23 values); VecNormalize'd
-observations still work, since normalisation is affine per entry, but the errors are then in
-normalised units.
+Both ``rehabbot train`` and RL Zoo (``python -m rl_zoo3.train --gym-packages rehabbot``) import
+a dotted ``policy``, and a model saved with one loads back with ``SAC.load``. (``rehabbot
+train`` also reads the older ``policy_kwargs: "dict(features_extractor_class=
+TrackingErrorFeatures)"``, which RL Zoo cannot; in Python pass the classes themselves.) The
+extractor needs the unnormalised observation layout of :mod:`rehabbot.tasks.observation` (23
+values); VecNormalize'd observations still work, since normalisation is affine per entry, but
+the errors are then in normalised units.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import torch
+from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from stable_baselines3.sac.policies import SACPolicy
+from stable_baselines3.td3.policies import TD3Policy
 
 from rehabbot.tasks.observation import OBS_SIZE, P_STAR, THETA, THETA_STAR, P
 
@@ -62,3 +72,42 @@ class TrackingErrorFeatures(BaseFeaturesExtractor):
             return torch.cat((scaled, joint_error, tool_error), dim=1)
         fine = torch.tanh(joint_error * (JOINT_ERROR_SCALE_RAD / self.fine_scale_rad))
         return torch.cat((scaled, joint_error, tool_error, fine), dim=1)
+
+
+# --------------------------------------------------------------------------- policies
+# SB3 builds a policy as ``policy_class(observation_space, action_space, lr_schedule,
+# **policy_kwargs)``: the extractor is a keyword argument, so a ``features_extractor_class``
+# in policy_kwargs still overrides the default below.
+
+
+class TrackingErrorSACPolicy(SACPolicy):
+    """SB3's SAC ``MlpPolicy`` with :class:`TrackingErrorFeatures` as its default extractor."""
+
+    def __init__(self, *args: Any,
+                 features_extractor_class: type[BaseFeaturesExtractor] = TrackingErrorFeatures,
+                 **kwargs: Any) -> None:
+        super().__init__(*args, features_extractor_class=features_extractor_class, **kwargs)
+
+
+class TrackingErrorTD3Policy(TD3Policy):
+    """SB3's TD3 ``MlpPolicy`` with :class:`TrackingErrorFeatures` as its default extractor."""
+
+    def __init__(self, *args: Any,
+                 features_extractor_class: type[BaseFeaturesExtractor] = TrackingErrorFeatures,
+                 **kwargs: Any) -> None:
+        super().__init__(*args, features_extractor_class=features_extractor_class, **kwargs)
+
+
+class TrackingErrorActorCriticPolicy(ActorCriticPolicy):
+    """SB3's PPO (and A2C) ``MlpPolicy`` with :class:`TrackingErrorFeatures` as its default
+    extractor."""
+
+    def __init__(self, *args: Any,
+                 features_extractor_class: type[BaseFeaturesExtractor] = TrackingErrorFeatures,
+                 **kwargs: Any) -> None:
+        super().__init__(*args, features_extractor_class=features_extractor_class, **kwargs)
+
+
+# The policy of each algorithm in the shipped settings files.
+TRACKING_ERROR_POLICIES = {"sac": TrackingErrorSACPolicy, "td3": TrackingErrorTD3Policy,
+                           "ppo": TrackingErrorActorCriticPolicy}

@@ -5,9 +5,16 @@ package (:func:`settings_path`).
 A file holds either env ids (full, or without ``rehabbot/``) mapped to hyperparameters, a
 ``default`` entry for every other id (as RL Zoo reads it), or one flat mapping. Keys: the SB3
 constructor arguments of the algorithm plus the zoo keys ``n_timesteps``, ``n_envs``,
-``policy``, ``normalize``, ``noise_type`` and ``noise_std``; ``policy_kwargs`` may be a mapping
-or a zoo string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``, parsed without
-``eval``; ``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``.
+``policy``, ``normalize``, ``noise_type`` and ``noise_std``; ``policy`` is an SB3 alias
+(``MlpPolicy``) or, as in RL Zoo, the dotted name of a policy class under ``rehabbot.`` or
+``stable_baselines3.`` (``rehabbot.rl.features.TrackingErrorSACPolicy``); ``policy_kwargs`` may
+be a mapping or a zoo string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``,
+parsed without ``eval``; ``learning_rate``/``clip_range``/``clip_range_vf`` may be
+``"lin_<float>"``.
+
+The settings shipped with the package are written so that RL Zoo reads them unchanged too
+(``python -m rl_zoo3.train --gym-packages rehabbot --conf-file .../sac.yml``): a ``default``
+entry, classes named only as ``policy``, ``policy_kwargs`` as a string of literals.
 """
 
 from __future__ import annotations
@@ -32,6 +39,8 @@ DEFAULT_NOISE_STD = 0.1
 HYPERPARAMS_DEFAULT_SOURCE = "sb3 defaults"
 SETTINGS_FOLDER = "hyperparams"  # package data of rehabbot.rl
 DEFAULT_ENTRY = "default"  # RL Zoo's entry for every env id without its own
+# Packages a dotted ``policy`` may be imported from (a hyperparameter file names no other code).
+POLICY_PACKAGES = ("rehabbot", "stable_baselines3")
 
 
 class HyperparameterError(UsageError):
@@ -208,13 +217,15 @@ class Hyperparameters:
     """The resolved contents of one hyperparameter entry for one algorithm.
 
     ``kwargs`` holds the SB3 constructor arguments ready to pass (schedules and torch classes
-    resolved); ``given`` the same as JSON-able values, as written in the file.
+    resolved); ``given`` the same as JSON-able values, as written in the file. ``policy`` is
+    what the SB3 constructor takes: an alias such as ``"MlpPolicy"``, or the class a dotted
+    name stands for (:attr:`policy_name` gives it back as a string).
     """
 
     algo: str
     source: str = HYPERPARAMS_DEFAULT_SOURCE
     entry: str | None = None
-    policy: str = DEFAULT_POLICY
+    policy: str | type = DEFAULT_POLICY
     kwargs: dict[str, Any] = field(default_factory=dict)
     given: dict[str, Any] = field(default_factory=dict)
     n_timesteps: int | None = None
@@ -222,6 +233,11 @@ class Hyperparameters:
     normalize: dict[str, Any] | None = None
     noise_type: str | None = None
     noise_std: float | None = None
+
+    @property
+    def policy_name(self) -> str:
+        """The policy as JSON: the alias, or the class by its dotted name."""
+        return self.policy if isinstance(self.policy, str) else jsonable(self.policy)
 
     def effective_kwargs(self) -> dict[str, Any]:
         """Every constructor argument (SB3 defaults filled in) as JSON-able values."""
@@ -231,7 +247,7 @@ class Hyperparameters:
             if name in ("self", "env", "_init_setup_model", "tensorboard_log", "seed"):
                 continue
             if name == "policy":
-                effective[name] = self.policy
+                effective[name] = self.policy_name
             elif name in self.kwargs:
                 given = self.given.get(name)
                 effective[name] = given if (name in SCHEDULE_KEYS and isinstance(given, str)) \
@@ -249,7 +265,7 @@ class Hyperparameters:
             "entry": self.entry,
             "given": jsonable(self.given),
             "kwargs": self.effective_kwargs(),
-            "policy": self.policy,
+            "policy": self.policy_name,
             "normalize": jsonable(self.normalize) if self.normalize is not None else False,
             "noise_type": self.noise_type,
             "noise_std": self.noise_std,
@@ -317,6 +333,38 @@ def _parse_policy_kwargs(value: Any, where: str) -> dict[str, Any]:
     return {str(key): _resolve_torch_names(item) for key, item in value.items()}
 
 
+def _class_name(value: type) -> str:
+    return f"{value.__module__}.{value.__qualname__}"
+
+
+def _policy_error(where: str, raw: Any, cls: Any, why: str) -> HyperparameterError:
+    return HyperparameterError(
+        f"{where}: policy {raw!r} {why}; valid: {', '.join(cls.policy_aliases)}, or the dotted "
+        f"name of a subclass of {_class_name(cls.policy_aliases[DEFAULT_POLICY])} under "
+        f"{' or '.join(f'{package}.' for package in POLICY_PACKAGES)} (rehabbot.rl.features "
+        f"has one for each algorithm)")
+
+
+def _parse_policy(raw: Any, cls: Any, where: str) -> str | type:
+    """An SB3 alias (kept as the string) or a dotted class name (imported, as RL Zoo does):
+    only from :data:`POLICY_PACKAGES`, and only a subclass of the algorithm's MlpPolicy."""
+    if isinstance(raw, str) and raw in cls.policy_aliases:
+        return raw
+    if not isinstance(raw, str) or "." not in raw.strip(". "):
+        raise _policy_error(where, raw, cls, "is neither an alias nor a dotted class name")
+    module_name, _, attr = raw.strip().rpartition(".")
+    if module_name.split(".")[0] not in POLICY_PACKAGES:
+        raise _policy_error(where, raw, cls, "is outside the packages policies may come from")
+    try:
+        policy = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError, ValueError) as err:
+        raise _policy_error(where, raw, cls, f"cannot be imported ({err})") from None
+    base = cls.policy_aliases[DEFAULT_POLICY]
+    if not (isinstance(policy, type) and issubclass(policy, base)):
+        raise _policy_error(where, raw, cls, f"is not a subclass of {_class_name(base)}")
+    return policy
+
+
 def _parse_schedule(value: Any, key: str, where: str) -> Any:
     if isinstance(value, str) and value.strip().startswith("lin_"):
         try:
@@ -340,8 +388,9 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
 
     Accepted keys: the SB3 constructor arguments of the algorithm (checked against its
     signature) and the zoo keys ``n_timesteps``, ``n_envs``, ``policy``, ``normalize``,
-    ``noise_type`` and ``noise_std``. ``policy_kwargs`` may be a mapping or a zoo string,
-    ``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``.
+    ``noise_type`` and ``noise_std``. ``policy`` may be an SB3 alias or the dotted name of a
+    policy class (see :func:`_parse_policy`), ``policy_kwargs`` a mapping or a zoo string,
+    ``learning_rate``/``clip_range``/``clip_range_vf`` ``"lin_<float>"``.
 
     Raises:
         HyperparameterError: an unknown key (named, with the algorithm) or a bad value.
@@ -365,10 +414,7 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
         elif key == "n_envs":
             hp.n_envs = _as_count(raw, key, where)
         elif key == "policy":
-            if not isinstance(raw, str) or raw not in cls.policy_aliases:
-                raise HyperparameterError(f"{where}: policy must be one of "
-                                    f"{', '.join(cls.policy_aliases)}, got {raw!r}")
-            hp.policy = raw
+            hp.policy = _parse_policy(raw, cls, where)
         elif key == "normalize":
             hp.normalize = _parse_normalize(raw, where)
         elif key == "noise_type":
