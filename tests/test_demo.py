@@ -9,6 +9,8 @@ import pytest
 
 from rehabbot.cli import demo, main
 
+pytestmark = pytest.mark.slow  # trains SAC, evaluates, plots: about 30 s
+
 
 @pytest.fixture(scope="module")
 def demo_out(tmp_path_factory) -> tuple[Path, int, str]:

@@ -33,7 +33,8 @@ print("CHECKED")
 """
 
 
-@pytest.mark.parametrize("env_id", PAPER_IDS)
+@pytest.mark.parametrize("env_id", [pytest.param(i, marks=() if i.endswith("reach-v0") else
+                                                  pytest.mark.slow) for i in PAPER_IDS])
 def test_gymnasium_env_checker_passes_without_warnings(env_id):
     """The checker also opens every render mode, ``human`` included: run it where there is a
     display (``make test`` runs under xvfb), or under ``xvfb-run``."""
@@ -83,7 +84,9 @@ print(_episode_digest(sys.argv[1], int(sys.argv[2]))[0])
 """
 
 
-@pytest.mark.parametrize("env_id", ["rehabbot/rehab-reach-v0", "rehabbot/rehab-knee-v0"])
+@pytest.mark.parametrize("env_id", ["rehabbot/rehab-reach-v0",
+                                    pytest.param("rehabbot/rehab-knee-v0",
+                                                 marks=pytest.mark.slow)])
 def test_same_seed_same_actions_give_bit_identical_episodes_in_and_across_processes(env_id):
     first, _draws = _episode_digest(env_id, seed=7)
     second, _ = _episode_digest(env_id, seed=7)

@@ -114,6 +114,7 @@ def test_listing1_example_is_the_papers_listing_verbatim() -> None:
     assert "xvfb-run" in header
 
 
+@pytest.mark.slow
 def test_listing1_runs_as_printed_under_xvfb() -> None:
     """The paper's Listing 1, unmodified, opens the viewer and runs one full episode of random
     actions in real time (<= 1000 steps of 20 ms), then closes cleanly."""

@@ -102,6 +102,7 @@ def test_leg_cuff_uses_the_lower_leg_limit_and_the_threshold_is_a_kwarg():
     assert "at rest" in str(err.value)
 
 
+@pytest.mark.slow
 def test_profiles_that_cannot_do_the_exercise_are_refused_when_the_env_is_built():
     heavy = {"height_m": 1.75, "mass_kg": 130.0, "sex": "male"}
     with pytest.raises(ValueError, match=r"weight_level 2: the cuff carries 13\d N") as err:
@@ -200,8 +201,9 @@ def test_instability_detectors_catch_blow_ups_that_mujoco_does_not_reset():
     # An observation outside its bounds is one too: shrink the checked bound of theta[0]
     # below the current angle; the env returns its last healthy observation.
     healthy_obs, *_ = env.step(np.zeros(6, np.float32))
-    base.healthy_obs_high = base.healthy_obs_high.copy()
-    base.healthy_obs_high[9] = healthy_obs[9] - 0.01
+    high = base.healthy_obs_high.copy()
+    high[9] = healthy_obs[9] - 0.01
+    base.set_healthy_box(base.healthy_obs_low, high)
     obs, reward, terminated, _, info = env.step(np.zeros(6, np.float32))
     assert terminated and info["safety_violation"] == "instability"
     np.testing.assert_array_equal(obs, healthy_obs)

@@ -197,6 +197,7 @@ def test_ensure_trace_evaluates_a_run_once(tmp_path: Path, sac_model: Path) -> N
 # --------------------------------------------------------------------------- render
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".gif", ".mp4"])
 def test_render_writes_a_video_of_the_episode(tmp_path: Path, capsys, suffix: str) -> None:
     import imageio.v3 as iio
@@ -240,6 +241,7 @@ def test_list_shows_every_id_with_its_spaces(capsys) -> None:
 # --------------------------------------------------------------------------- listings
 
 
+@pytest.mark.slow
 def test_listings_2_and_3_train_save_load_and_evaluate(tmp_path: Path) -> None:
     listing2 = (REPO / "examples" / "listing2_train_sac.py").read_text()
     assert "model.learn(total_timesteps=200_000)" in listing2

@@ -200,6 +200,7 @@ def _assert_limb_masses(env: RehabEnv, profile: pt.PatientProfile, level: int) -
     level=st.sampled_from(sc.WEIGHT_LEVELS),
     seed=st.integers(0, 2**32 - 1),
 )
+@pytest.mark.slow
 def test_any_allowed_profile_builds_with_targets_and_resets_inside_the_spaces(
         limb, side, task_type, profile, level, seed):
     """For every profile that ``PatientProfile`` accepts (the whole allowed height and mass
@@ -241,6 +242,7 @@ def test_any_allowed_profile_builds_with_targets_and_resets_inside_the_spaces(
                               st.sampled_from(sc.WEIGHT_LEVELS),
                               st.integers(0, 2**32 - 1)), min_size=1, max_size=3),
 )
+@pytest.mark.slow
 def test_reset_puts_the_cuff_on_scales_the_limb_and_starts_at_rest(limb, side, task_type,
                                                                    profile, build_level, resets):
     """After ``reset(seed, options={"exercise": e, "weight_level": l})`` (several in a row, so
@@ -286,6 +288,7 @@ def test_reset_puts_the_cuff_on_scales_the_limb_and_starts_at_rest(limb, side, t
     exercise=st.sampled_from((0, 1)),
     levels=st.permutations(sc.WEIGHT_LEVELS),
 )
+@pytest.mark.slow
 def test_holding_still_at_home_is_safe_for_any_allowed_profile_and_level(limb, side, profile,
                                                                          exercise, levels):
     """The home state is safe: for every profile that ``PatientProfile`` accepts and every
@@ -338,6 +341,7 @@ def _expected_controls(env: RehabEnv, setpoint_before: np.ndarray, action: np.nd
     via_gym_make=st.booleans(),
     data=st.data(),
 )
+@pytest.mark.slow
 def test_every_step_is_sound(limb, side, task_type, control_mode, profile, exercise, level,
                              seed, smoothness_weight, effort_weight, terminate_on_safety,
                              safety_penalty, max_episode_steps, via_gym_make, data):
@@ -580,6 +584,7 @@ def _close_determinism_envs():
 @given(config=st.sampled_from(range(len(DETERMINISM_CONFIGS))), seed=st.integers(0, 2**32 - 1),
        other_seed=st.integers(0, 2**32 - 1), other_level=st.sampled_from(sc.WEIGHT_LEVELS),
        data=st.data())
+@pytest.mark.slow
 def test_same_seed_and_actions_give_the_same_episode(config, seed, other_seed, other_level,
                                                      data):
     """``reset(seed=s)`` (exercise and weight level drawn from s) followed by the same actions

@@ -34,6 +34,7 @@ def _counts(report: SoakReport) -> dict[str, tuple]:
                         cell.action_seeds) for cell in report.cells}
 
 
+@pytest.mark.slow
 def test_short_soak_of_every_cell_is_clean(short_soak: SoakReport) -> None:
     report = short_soak
     cells = {(cell.env_id, cell.control_mode) for cell in report.cells}
@@ -62,6 +63,7 @@ def test_short_soak_of_every_cell_is_clean(short_soak: SoakReport) -> None:
     assert process.growth_mib is not None and math.isfinite(process.growth_mib)
 
 
+@pytest.mark.slow
 def test_same_seed_gives_the_same_counts(short_soak: SoakReport) -> None:
     # A subset of the cells, with the same share each: the same episodes, whatever the filter.
     share = SHORT_STEPS // 16
@@ -75,6 +77,7 @@ def test_same_seed_gives_the_same_counts(short_soak: SoakReport) -> None:
     assert counts[1:] != first[name][1:]  # other episodes and seeds
 
 
+@pytest.mark.slow
 def test_workers_give_the_same_counts_as_one_process() -> None:
     kwargs = {"total_steps": 600, "env_ids": ["rehab-hip-v0"],
               "control_modes": ["joint_delta", "torque"], "seed": 3}
@@ -286,6 +289,7 @@ def test_sigterm_stops_the_run_with_exit_143(tmp_path: Path) -> None:
     assert data["steps"] == first["steps"]
 
 
+@pytest.mark.slow
 def test_the_script_runs_from_the_repository_root(tmp_path) -> None:
     out = tmp_path / "soak.json"
     result = subprocess.run([sys.executable, "benchmarks/soak.py", "--steps", "40", "--env",

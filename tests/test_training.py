@@ -154,6 +154,7 @@ def test_train_writes_the_run_directory(tmp_path: Path, algo: str, capsys) -> No
     assert "last eval at 2000 steps: success" in lines[-1] and "mean return" in lines[-1]
 
 
+@pytest.mark.slow
 def test_resume_continues_to_the_requested_total(tmp_path: Path, capsys) -> None:
     out = tmp_path / "runs"
     hp = {**SMALL["td3"], "normalize": True, "noise_type": "normal", "noise_std": 0.2,
@@ -196,6 +197,7 @@ def test_resume_continues_to_the_requested_total(tmp_path: Path, capsys) -> None
     assert "already finished 2000 steps" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("damaged", ["checkpoint", "replay_buffer", "manifest"])
 def test_resume_from_a_damaged_file_is_refused_and_changes_nothing(tmp_path: Path,
                                                                    damaged: str) -> None:
@@ -218,6 +220,7 @@ def test_resume_from_a_damaged_file_is_refused_and_changes_nothing(tmp_path: Pat
     assert after == before, "a refused resume leaves the run as it was"
 
 
+@pytest.mark.slow
 def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
     out = tmp_path / "runs"
     hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})
@@ -270,6 +273,7 @@ def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
     assert _algo_class("sac").load(run_dir / "model.zip").num_timesteps == target
 
 
+@pytest.mark.slow
 def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path) -> None:
     out = tmp_path / "runs"
     hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})

@@ -75,7 +75,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     env_id, _kwargs = env_for(args.policies, args.env, args.env_kwargs)  # checks every spec
     out_dir = args.out or evaluation.default_out_dir(args.policies, env_id)
     check_writable_dir(out_dir)
-    results = evaluation.evaluate_policies(args.policies, env_id, args.episodes, args.seed,
+    results = evaluation.evaluate_policies(args.policies, args.env, args.episodes, args.seed,
                                            args.env_kwargs, deterministic=not args.stochastic)
     reports = []
     for report, trace in results:

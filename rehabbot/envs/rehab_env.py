@@ -153,6 +153,9 @@ from rehabbot.tasks.reward import StepOutcome, total
 from rehabbot.tasks.targets import TargetSequence
 
 RESET_OPTIONS = ("exercise", "weight_level")
+# A value this far inside a bound of the healthy box is inside whatever float32 rounding does
+# (the bounds are below 10 in magnitude; float32 rounds them by at most 5e-7).
+BOUND_CLEARANCE = 1e-5
 
 
 class RehabEnv(gym.Env):
@@ -189,10 +192,6 @@ class RehabEnv(gym.Env):
         self.layout = parts.layout
         self.action_space = self.controller.action_space
         self.observation_space = parts.observation_space
-        # The tighter box of this patient that a healthy observation stays in (float32): its
-        # setpoint bounds and joint limits; leaving it is an "instability".
-        self.healthy_obs_low: np.ndarray
-        self.healthy_obs_high: np.ndarray
         self.render_mode = config.render_mode
         self.frame_skip = config.frame_skip
         self.max_episode_steps = config.max_episode_steps
@@ -206,7 +205,6 @@ class RehabEnv(gym.Env):
         self._theta_obs, self._p_obs = layout.slice("theta"), layout.slice("p")
         self._phi_obs, self._e_obs, self._l_obs = (layout.slice("phi"), layout.index("e"),
                                                    layout.index("l"))
-        self.healthy_obs_low, self.healthy_obs_high = parts.healthy_low, parts.healthy_high
         self._clip_low = self.controller.clip_low.astype(float)
         self._clip_high = self.controller.clip_high.astype(float)
         self._clip_bounds = tuple(zip(self.controller.clip_low.tolist(),
@@ -217,21 +215,35 @@ class RehabEnv(gym.Env):
         self._base_pos = self.data.xpos[base].copy()
         self._base_rot = self.data.xmat[base].reshape(3, 3).copy()
         self._qpos_adr = as_index(self.handle.qpos_adr)
+        phi_adr = [int(a) for a in self.scene.exercised_qpos_adr]
+        self._phi_block = slice(min(phi_adr), max(phi_adr) + 1)  # read as one slice
+        self._phi_pick = tuple(a - min(phi_adr) for a in phi_adr)
         self._dof_adr = as_index(self.handle.dof_adr)
         self._tool_site = self.handle.tool_site_id
         self._exercised_qpos_adr = as_index(self.scene.exercised_qpos_adr)
         self._patient_qpos_adr = as_index(self.scene.patient_qpos_adr)
-        n = self.robot.n_joints
+        n = self._n_joints = self.robot.n_joints
         self._obs = np.zeros(layout.size, np.float32)  # working vector
-        self._healthy_obs = np.zeros(layout.size, np.float32)  # the last one in bounds
-        self._tool_rel = np.zeros(3)
-        self._theta = np.zeros(n)
-        self._error = np.zeros(n)
-        self._abs_error = np.zeros(n)
+        # The per-step fields theta, p, phi sit side by side (indices 9-20 of the paper's
+        # layout): one write, one bounds check.
+        if not (self._theta_obs.stop == self._p_obs.start and self._p_obs.stop ==
+                self._phi_obs.start):
+            raise AssertionError("the layout must keep theta, p and phi side by side")
+        self._dynamic = slice(self._theta_obs.start, self._phi_obs.stop)
+        self.set_healthy_box(parts.healthy_low, parts.healthy_high)
+        self._static_inside = True  # whether theta*, p*, e and l are in the healthy box
+        self._healthy_values: list[float] = []  # theta, p, phi of the last healthy step
+        self._base_pos_list = self._base_pos.tolist()
+        self._base_rot_cols = self._base_rot.T.tolist()  # p = base_rot^T (x - base_pos)
+        self._theta = [0.0] * n  # the last healthy joint angles (a list: six numbers)
+        self._target = [0.0] * n  # theta* of the active target
         self._prev_action = np.zeros(n)
+        self._keep_previous_action = self.reward_function.uses_previous_action
         self._outcome = StepOutcome(previous_action=self._prev_action)
-        self._reward_keys = tuple(f"reward_{name}" for name in self.reward_function.names)
+        self._num_targets = 0
+        self._float32 = np.dtype(np.float32)
         self._tolerance = self.reward_function.target_tolerance_rad
+        self._terminate_on_safety = config.terminate_on_safety
         self._steps = 0
         self._target_index = 0
         self._exercise = 0
@@ -285,10 +297,9 @@ class RehabEnv(gym.Env):
         obs = self._obs
         obs[self._e_obs] = self._exercise
         obs[self._l_obs] = self.scene.weight_level
+        self._num_targets = len(self._sequence)
         self._write_target()
-        self._observe()
-        self._healthy_obs[:] = obs
-        self._theta[:] = self._qpos[self._qpos_adr]
+        self._theta = self._observe() or self._qpos[self._qpos_adr].tolist()
         info = self._info(None, False, self.safety.cuff_force_n(data),
                           self.reward_function.zero_terms(), 0)
         self._needs_reset = False
@@ -299,59 +310,65 @@ class RehabEnv(gym.Env):
     def step(self, action):
         if self._needs_reset:
             self._refuse_step()
-        action, clipped = self._check_action(action)
         data = self.data
-        self.controller.apply(action, data)
+        if self.controller.apply_fast(action):  # a float32 array inside the box: checked
+            clipped = 0
+        else:
+            action, clipped = self._check_action(action)
+            self.controller.apply(action, data)
         mujoco.mj_step(self.model, data, nstep=self.frame_skip)
         self._steps += 1
 
-        force_n = self.safety.cuff_force_n(data)
-        violation = self.safety.check(data, force_n)
-        healthy = violation != "instability"
-        if healthy:
-            self._observe()
-            if not self._inside(self._obs):
-                violation, healthy = "instability", False
-        if healthy:
-            self._healthy_obs[:] = self._obs
-            self._theta[:] = self._qpos[self._qpos_adr]
-            self._record_trace()
-        else:  # keep the last healthy observation and joint angles
-            self._obs[:] = self._healthy_obs
+        violation, force_n = self.safety.check_step(data)
+        obs = self._obs
+        if violation != "instability":
+            healthy = self._healthy_values
+            theta = self._observe()
+            if theta is not None:
+                self._theta = theta
+                if self._record:
+                    self._rendering.record(self._tool_xpos)
+            else:
+                violation = "instability"
+                self._healthy_values = healthy
+        if violation == "instability":  # keep the last healthy observation and joint angles
+            obs[self._dynamic] = self._healthy_values
             force_n = 0.0 if not math.isfinite(force_n) else force_n
 
-        # Distance to the target that was active during the step.
-        i = self._target_index
-        error = np.subtract(self._theta, self._sequence.robot_rad[i], out=self._error)
-        outcome = self._outcome
-        outcome.distance_rad = math.sqrt(float(error @ error))
-        reached = float(np.abs(error, out=self._abs_error).max()) < self._tolerance
-        safety_stop = violation is not None and (self.config.terminate_on_safety
+        # Distance to the target that was active during the step (six numbers: plain Python).
+        squared = largest = 0.0
+        for angle, goal in zip(self._theta, self._target, strict=True):
+            error = angle - goal
+            squared += error * error
+            if abs(error) > largest:
+                largest = abs(error)
+        last = self._target_index == self._num_targets - 1
+        safety_stop = violation is not None and (self._terminate_on_safety
                                                  or violation == "instability")
-        last = i == len(self._sequence) - 1
-        outcome.reached = reached and not safety_stop
+        reached = largest < self._tolerance and not safety_stop
+        outcome = self._outcome
+        outcome.distance_rad = math.sqrt(squared)
+        outcome.reached = reached
         outcome.last_target = last
         outcome.safety_stop = safety_stop
         outcome.steps_done = self._steps
         outcome.action = action
         terms = self.reward_function(outcome)
-        self._prev_action[:] = action
+        if self._keep_previous_action:
+            self._prev_action[:] = action
 
-        terminated = is_success = False
-        if safety_stop:
-            terminated = True
-        elif reached:
+        terminated, is_success = safety_stop, False
+        if reached:
             if last:
                 terminated = is_success = True
             else:
                 self._target_index += 1
                 self._write_target()  # the observation shows the next target
-                self._healthy_obs[:] = self._obs
         self._needs_reset = terminated
         info = self._info(violation, is_success, force_n, terms, clipped)
         if self.render_mode == "human":
             self.render()
-        return self._obs.copy(), total(terms), terminated, False, info
+        return obs.copy(), total(terms), terminated, False, info
 
     def render(self):
         if self.render_mode is None:
@@ -379,6 +396,31 @@ class RehabEnv(gym.Env):
     def dt(self) -> float:
         """Seconds per step (``frame_skip x timestep``), as in Gymnasium's MuJoCo envs."""
         return self.dt_s
+
+    @property
+    def healthy_obs_low(self) -> np.ndarray:
+        """Lower corner of the box (this patient's setpoint bounds and joint limits) that a
+        healthy observation stays in; leaving it is an "instability". Read-only: change it
+        with :meth:`set_healthy_box`."""
+        return self._healthy_low
+
+    @property
+    def healthy_obs_high(self) -> np.ndarray:
+        """Upper corner of the healthy box (see :attr:`healthy_obs_low`)."""
+        return self._healthy_high
+
+    def set_healthy_box(self, low: np.ndarray, high: np.ndarray) -> None:
+        """Replace the box a healthy observation must stay in (float32, read-only copies)."""
+        self._healthy_low = np.array(low, dtype=np.float32)
+        self._healthy_high = np.array(high, dtype=np.float32)
+        for bound in (self._healthy_low, self._healthy_high):
+            bound.setflags(write=False)
+        self._dynamic_bounds = tuple(zip(self._healthy_low[self._dynamic].tolist(),
+                                         self._healthy_high[self._dynamic].tolist(),
+                                         strict=True))
+        self._dynamic_clear = tuple((low + BOUND_CLEARANCE, high - BOUND_CLEARANCE)
+                                    for low, high in self._dynamic_bounds)
+        self._static_inside = self._static_fields_inside()
 
     @property
     def worst_step_reward(self) -> float:
@@ -419,9 +461,9 @@ class RehabEnv(gym.Env):
                                     "env.reset() to start the next one")
 
     def _check_action(self, action) -> tuple[np.ndarray, int]:
-        if type(action) is np.ndarray and action.dtype == np.float32 \
+        if type(action) is np.ndarray and action.dtype is self._float32 \
                 and action.shape == self._action_shape:
-            for value, (low, high) in zip(action.tolist(), self._clip_bounds):  # noqa: B905
+            for value, (low, high) in zip(action.tolist(), self._clip_bounds, strict=True):
                 if not low <= value <= high:  # also for NaN
                     break
             else:
@@ -450,51 +492,75 @@ class RehabEnv(gym.Env):
     def _write_target(self) -> None:
         """The active target's fields of the observation (theta*, p*)."""
         obs, i = self._obs, self._target_index
-        obs[self._theta_star] = self._sequence.robot_rad[i]
+        target = self._sequence.robot_rad[i]
+        obs[self._theta_star] = target
         obs[self._p_star] = self._sequence.tool_pos_base_m[i]
+        self._target = target.tolist()
+        self._static_inside = self._static_fields_inside()
 
-    def _observe(self) -> None:
-        """The fields that change every step (theta, p, phi), written into ``self._obs``."""
-        obs, qpos = self._obs, self._qpos
-        obs[self._theta_obs] = qpos[self._qpos_adr]
-        rel = np.subtract(self._site_xpos[self._tool_site], self._base_pos, out=self._tool_rel)
-        obs[self._p_obs] = rel @ self._base_rot
-        obs[self._phi_obs] = qpos[self._exercised_qpos_adr]
+    def _static_fields_inside(self) -> bool:
+        """Whether the fields that change only at reset and target switches (theta*, p*, e,
+        l) are in the healthy box; checked when they change, not every step."""
+        obs, dynamic = self._obs, self._dynamic
+        inside = (obs >= self._healthy_low) & (obs <= self._healthy_high)
+        return bool(inside[:dynamic.start].all() and inside[dynamic.stop:].all())
 
-    def _inside(self, obs: np.ndarray) -> bool:
-        # NaN fails both comparisons, so this also rejects non-finite values.
-        return bool(np.logical_and.reduce((obs >= self.healthy_obs_low)
-                                          & (obs <= self.healthy_obs_high)))
+    def _observe(self) -> list[float] | None:
+        """Write the fields that change every step (theta, p, phi) into ``self._obs`` (and
+        keep them, to restore the last healthy observation); return theta (the robot's joint
+        angles, float64) as a list, or None if the observation left the healthy box."""
+        qpos = self._qpos
+        theta = qpos[self._qpos_adr].tolist()
+        block = qpos[self._phi_block].tolist()
+        (bx, by, bz), (c0, c1, c2) = self._base_pos_list, self._base_rot_cols
+        x, y, z = self._tool_xpos.tolist()
+        dx, dy, dz = x - bx, y - by, z - bz
+        values = self._healthy_values = [
+            *theta, dx * c0[0] + dy * c0[1] + dz * c0[2], dx * c1[0] + dy * c1[1] + dz * c1[2],
+            dx * c2[0] + dy * c2[1] + dz * c2[2], *[block[k] for k in self._phi_pick]]
+        self._obs[self._dynamic] = values
+        if not self._static_inside:
+            return None
+        # Clear of the bounds (by far more than float32 rounding): inside. Near them, compare
+        # the float32 observation with the float32 bounds, as the box is defined.
+        for value, (low, high) in zip(values, self._dynamic_clear, strict=True):
+            if not low < value < high:
+                break
+        else:
+            return theta
+        for value, (low, high) in zip(self._obs[self._dynamic].tolist(),
+                                      self._dynamic_bounds, strict=True):
+            if not low <= value <= high:  # NaN fails too
+                return None
+        return theta
 
     def _info(self, safety_violation, is_success, force_n, terms, clipped) -> dict:
-        info = {
+        return {
             "is_success": is_success,
             "target_index": self._target_index,
-            "num_targets": len(self._sequence),
+            "num_targets": self._num_targets,
             "safety_violation": safety_violation,
+            **terms,  # reward_distance, reward_bonus, ...
+            "interaction_force_n": force_n,
+            "robot_torque_nm": self._qfrc_actuator[self._dof_adr].copy(),
+            "patient_qpos": self._qpos[self._patient_qpos_adr].copy(),
+            "exercise": self._exercise,
+            "weight_level": self.scene.weight_level,
+            "action_clipped": clipped,
         }
-        for key, value in zip(self._reward_keys, terms.values()):  # noqa: B905
-            info[key] = value
-        info["interaction_force_n"] = float(force_n)
-        info["robot_torque_nm"] = self._qfrc_actuator[self._dof_adr].copy()
-        info["patient_qpos"] = self._qpos[self._patient_qpos_adr].copy()
-        info["exercise"] = self._exercise
-        info["weight_level"] = self.scene.weight_level
-        info["action_clipped"] = clipped
-        return info
 
     def _record_trace(self) -> None:
         if self._record:
-            self._rendering.record(self._site_xpos[self._tool_site])
+            self._rendering.record(self._tool_xpos)
 
     def _bind_views(self) -> None:
         """Cache views of ``self.data``'s arrays (again after unpickling: views do not
         survive a pickle round trip)."""
         data = self.data
         self._qpos = data.qpos
-        self._site_xpos = data.site_xpos
+        self._tool_xpos = data.site_xpos[self._tool_site]  # a view
         self._qfrc_actuator = data.qfrc_actuator
-        self.controller._ctrl = data.ctrl
+        self.controller.bind(data)
         self.safety.bind(data)
         self._outcome.torque_nm = self._qfrc_actuator[self._dof_adr]  # a view
 

@@ -1,7 +1,7 @@
 """Reward terms, named: a reward function turns what happened in a step
-(:class:`StepOutcome`) into a dict of terms; the env pays their sum and reports each as
-``info["reward_<name>"]``. A later env version adds or replaces terms by giving the env
-another reward function, without touching ``step``.
+(:class:`StepOutcome`) into a dict of terms keyed ``"reward_<name>"``; the env pays their sum
+(:func:`total`) and puts the dict into ``info``. A later env version adds or replaces terms
+by giving the env another reward function, without touching ``step``.
 
 :class:`PaperReward` is eq. (5) of the paper with two optional terms and the safety penalty:
 
@@ -68,6 +68,7 @@ class PaperReward:
     names: tuple[str, ...] = ("distance", "bonus", "safety", "smoothness", "effort")
 
     def __call__(self, outcome: StepOutcome) -> dict[str, float]:
+        """The terms of one step, ``{"reward_distance": ..., "reward_bonus": ..., ...}``."""
         distance = -outcome.distance_rad
         smoothness = effort = safety = bonus = 0.0
         if self.smoothness_weight:
@@ -86,12 +87,22 @@ class PaperReward:
             safety = steps_left * per_step
         elif outcome.reached:
             bonus = self.final_bonus if outcome.last_target else self.intermediate_bonus
-        return {"distance": distance, "bonus": bonus, "safety": safety,
-                "smoothness": smoothness, "effort": effort}
+        return {"reward_distance": distance, "reward_bonus": bonus, "reward_safety": safety,
+                "reward_smoothness": smoothness, "reward_effort": effort}
+
+    @property
+    def uses_previous_action(self) -> bool:
+        """Whether a term needs the previous action (the smoothness term)."""
+        return bool(self.smoothness_weight)
 
     def zero_terms(self) -> dict[str, float]:
         """Every term at 0 (the ``info`` of ``reset``)."""
-        return dict.fromkeys(self.names, 0.0)
+        return dict.fromkeys(info_keys(self.names), 0.0)
+
+
+def info_keys(names: tuple[str, ...]) -> tuple[str, ...]:
+    """The ``info`` keys of reward terms: ``"reward_<name>"``."""
+    return tuple(f"reward_{name}" for name in names)
 
 
 def total(terms: dict[str, float]) -> float:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from mujoco import mju_dot
 
 from rehabbot.common.arrays import as_index
 from rehabbot.sim.scene import Scene
@@ -119,10 +120,25 @@ class SafetyMonitor:
         self._cuff_rows = tuple(int(first_row[h.equality_id]) for h in scene.robots)
         self._cuff_rows_needed = max(self._cuff_rows) + 3
         self._single_cuff = len(self._cuff_rows) == 1
+        self._force_limit_n = float(self.force_limits_n[0])
         self._forces_n = np.zeros(len(self._cuff_rows))
-        self._warning_idx = tuple(int(w) for w in UNSTABLE_WARNINGS)
+        warnings = sorted(int(w) for w in UNSTABLE_WARNINGS)
+        first, last = warnings[0], warnings[-1]
+        if warnings != list(range(first, last + 1)):
+            raise AssertionError("MuJoCo's instability warnings are no longer contiguous")
+        self._warning_slice = slice(first, last + 1)
+        self._warning_numbers = np.zeros(last - first + 1, dtype=int)
         self._warnings0 = 0
         self._blowup_speed2 = BLOWUP_SPEED_RAD_S**2
+        self._speed2 = 0.0
+        # Range of motion without reading every joint: when no joint limit was active at the
+        # start of the last physics step (MuJoCo's data.nl == 0: every joint inside its
+        # range) and no joint moves more than half the tolerance in one physics step
+        # (|qvel| * timestep), no joint can be beyond its range by more than the tolerance.
+        limited = model.jnt_limited[jnt].astype(bool)
+        no_margin = model.jnt_margin[jnt] == 0
+        self._rom_shortcut = bool(tol > 0 and limited.all() and no_margin.all())
+        self._rom_speed2 = (0.5 * tol / model.opt.timestep) ** 2
         self._qpos = np.zeros(model.nq)
         self._qvel = np.zeros(model.nv)
         self._speed = np.zeros(model.nv)
@@ -136,16 +152,12 @@ class SafetyMonitor:
         """Cache views of ``data``'s arrays (again after a pickle round trip)."""
         self._qpos = data.qpos
         self._qvel = data.qvel
+        self._warning_numbers = data.warning.number[self._warning_slice]
 
     def reset(self, data: mujoco.MjData) -> None:
         """Start an episode on ``data`` (its views are cached and its warnings counted)."""
         self.bind(data)
-        self._warnings0 = self._warning_count(data)
-
-    def _warning_count(self, data: mujoco.MjData) -> int:
-        number = data.warning.number
-        i, j, k = self._warning_idx
-        return int(number[i]) + int(number[j]) + int(number[k])
+        self._warnings0 = sum(self._warning_numbers.tolist())
 
     def cuff_forces_n(self, data: mujoco.MjData) -> np.ndarray:
         """Magnitude of each cuff's constraint force [N] (0 when the cuffs are not active);
@@ -156,8 +168,8 @@ class SafetyMonitor:
             return forces
         efc_force = data.efc_force
         for k, row in enumerate(self._cuff_rows):
-            f = efc_force[row:row + 3]
-            forces[k] = math.sqrt(float(f @ f))
+            x, y, z = efc_force[row:row + 3].tolist()
+            forces[k] = math.sqrt(x * x + y * y + z * z)
         return forces
 
     def cuff_force_n(self, data: mujoco.MjData) -> float:
@@ -165,8 +177,8 @@ class SafetyMonitor:
         if self._single_cuff:
             if data.ne < 3:
                 return 0.0
-            f = data.efc_force[:3]
-            return math.sqrt(float(f @ f))
+            x, y, z = data.efc_force[:3].tolist()
+            return math.sqrt(x * x + y * y + z * z)
         return float(self.cuff_forces_n(data).max())
 
     def unstable(self, data: mujoco.MjData, force_n: float) -> bool:
@@ -174,26 +186,34 @@ class SafetyMonitor:
         qpos/qvel/qacc (and reset the state), a joint speed or the cuff force ``force_n`` is
         non-finite or beyond its blow-up bound. Out-of-bounds observations are checked by the
         env."""
-        if self._warning_count(data) != self._warnings0:
+        if sum(self._warning_numbers.tolist()) != self._warnings0:
             return True
         if not force_n <= BLOWUP_FORCE_N:  # also true for NaN
             return True
         qvel = self._qvel
-        if qvel @ qvel <= self._blowup_speed2:  # no |v| can exceed the bound (NaN fails)
+        speed2 = self._speed2 = mju_dot(qvel, qvel)  # a C loop: no BLAS call per step
+        if speed2 <= self._blowup_speed2:  # no |v| can exceed the bound (NaN fails)
             return False
         speed = np.abs(qvel, out=self._speed)
         return not float(speed.max()) <= BLOWUP_SPEED_RAD_S
+
+    def check_step(self, data: mujoco.MjData) -> tuple[str | None, float]:
+        """The first rule that fires after a step and the largest cuff force [N]: the same as
+        :meth:`cuff_force_n` then :meth:`check`, in one call (the env's per-step path)."""
+        force_n = self.cuff_force_n(data)
+        return self.check(data, force_n), force_n
 
     def check(self, data: mujoco.MjData, force_n: float) -> str | None:
         """The first rule that fires for ``data`` (its largest cuff force ``force_n``, from
         :meth:`cuff_force_n`), or None."""
         if self.unstable(data, force_n):
             return "instability"
-        q = self._qpos[self._patient_qpos_adr]
-        if np.logical_or.reduce((q < self._rom_low) | (q > self._rom_high)):
-            return "range_of_motion"
+        if not (self._rom_shortcut and data.nl == 0 and self._speed2 <= self._rom_speed2):
+            q = self._qpos[self._patient_qpos_adr]
+            if np.logical_or.reduce((q < self._rom_low) | (q > self._rom_high)):
+                return "range_of_motion"
         if self._single_cuff:
-            if force_n > self.force_limits_n[0]:
+            if force_n > self._force_limit_n:
                 return "cuff_force"
         elif (self.cuff_forces_n(data) > self.force_limits_n).any():
             return "cuff_force"
