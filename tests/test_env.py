@@ -423,3 +423,60 @@ def test_step_before_reset_after_termination_and_after_close_are_clear_errors():
     env.close()  # a no-op
     with pytest.raises(RuntimeError, match="close"):
         env.step(np.zeros(6, np.float32))
+
+
+# -- exercises of one's own -----------------------------------------------------------------
+def test_an_exercise_of_ones_own_is_taught_without_editing_the_package():
+    from rehabbot import Exercise
+    from rehabbot.tasks.exercises import exercises_for
+
+    raise_arm = Exercise("shoulder_raise", "shoulder flexion to 100 deg",
+                         ({"shoulder_flexion": 55}, {"shoulder_flexion": 80},
+                          {"shoulder_flexion": 100}))
+    as_dict = {"name": "elbow_reach", "key_poses_deg": [{"elbow_flexion": 45},
+                                                        {"elbow_flexion": 100}]}
+    env = gym.make("rehabbot/rehab-reach-v0", exercises=(*exercises_for("arm"), raise_arm,
+                                                         as_dict))
+    base = env.unwrapped
+    assert [e.name for e in base.exercises] == ["shoulder_flexion", "elbow_flexion",
+                                                "shoulder_raise", "elbow_reach"]
+    assert env.observation_space.high[21] == 3  # e ranges over the table
+    expert = ScriptedExpert(env)
+    for exercise, targets in ((2, 3), (3, 2)):
+        obs, info = env.reset(seed=0, options={"exercise": exercise})
+        assert info["num_targets"] == targets and obs[21] == exercise
+        for _ in range(1000):
+            obs, _r, terminated, truncated, info = env.step(expert(obs))
+            if terminated or truncated:
+                break
+        assert info["is_success"] and info["safety_violation"] is None
+        # The last target holds the patient near the last key pose (the robot is within
+        # 0.05 rad of theta* on every joint; the strap and the limb's weight add a few degrees).
+        last_pose = base.exercises[exercise].key_poses_deg[-1]
+        joint = f"{next(iter(last_pose))}_r"
+        assert math.degrees(base.data.qpos[base.model.joint(joint).qposadr[0]]) == \
+            pytest.approx(next(iter(last_pose.values())), abs=6.0)
+
+
+@pytest.mark.parametrize(("exercises", "message"), [
+    ([{"name": "x", "key_poses_deg": [{"knee_flexion": 30}]}],
+     r"moves \['knee_flexion'\], which are not joints of the 'arm' limb"),
+    ([{"name": "x", "key_poses_deg": []}], "non-empty sequence"),
+    ([{"name": "x", "key_poses_deg": [{"elbow_flexion": float("nan")}]}],
+     "elbow_flexion=nan must be a finite angle"),
+    ([{"name": "x", "key_poses_deg": [{"elbow_flexion": 40}]},
+      {"name": "x", "key_poses_deg": [{"elbow_flexion": 50}]}], "names must be unique"),
+    ([{"name": "x", "poses": []}], "needs the fields name, key_poses_deg"),
+    ("shoulder", "non-empty sequence of Exercise objects"),
+])
+def test_bad_exercises_are_refused_naming_the_problem(exercises, message):
+    with pytest.raises(ValueError, match=message):
+        RehabEnv(exercises=exercises)
+
+
+def test_an_exercise_index_beyond_the_table_is_refused():
+    with pytest.raises(ValueError, match=r"exercise=2 is not one of \[0, 1\]"):
+        RehabEnv(exercise=2)
+    env = RehabEnv()
+    with pytest.raises(ValueError, match=r"exercise=5 is not one of \[0, 1\]"):
+        env.reset(options={"exercise": 5})

@@ -65,7 +65,7 @@ class SegmentData:
 
 REFERENCE_STATURE_M = {"male": 1.741, "female": 1.735}
 
-# de Leva (1996) Table 4. Limb rows: domain-facts §2.1. Head and trunk sub-segments (upper,
+# de Leva (1996) Table 4. Head and trunk sub-segments (upper,
 # middle, lower trunk) are from the same table; their lengths are the male reference lengths for
 # both sexes (the trunk's geometry is not tested, its masses are).
 DE_LEVA: dict[str, dict[str, SegmentData]] = {
@@ -152,7 +152,7 @@ def _side_sign(side: str) -> float:
 
 
 def joint_table() -> tuple[PatientJoint, ...]:
-    """The 21 hinges with anatomical ranges (AAOS / Norkin & White, domain-facts §3).
+    """The 21 hinges with anatomical ranges (AAOS / Norkin & White).
 
     Axes are chosen so positive angles are flexion, abduction, internal rotation, dorsiflexion
     and inversion on both sides.
@@ -211,7 +211,7 @@ class PassiveJoint:
 
 
 # Relaxed, low-tone joints: the robot carries the limb. Elbow damping 0.5 N·m·s/rad as in
-# MyoSuite's elbow; stiffness well under the <= 20 N·m/rad of an active elbow (domain-facts §6.3).
+# MyoSuite's elbow; stiffness well under the <= 20 N·m/rad of an active elbow (Bennett et al. 1992).
 EXERCISED_PASSIVE: dict[str, PassiveJoint] = {
     "shoulder_flexion": PassiveJoint(2.0, 0.8),
     "shoulder_abduction": PassiveJoint(2.0, 0.8),

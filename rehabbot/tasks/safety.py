@@ -42,7 +42,7 @@ UNSTABLE_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_
 BLOWUP_SPEED_RAD_S = 1000.0
 BLOWUP_FORCE_N = 1.0e5
 
-# ISO/TS 15066 Table A.2, quasi-static contact force limits [N] (domain-facts §4.1).
+# ISO/TS 15066 Table A.2, quasi-static contact force limits [N].
 ISO_TS_15066_QUASI_STATIC_N: dict[str, float] = {
     "hands_and_fingers": 140.0,
     "lower_arms_and_wrists": 160.0,
@@ -205,7 +205,9 @@ class SafetyMonitor:
 
     def check(self, data: mujoco.MjData, force_n: float) -> str | None:
         """The first rule that fires for ``data`` (its largest cuff force ``force_n``, from
-        :meth:`cuff_force_n`), or None."""
+        :meth:`cuff_force_n`), or None. ``data`` must hold the state after ``mj_step`` or
+        ``mj_forward``: the range-of-motion rule reads which joint limits MuJoCo found active
+        (``data.nl``) before it reads the joints."""
         if self.unstable(data, force_n):
             return "instability"
         if not (self._rom_shortcut and data.nl == 0 and self._speed2 <= self._rom_speed2):
