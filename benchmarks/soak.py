@@ -81,36 +81,22 @@ from rehabbot.common.signals import handling_signals
 from rehabbot.envs.config import CONTROL_MODES
 from rehabbot.envs.registration import ENV_SPECS
 
-try:  # run as a script (python benchmarks/soak.py) or imported as benchmarks.soak
-    from soak_report import (
-        END_REASONS,
-        MAX_CONSECUTIVE_FAILURES,
-        WARMUP_STEPS,
-        CellReport,
-        ProcessMemory,
-        SoakReport,
-        format_footer,
-        format_header,
-        format_table,
-        rss_mib,
-        short_id,
-        write_report,
-    )
-except ImportError:
-    from benchmarks.soak_report import (
-        END_REASONS,
-        MAX_CONSECUTIVE_FAILURES,
-        WARMUP_STEPS,
-        CellReport,
-        ProcessMemory,
-        SoakReport,
-        format_footer,
-        format_header,
-        format_table,
-        rss_mib,
-        short_id,
-        write_report,
-    )
+if not __package__:  # run as a script (python benchmarks/soak.py): make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.soak_report import (
+    END_REASONS,
+    MAX_CONSECUTIVE_FAILURES,
+    WARMUP_STEPS,
+    CellReport,
+    ProcessMemory,
+    SoakReport,
+    format_footer,
+    format_header,
+    format_table,
+    rss_mib,
+    short_id,
+    write_report,
+)
 
 __all__ = [
     "DEFAULT_TOTAL_STEPS",

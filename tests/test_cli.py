@@ -202,6 +202,7 @@ def xvfb_display() -> Iterator[str]:
             server.kill()
 
 
+@pytest.mark.slow
 def test_view_steps_physics_in_the_viewer(xvfb_display: str) -> None:
     env = {**os.environ, "DISPLAY": xvfb_display}
     env.pop("WAYLAND_DISPLAY", None)

@@ -263,7 +263,7 @@ def test_range_of_motion_shortcut_never_hides_a_joint_beyond_its_range():
     env.reset(seed=0)
     monitor, model, data = base.safety, base.model, base.data
     elbow = model.joint("elbow_flexion_r")
-    low, high = model.jnt_range[elbow.id]
+    _low, high = model.jnt_range[elbow.id]
     force = monitor.cuff_force_n(data)
     assert monitor.check(data, force) is None
     data.qpos[elbow.qposadr[0]] = high + math.radians(2.5)  # beyond range + 2 deg tolerance

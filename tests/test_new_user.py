@@ -64,7 +64,9 @@ def test_a_bad_policy_fails_before_anything_is_written(trained_run, tmp_path, ca
 
 
 # -- one id, one pair of spaces -------------------------------------------------------------
-@pytest.mark.parametrize("env_id", list(ENV_SPECS))
+@pytest.mark.parametrize("env_id", [env_id if env_id.endswith("reach-v0") else
+                                    pytest.param(env_id, marks=pytest.mark.slow)
+                                    for env_id in ENV_SPECS])
 def test_spaces_do_not_depend_on_the_patient_or_the_weight_level(env_id: str) -> None:
     for mode in ("joint_delta", "joint_position"):
         spaces = set()

@@ -456,6 +456,7 @@ def test_label_is_sanitised(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- plot_all, errors
 
 
+@pytest.mark.slow
 def test_plot_all_calls_ensure_trace_for_model_without_trace(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     root = tmp_path / "runs"
@@ -486,6 +487,7 @@ def test_plot_all_calls_ensure_trace_for_model_without_trace(
         for n, kind in ((3, "tool_path"), (5, "kinematics"), (6, "torques")) for s in (0, 1)])
 
 
+@pytest.mark.slow
 def test_plot_all_duplicate_labels_do_not_overwrite(tmp_path: Path) -> None:
     make_trace(tmp_path / "a" / "trace.npz")
     make_trace(tmp_path / "b" / "trace.npz")
