@@ -299,10 +299,13 @@ def test_cameras_give_different_images() -> None:
     for i, a in enumerate(CAMERAS):
         for b in CAMERAS[i + 1:]:
             assert np.abs(images[a] - images[b]).mean() > 5.0, (a, b)
-    # The default camera is "overview".
+    # The default camera is "overview". Mesa's software rasteriser has, once in CI, shaded a
+    # handful of pixels of the same scene differently, so the images are compared by their
+    # mean difference (different cameras differ by more than 5 per pixel).
     env = gym.make(ENV_ID, render_mode="rgb_array", width=160, height=120)
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
-    np.testing.assert_array_equal(env.render(), images["overview"])
+    assert env.unwrapped.config.camera_name == "overview"
+    assert np.abs(env.render().astype(int) - images["overview"]).mean() < 0.05
     env.close()
 
 
