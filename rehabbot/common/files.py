@@ -30,30 +30,11 @@ def _fsync_dir(directory: Path) -> None:
             os.close(fd)
 
 
-def atomic_write(path: Path, write: Callable[[io.BufferedWriter], Any]) -> None:
-    """Write ``path`` through ``write(stream)`` via a temporary file and ``os.replace``."""
-    path = Path(path)
-    tmp = temp_path(path)
+def _produce_then_rename(path: Path, tmp: Path, produce: Callable[[Path], Any]) -> None:
+    """Let ``produce(tmp)`` write the temporary file, flush it to disk, rename it to
+    ``path``; remove it if anything fails (interruptions included)."""
     try:
-        with open(tmp, "wb") as stream:
-            write(stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    _fsync_dir(path.parent)
-
-
-def atomic_save(path: Path, save: Callable[[str], Any]) -> None:
-    """Like :func:`atomic_write` for writers that take a file name (``save(tmp_name)``); the
-    temporary name keeps ``path``'s suffix, which some writers read to pick a format."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
-        save(str(tmp))
+        produce(tmp)
         with open(tmp, "rb+") as stream:
             os.fsync(stream.fileno())
         os.replace(tmp, path)
@@ -62,6 +43,25 @@ def atomic_save(path: Path, save: Callable[[str], Any]) -> None:
             tmp.unlink()
         raise
     _fsync_dir(path.parent)
+
+
+def atomic_write(path: Path, write: Callable[[io.BufferedWriter], Any]) -> None:
+    """Write ``path`` through ``write(stream)`` via a temporary file and ``os.replace``."""
+    path = Path(path)
+
+    def produce(tmp: Path) -> None:
+        with open(tmp, "wb") as stream:
+            write(stream)
+
+    _produce_then_rename(path, temp_path(path), produce)
+
+
+def atomic_save(path: Path, save: Callable[[str], Any]) -> None:
+    """Like :func:`atomic_write` for writers that take a file name (``save(tmp_name)``); the
+    temporary name keeps ``path``'s suffix, which some writers read to pick a format."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    _produce_then_rename(path, tmp, lambda name: save(str(name)))
 
 
 def atomic_write_text(path: Path, text: str) -> None:
