@@ -31,7 +31,8 @@ import numpy as np
 
 GOLDEN_PATH = Path(__file__).with_name("golden") / "episodes.npz"
 IDS = ("rehabbot/rehab-reach-v0", "rehabbot/rehab-reach-l-v0", "rehabbot/rehab-hip-v0",
-       "rehabbot/rehab-knee-v0")
+       "rehabbot/rehab-knee-v0", "rehabbot/rehab-reach-v1", "rehabbot/rehab-reach-l-v1",
+       "rehabbot/rehab-hip-v1", "rehabbot/rehab-knee-v1")
 MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 EXERCISES = (0, 1)
 WEIGHT_LEVELS = (0, 1, 2, 3, 4)
@@ -151,8 +152,12 @@ def flatten(rollouts: dict[str, dict[str, np.ndarray]]) -> dict[str, np.ndarray]
     keys = list(rollouts)
     flat = {"rollout_keys": np.array(keys),
             "rollout_rows": np.array([len(rollouts[k]["kind"]) for k in keys])}
-    for name in rollouts[keys[0]]:
-        values = np.concatenate([rollouts[k][name] for k in keys])
+    names = list(dict.fromkeys(name for k in keys for name in rollouts[k]))
+    for name in names:
+        # A field that an id does not report (the -v0 and -v1 reward terms differ) is stored
+        # as NaN in its rows (missing_fields tells it apart from a NaN value).
+        values = np.concatenate([rollouts[k][name] if name in rollouts[k] else
+                                 np.full(len(rollouts[k]["kind"]), np.nan) for k in keys])
         if values.dtype == np.float64 and not name.startswith("reward"):
             values = values.astype(np.float32)
         flat[name] = values
@@ -167,7 +172,8 @@ def load_golden(path: Path = GOLDEN_PATH) -> dict[str, dict[str, np.ndarray]]:
         starts = ends - data["rollout_rows"]
         fields = {name: data[name] for name in data.files
                   if name not in ("rollout_keys", "rollout_rows")}
-    return {key: {name: values[a:b] for name, values in fields.items()}
+    return {key: {name: values[a:b] for name, values in fields.items()
+                  if not (values.dtype.kind == "f" and np.isnan(values[a:b]).all())}
             for key, a, b in zip(keys, starts, ends, strict=True)}
 
 

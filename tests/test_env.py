@@ -19,7 +19,8 @@ from rehabbot.tasks import targets as tg
 from rehabbot.tasks import workspace as ws
 from rehabbot.tasks.observation import P_STAR, PHI, THETA, THETA_STAR, P
 
-PAPER_IDS = tuple(ENV_SPECS)
+PAPER_IDS = tuple(i for i in ENV_SPECS if i.endswith("-v0"))
+V1_IDS = tuple(i for i in ENV_SPECS if i.endswith("-v1"))
 INFO_KEYS = {"is_success", "target_index", "safety_violation", "reward_distance",
              "reward_bonus", "reward_safety", "reward_smoothness", "reward_effort",
              "interaction_force_n", "robot_torque_nm", "patient_qpos", "exercise",
@@ -52,6 +53,12 @@ def test_the_four_paper_ids_are_registered_as_kwargs_of_one_class():
     for env_id, (limb, side, task) in expected.items():
         kwargs = gym.spec(env_id).kwargs
         assert (kwargs["limb"], kwargs["side"], kwargs["task_type"]) == (limb, side, task)
+        assert "reward" not in kwargs  # the paper's eq. (5)
+        # Each -v1 id is the same task with the progress reward, and nothing else changed.
+        v1 = gym.spec(env_id.replace("-v0", "-v1"))
+        assert v1.kwargs == {**kwargs, "reward": "progress"}
+        assert v1.entry_point == gym.spec(env_id).entry_point and v1.max_episode_steps == 1000
+    assert set(V1_IDS) == {i.replace("-v0", "-v1") for i in PAPER_IDS}
 
 
 def test_every_registered_rehabbot_id_constructs_resets_and_steps():

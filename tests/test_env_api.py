@@ -24,16 +24,19 @@ CHECK_ENV = """
 import sys, warnings
 import gymnasium as gym, rehabbot
 from gymnasium.utils.env_checker import check_env
+# gym.make itself warns that a -v0 id is "out of date" (a -v1 exists): Gymnasium's notice,
+# not the checker's; the checker must find nothing.
+env = gym.make(sys.argv[1])
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
-    check_env(gym.make(sys.argv[1]).unwrapped)
+    check_env(env.unwrapped)
 for w in caught:
     print("WARNING:", w.message)
 print("CHECKED")
 """
 
 
-@pytest.mark.parametrize("env_id", [pytest.param(i, marks=() if i.endswith("reach-v0") else
+@pytest.mark.parametrize("env_id", [pytest.param(i, marks=() if i.endswith("reach-v1") else
                                                   pytest.mark.slow) for i in PAPER_IDS])
 def test_gymnasium_env_checker_passes_without_warnings(env_id):
     """The checker also opens every render mode, ``human`` included: run it where there is a

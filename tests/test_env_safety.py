@@ -19,10 +19,13 @@ from rehabbot.tasks.safety import (
 
 
 def _run_until_terminated(env, policy, max_steps=300):
+    hold_distance = env.unwrapped._hold_distance  # the state before the first step
     for _ in range(max_steps):
         _obs, reward, terminated, truncated, info = env.step(policy())
+        info["test_hold_distance"] = hold_distance  # of the state before this step
         if terminated or truncated:
             return reward, info
+        hold_distance = env.unwrapped._hold_distance
     raise AssertionError("the episode did not end")
 
 
@@ -40,8 +43,20 @@ def _assert_safety_penalty(env, reward, info):
         worst_distance = np.linalg.norm(np.maximum(high[9:15] - low[0:6], high[0:6] - low[9:15]))
         assert info["reward_safety"] <= -worst_distance * (steps_left - 1) + 1e-6
     else:
-        # "hold": what holding still at this step's distance would cost until the time limit.
-        assert info["reward_safety"] == pytest.approx(steps_left * info["reward_distance"])
+        # "hold": at least what holding still from the state before the step would cost
+        # until the time limit, at the larger of its distance and this step's.
+        extras = base.smoothness_weight + base.effort_weight
+        per_step = max(-info["reward_distance"], info["test_hold_distance"]) + extras
+        if base.safety_penalty_steps is None:
+            # The gap G to the best hold of the episode, this step's other terms, one step.
+            rest = info["reward_distance"] + info["reward_smoothness"] + info["reward_effort"]
+            expected = -(max(base._hold_gap + rest, 0.0) + per_step)
+            assert info["reward_safety"] == pytest.approx(expected)
+            # Never better than holding still from the state before the step: that pays its
+            # distance for every step left (steps_left counts this one and one more).
+            assert reward < -(steps_left - 1) * info["test_hold_distance"]
+        else:
+            assert info["reward_safety"] == pytest.approx(-steps_left * per_step)
         assert info["reward_safety"] < 0
     assert reward == pytest.approx(info["reward_distance"] + info["reward_safety"])
 
@@ -158,7 +173,9 @@ def test_unstable_physics_option_ends_with_instability_and_the_next_reset_is_hea
     base.model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
     for k in range(50):
         sign = 1.0 if k % 2 else -1.0
+        hold_distance = base._hold_distance
         obs, reward, terminated, truncated, info = env.step(np.full(6, sign, np.float32))
+        info["test_hold_distance"] = hold_distance
         if terminated:
             break
     assert terminated and not truncated and info["safety_violation"] == "instability"
@@ -227,29 +244,32 @@ def test_rules_are_documented():
 
 
 def test_hold_penalty_never_pays_better_than_holding_still():
-    """With the default penalty, stopping costs what holding still at the current error
-    would cost until the time limit; an unknown penalty name is refused."""
-    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", safety_penalty_steps=None)
+    """With the default penalty (every step left, uncapped), stopping costs at least what
+    holding still from the state before the step would cost until the time limit; an unknown
+    penalty name is refused."""
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
     base = env.unwrapped
-    assert base.safety_penalty == "hold"
+    assert base.safety_penalty == "hold" and base.safety_penalty_steps is None
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
     reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))
     steps_left = base.max_episode_steps - base._steps + 1
     assert info["safety_violation"] is not None
-    # Holding still at this distance until the time limit pays exactly the same.
-    assert reward == pytest.approx((steps_left + 1) * info["reward_distance"])
+    _assert_safety_penalty(env, reward, info)
+    # Holding still from the state before the step pays its distance for every step left.
+    assert reward < -(steps_left - 1) * info["test_hold_distance"]
     with pytest.raises(ValueError, match=r"safety_penalty.*'hold'.*'worst_case'"):
         gym.make("rehabbot/rehab-reach-v0", safety_penalty="none")
 
 
 def test_safety_penalty_steps_caps_the_steps_counted():
-    assert gym.make("rehabbot/rehab-reach-v0").unwrapped.safety_penalty_steps == 100
+    assert gym.make("rehabbot/rehab-reach-v0").unwrapped.safety_penalty_steps is None
     env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", safety_penalty_steps=50)
     base = env.unwrapped
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
     _reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))
     assert base.max_episode_steps - base._steps + 1 > 50  # the cap is what binds
-    assert info["reward_safety"] == pytest.approx(50 * info["reward_distance"])
+    per_step = max(-info["reward_distance"], info["test_hold_distance"])
+    assert info["reward_safety"] == pytest.approx(-50 * per_step)
     with pytest.raises(ValueError, match="safety_penalty_steps"):
         gym.make("rehabbot/rehab-reach-v0", safety_penalty_steps=0)
 

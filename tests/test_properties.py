@@ -383,6 +383,7 @@ def test_every_step_is_sound(limb, side, task_type, control_mode, profile, exerc
         setpoint_before = env.controller.setpoint_rad.copy()
         target_before = env.target_index
         target_rad = env.target_sequence.robot_rad[target_before].copy()
+        hold_before, gap_before = env._hold_distance, env._hold_gap
 
         obs, reward, terminated, truncated, info = wrapped.step(action)
 
@@ -429,10 +430,18 @@ def test_every_step_is_sound(limb, side, task_type, control_mode, profile, exerc
         if safety_end:
             assert terminated and not info["is_success"]
             assert info["reward_bonus"] == 0.0
-            steps_left = min(max(env.max_episode_steps - k, 0) + 1, env.safety_penalty_steps)
-            per_step = (env.worst_step_reward if safety_penalty == "worst_case" else
-                        info["reward_distance"] - smoothness_weight - effort_weight)
-            assert info["reward_safety"] == pytest.approx(steps_left * per_step, rel=1e-9)
+            steps_left = max(env.max_episode_steps - k, 0) + 1
+            extras = smoothness_weight + effort_weight
+            hold = max(-info["reward_distance"], hold_before) + extras
+            if safety_penalty == "worst_case":
+                expected = steps_left * env.worst_step_reward
+            else:  # the gap to the best hold of the episode, and one step more
+                rest = info["reward_distance"] + info["reward_smoothness"] + \
+                    info["reward_effort"]
+                expected = -(max(gap_before + rest, 0.0) + hold)
+                # Never better than holding still from the state before this step.
+                assert reward < -(steps_left - 1) * (hold_before + 0.0)
+            assert info["reward_safety"] == pytest.approx(expected, rel=1e-9)
             assert info["reward_safety"] < 0.0
         else:
             assert info["reward_safety"] == 0.0

@@ -28,6 +28,7 @@ from rehabbot.tasks.observation import (
     ObservationLayout,
     paper_layout,
 )
+from rehabbot.tasks.progress_reward import ProgressReward, remaining_path_rad
 from rehabbot.tasks.reward import PaperReward
 from rehabbot.tasks.safety import SafetyMonitor
 from rehabbot.tasks.targets import TargetSequence, build_targets
@@ -55,8 +56,9 @@ class EnvParts:
     healthy_low: np.ndarray  # float32
     healthy_high: np.ndarray  # float32
     safety: SafetyMonitor
-    reward: PaperReward
+    reward: PaperReward | ProgressReward
     unusable_levels: dict[int, str]
+    remaining_paths: tuple[tuple[float, ...], ...]  # per exercise: rest[i] (rad) after target i
 
 
 def limit_robot_joints(scene: Scene, handle: RobotHandle, low_rad: np.ndarray,
@@ -129,18 +131,29 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
     # extra terms' maxima.
     worst_distance = np.maximum(healthy_high[theta] - healthy_low[theta_star],
                                 healthy_high[theta_star] - healthy_low[theta])
-    reward = PaperReward(
-        target_tolerance_rad=config.target_tolerance_rad,
-        intermediate_bonus=config.intermediate_bonus, final_bonus=config.final_bonus,
-        smoothness_weight=config.smoothness_weight, effort_weight=config.effort_weight,
-        safety_penalty=config.safety_penalty,
-        safety_penalty_steps=config.safety_penalty_steps,
-        max_episode_steps=config.max_episode_steps,
+    remaining = tuple(tuple(remaining_path_rad(seq.robot_rad).tolist()) for seq in targets)
+    common = {
+        "target_tolerance_rad": config.target_tolerance_rad,
+        "intermediate_bonus": config.intermediate_bonus, "final_bonus": config.final_bonus,
+        "smoothness_weight": config.smoothness_weight, "effort_weight": config.effort_weight,
+        "safety_penalty_steps": config.safety_penalty_steps,
+        "max_episode_steps": config.max_episode_steps,
         # The span of the box actions are clipped to (joint_position: the setpoint bounds).
-        action_range=controller.clip_high.astype(float) - controller.clip_low.astype(float),
-        torque_limit_nm=handle.robot.torque_limits(),
-        worst_step_reward=-(float(np.linalg.norm(worst_distance)) + config.smoothness_weight
-                            + config.effort_weight))
+        "action_range": controller.clip_high.astype(float) - controller.clip_low.astype(float),
+        "torque_limit_nm": handle.robot.torque_limits(),
+    }
+    worst_norm = float(np.linalg.norm(worst_distance))
+    if config.reward == "progress":
+        # D_cap: no pose in the box is farther from a target, and no target has a longer path
+        # after it than the first.
+        reward = ProgressReward(progress_weight=config.progress_weight,
+                                time_cost=config.time_cost,
+                                path_cap_rad=worst_norm + max(rest[0] for rest in remaining),
+                                **common)
+    else:
+        reward = PaperReward(safety_penalty=config.safety_penalty,
+                             worst_step_reward=-(worst_norm + config.smoothness_weight
+                                                 + config.effort_weight), **common)
 
     # Can this patient do these exercises here at all? (fails loudly, once)
     feasibility.check_targets(targets, setpoint_low, setpoint_high, POSITION_BOUND_M,
@@ -158,4 +171,4 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
                     layout=layout, observation_space=observation_space,
                     healthy_low=healthy_low.astype(np.float32),
                     healthy_high=healthy_high.astype(np.float32), safety=safety,
-                    reward=reward, unusable_levels=unusable)
+                    reward=reward, unusable_levels=unusable, remaining_paths=remaining)

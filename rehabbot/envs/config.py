@@ -19,11 +19,15 @@ from rehabbot.sim.patient import PatientProfile
 from rehabbot.sim.robots.ur5e import MAX_JOINT_SPEED_RAD_S
 from rehabbot.sim.scene import CAMERA_NAMES, SIDES, WEIGHT_LEVELS, SceneOptions, check_weight_level
 from rehabbot.tasks.exercises import LIMBS, TASK_TYPES, Exercise, exercise_table
+from rehabbot.tasks.progress_reward import PROGRESS_WEIGHT_PER_RAD, TIME_COST_PER_STEP
 from rehabbot.tasks.reward import SAFETY_PENALTIES, SAFETY_PENALTY_STEPS
 from rehabbot.tasks.safety import SafetyThresholds
 
 CONTROL_MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 RENDER_MODES = ("human", "rgb_array", "depth_array")
+# "paper": eq. (5) (the -v0 ids); "progress": the learnable -v1 reward
+# (rehabbot.tasks.progress_reward).
+REWARDS = ("paper", "progress")
 
 PRESET_OF: dict[tuple[str, str], str] = {
     ("arm", "right"): "upper_right", ("arm", "left"): "upper_left",
@@ -40,6 +44,8 @@ NUMBER_RANGES: dict[str, tuple[float, float, bool]] = {
     "final_bonus": (0.0, 1e6, False),
     "smoothness_weight": (0.0, 1e6, False),
     "effort_weight": (0.0, 1e6, False),
+    "progress_weight": (0.0, 1e6, False),
+    "time_cost": (0.0, 1e6, False),
     "segment_s": (0.1, 60.0, False),
     "min_waypoint_spacing_rad": (0.0, 1.0, False),
     "max_speed_rad_s": (1e-3, MAX_JOINT_SPEED_RAD_S, False),
@@ -65,6 +71,9 @@ class RehabEnvConfig:
     frame_skip: int = 10
     timestep_s: float = 0.002
     target_tolerance_rad: float = 0.05
+    reward: str = "paper"
+    progress_weight: float = PROGRESS_WEIGHT_PER_RAD
+    time_cost: float = TIME_COST_PER_STEP
     intermediate_bonus: float = 10.0
     final_bonus: float = 100.0
     smoothness_weight: float = 0.0
@@ -112,6 +121,10 @@ class RehabEnvConfig:
         if not isinstance(self.terminate_on_safety, bool):
             raise ValueError(f"terminate_on_safety={self.terminate_on_safety!r} must be a bool")
         check_choice("safety_penalty", self.safety_penalty, SAFETY_PENALTIES)
+        check_choice("reward", self.reward, REWARDS)
+        if self.reward == "progress" and self.safety_penalty != "hold":
+            raise ValueError(f"safety_penalty={self.safety_penalty!r} applies to the paper's "
+                             "reward only (reward='paper'); the progress reward has one penalty")
         if self.safety_penalty_steps is not None:
             set_(self, "safety_penalty_steps", check_number(
                 "safety_penalty_steps", self.safety_penalty_steps, 1, 10**9, integer=True))

@@ -20,7 +20,9 @@ NAMESPACE = "rehabbot"
 ENTRY_POINT = "rehabbot.envs.rehab_env:RehabEnv"
 MAX_EPISODE_STEPS = 1000
 
-# id -> (kwargs, one-line description); the paper's Table 2.
+# id -> (kwargs, one-line description). The -v0 ids are the paper's Table 2 with eq. (5); the
+# -v1 ids are the same tasks and spaces with the learnable progress reward
+# (rehabbot.tasks.progress_reward).
 ENV_SPECS: dict[str, tuple[dict, str]] = {
     "rehabbot/rehab-reach-v0": (
         {"limb": "arm", "side": "right", "task_type": "reaching"},
@@ -39,6 +41,10 @@ ENV_SPECS: dict[str, tuple[dict, str]] = {
         "right leg, seated: follow dense waypoints of a minimum-jerk knee flexion/extension path",
     ),
 }
+V1_KWARGS = {"reward": "progress"}
+for _v0_id, (_kwargs, _description) in list(ENV_SPECS.items()):
+    ENV_SPECS[_v0_id.replace("-v0", "-v1")] = (
+        {**_kwargs, **V1_KWARGS}, f"{_description}; learnable progress reward")
 
 
 def register_envs() -> None:

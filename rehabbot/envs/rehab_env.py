@@ -51,20 +51,23 @@ weight level of an id (``r``: each robot joint's hardware range, 2 pi or pi for 
 | 22 | l: weight level (0..4) | - | [0, 4] |
 
 ## Rewards
-Named terms (:mod:`rehabbot.tasks.reward`), each reported as ``info["reward_<name>"]``; the
-reward is their sum. Eq. (5) of the paper: ``reward_distance = -||theta - theta*_i||_2`` and
-``reward_bonus = B_i`` when ``||theta - theta*_i||_inf < target_tolerance_rad`` (``B_i =
-intermediate_bonus``, or ``final_bonus`` for the last target). Optional terms, 0 by default:
-``reward_smoothness = -smoothness_weight * mean(((a_t - a_{t-1}) / (high - low))^2)``,
-``reward_effort = -effort_weight * mean((tau / tau_limit)^2)``. On a safety termination
-(``safety_penalty="hold"``, the default) ``reward_safety = -min(steps left + 1, H) * (this
-step's distance + the extra terms' maxima)`` with ``H = safety_penalty_steps`` (default 100 =
-1 / (1 - gamma) for the usual gamma = 0.99): what holding still at the current error would
-cost an agent that discounts with gamma, so stopping never pays better than holding still.
-``safety_penalty_steps=None`` counts every step left until the time limit (a penalty of up to
--1000 x the distance, which dwarfs the discounted values and stops SAC and TD3 from learning;
-README, Results). ``safety_penalty="worst_case"`` uses the worst per-step reward that this
-patient's joint limits allow instead of the current distance (up to about -7600 uncapped).
+Named terms, each reported as ``info["reward_<name>"]``; the reward is their sum.
+
+* ``reward="paper"`` (the -v0 ids): eq. (5) of the paper, :mod:`rehabbot.tasks.reward`:
+  ``reward_distance = -||theta - theta*_i||_2``, ``reward_bonus`` (``intermediate_bonus`` /
+  ``final_bonus`` when ``||theta - theta*_i||_inf < target_tolerance_rad``), optional
+  ``reward_smoothness`` and ``reward_effort`` (0 by default), and ``reward_safety`` on a safety
+  stop: the episode then earns less than holding still from any state it passed through.
+  Stalling short of a target can be worth more than reaching it (``benchmarks/reward_trap.py``).
+* ``reward="progress"`` (the -v1 ids), :mod:`rehabbot.tasks.progress_reward`:
+  ``reward_progress = progress_weight x`` the decrease of the joint-space path still to travel,
+  ``reward_bonus`` as above, ``reward_time = -time_cost``, the optional terms, and
+  ``reward_safety`` on a stop (the worst pose plus the time cost to the limit). Reaching each
+  target is worth more than stalling for every gamma in [0.95, 0.999], and a stop pays less
+  than holding still from the state before it.
+
+``info["cost"]`` is 1.0 in a step where a safety rule fired (also with
+``terminate_on_safety=False``), else 0.0: Safety-Gymnasium's convention, for constrained RL.
 
 A profile that cannot do the exercises in its scene (the robot cannot reach the cuff, a target
 outside the setpoint bounds, or a home state that already breaks a safety rule at a weight
@@ -109,17 +112,20 @@ takes a config instead.
 | ``frame_skip`` | 10 | physics steps per decision |
 | ``timestep_s`` | 0.002 | physics step; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
 | ``target_tolerance_rad`` | 0.05 | epsilon of eq. (5) |
+| ``reward`` | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
+| ``progress_weight`` | 10.0 | progress reward: paid per rad of path travelled |
+| ``time_cost`` | 0.05 | progress reward: cost of every step |
 | ``intermediate_bonus`` | 10.0 | B_i for i < N - 1 |
 | ``final_bonus`` | 100.0 | B_{N-1} |
 | ``smoothness_weight`` | 0.0 | weight of ``reward_smoothness`` |
 | ``effort_weight`` | 0.0 | weight of ``reward_effort`` |
 | ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
-| ``safety_penalty`` | ``"hold"`` | ``"hold"`` (steps left x current per-step loss) or ``"worst_case"`` (steps left x worst per-step loss); see Rewards |
-| ``safety_penalty_steps`` | 100 | count at most this many steps in the safety penalty (None: all steps left until the time limit); see Rewards |
+| ``safety_penalty`` | ``"hold"`` | paper reward: ``"hold"`` (the gap to holding still) or ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
+| ``safety_penalty_steps`` | None | charge at most this many steps at the current hold cost instead (0.2.0's default was 100; with a cap a stop can pay) |
 | ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range |
 | ``cuff_force_limit_n`` | None | cuff force rule: limit in N for every cuff (None = ISO/TS 15066 quasi-static limit of the region each cuff holds) |
 | ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact |
-| ``max_episode_steps`` | 1000 | horizon used by the safety penalty (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` takes the name for its TimeLimit and never passes it to the env, which keeps 1000: with the default ``safety_penalty_steps=100`` this only over-counts the penalty in the last 100 steps before m. Build ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` to change both |
+| ``max_episode_steps`` | 1000 | horizon used by the safety penalty (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` takes the name for its TimeLimit and never passes it to the env, which keeps 1000: the safety penalties then count steps to 1000, not m (over-counting, never under-counting). Build ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` to change both |
 | ``segment_s`` | 3.0 | trajectory: duration of each min-jerk segment between key poses |
 | ``waypoint_dt_s`` | 0.1 | trajectory: sampling period of the min-jerk path |
 | ``min_waypoint_spacing_rad`` | 0.1 | trajectory: minimum distance (inf-norm, robot joints) between waypoints |
@@ -198,6 +204,13 @@ class RehabEnv(gym.Env):
         self.dt_s = self.frame_skip * self.model.opt.timestep
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
         self._unusable_levels = parts.unusable_levels
+        self._remaining_paths = parts.remaining_paths
+        self._uses_path = self.reward_function.uses_path
+        self._rest: tuple[float, ...] = parts.remaining_paths[0]
+        self._hold_distance = 0.0  # ||theta - theta*|| of the current state, active target
+        self._path_left = 0.0  # the path still to travel from the current state [rad]
+        self._uses_hold_gap = getattr(self.reward_function, "uses_hold_gap", False)
+        self._hold_gap = 0.0  # G of StepOutcome.hold_gap
 
         # -- ids, slices and buffers (resolved once) -----------------------------------------
         layout = self.layout
@@ -300,6 +313,12 @@ class RehabEnv(gym.Env):
         self._num_targets = len(self._sequence)
         self._write_target()
         self._theta = self._observe() or self._qpos[self._qpos_adr].tolist()
+        self._rest = self._remaining_paths[self._exercise]
+        self._hold_distance = _distance(self._theta, self._target)
+        self._path_left = self._hold_distance + self._rest[0]
+        if self._uses_hold_gap:
+            self._hold_gap = self.max_episode_steps * self.reward_function.hold_step_cost(
+                self._hold_distance)
         info = self._info(None, False, self.safety.cuff_force_n(data),
                           self.reward_function.zero_terms(), 0)
         self._needs_reset = False
@@ -347,13 +366,29 @@ class RehabEnv(gym.Env):
                                                  or violation == "instability")
         reached = largest < self._tolerance and not safety_stop
         outcome = self._outcome
-        outcome.distance_rad = math.sqrt(squared)
+        distance = outcome.distance_rad = math.sqrt(squared)
+        outcome.hold_distance_rad = self._hold_distance
+        # After a switch, holding still costs the distance to the next target.
+        switching = reached and not last
+        hold = self._hold_distance = (
+            _distance(self._theta, self._sequence.robot_rad[self._target_index + 1].tolist())
+            if switching else distance)
+        if self._uses_path:
+            outcome.path_left_before_rad = self._path_left
+            self._path_left = outcome.path_left_rad = hold + self._rest[
+                self._target_index + 1 if switching else self._target_index]
         outcome.reached = reached
         outcome.last_target = last
         outcome.safety_stop = safety_stop
         outcome.steps_done = self._steps
         outcome.action = action
+        outcome.hold_gap = self._hold_gap
         terms = self.reward_function(outcome)
+        reward = total(terms)
+        if self._uses_hold_gap and not safety_stop:
+            self._hold_gap = max(self._hold_gap + reward, max(
+                self.max_episode_steps - self._steps, 0) * self.reward_function.hold_step_cost(
+                hold))
         if self._keep_previous_action:
             self._prev_action[:] = action
 
@@ -368,7 +403,7 @@ class RehabEnv(gym.Env):
         info = self._info(violation, is_success, force_n, terms, clipped)
         if self.render_mode == "human":
             self.render()
-        return obs.copy(), total(terms), terminated, False, info
+        return obs.copy(), reward, terminated, False, info
 
     def render(self):
         if self.render_mode is None:
@@ -423,9 +458,10 @@ class RehabEnv(gym.Env):
         self._static_inside = self._static_fields_inside()
 
     @property
-    def worst_step_reward(self) -> float:
-        """The per-step loss of the ``"worst_case"`` safety penalty (this patient's bounds)."""
-        return self.reward_function.worst_step_reward
+    def worst_step_reward(self) -> float | None:
+        """The per-step loss of the ``"worst_case"`` safety penalty (this patient's bounds);
+        None for the progress reward, which has no such penalty."""
+        return getattr(self.reward_function, "worst_step_reward", None)
 
     @property
     def target_index(self) -> int:
@@ -547,6 +583,9 @@ class RehabEnv(gym.Env):
             "exercise": self._exercise,
             "weight_level": self.scene.weight_level,
             "action_clipped": clipped,
+            # Safety-Gymnasium's convention: 1.0 in a step where a safety rule fired (also with
+            # terminate_on_safety=False), else 0.0; for constrained RL.
+            "cost": 0.0 if safety_violation is None else 1.0,
         }
 
     def _record_trace(self) -> None:
@@ -567,3 +606,11 @@ class RehabEnv(gym.Env):
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._bind_views()
+
+
+def _distance(theta: list[float], target: list[float]) -> float:
+    """``||theta - target||_2`` of two short lists (plain Python: no allocation)."""
+    squared = 0.0
+    for angle, goal in zip(theta, target, strict=True):
+        squared += (angle - goal) * (angle - goal)
+    return math.sqrt(squared)

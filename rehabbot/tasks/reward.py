@@ -11,12 +11,18 @@ term                value
 ``distance``        ``-||theta - theta*_i||_2`` [rad]
 ``bonus``           ``B_i`` when ``||theta - theta*_i||_inf < target_tolerance_rad``:
                     ``intermediate_bonus`` (10), or ``final_bonus`` (100) for the last target
-``safety``          on a safety stop: ``-min(steps left + 1, H) x c``, ``H =
-                    safety_penalty_steps`` (100 = 1 / (1 - gamma) for gamma = 0.99; ``None``:
-                    every step left), ``c`` = this step's distance plus the extra terms' maxima
-                    (``safety_penalty="hold"``) or the worst per-step loss the bounds allow
-                    (``"worst_case"``): what holding still would have cost, so stopping never
-                    pays better than holding still for an agent with that gamma
+``safety``          on a safety stop, ``safety_penalty="hold"`` (default): ``-(max(G + r, 0) +
+                    c)``. ``G = max_s [(H - s) x h_s + R(s)]`` over the episode's states
+                    ``s`` so far: ``h_s`` is what a step of holding still at ``s`` costs (its
+                    distance to its active target plus the extra terms' maxima), ``H - s`` the
+                    steps left from ``s`` to the time limit, ``R(s)`` the rewards earned after
+                    ``s``; ``r`` is this step's other terms; ``c`` the larger of this step's
+                    and the previous state's hold cost. The episode that stops thus earns less
+                    than holding still from any state it passed through would have (tracked in
+                    O(1) a step). ``"worst_case"``: ``-(steps left + 1) x`` the worst per-step
+                    loss the bounds allow. ``safety_penalty_steps=K`` instead charges ``K``
+                    steps at ``c`` at most (0.2.0's default, 100): smaller, and a stop can then
+                    pay
 ``smoothness``      ``-smoothness_weight x mean(((a_t - a_{t-1}) / (high - low))^2)`` (0 by default)
 ``effort``          ``-effort_weight x mean((tau / tau_limit)^2)`` (0 by default)
 ==================  ===========================================================================
@@ -29,7 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 
 SAFETY_PENALTIES = ("hold", "worst_case")
-SAFETY_PENALTY_STEPS = 100  # 1 / (1 - gamma) for gamma = 0.99: the horizon of the agent's values
+# Steps the safety penalty counts by default: None = every step left to the time limit, the
+# only count with which a stop never pays better than holding still (0.2.0 capped it at 100).
+SAFETY_PENALTY_STEPS: int | None = None
 
 
 @dataclass
@@ -38,6 +46,18 @@ class StepOutcome:
     in every step (no allocation)."""
 
     distance_rad: float = 0.0  # ||theta - theta*_i||_2 for the target active during the step
+    # ||theta - theta*|| of the state before the step, to the target active in that state:
+    # what one step of holding still there costs in eq. (5)
+    hold_distance_rad: float = 0.0
+    # The path still to travel [rad]: the distance to the active target plus the joint-space
+    # lengths between the remaining targets, before and after the step (after a target switch:
+    # from the next target). Filled only for reward functions with ``uses_path``.
+    path_left_before_rad: float = 0.0
+    path_left_rad: float = 0.0
+    # G: the most that holding still from some earlier state of the episode would have paid
+    # beyond what the episode earned since (``max_s [(H - s) x h_s + R(s, t-1)]``, h_s the
+    # per-step cost of holding at s, R the rewards since s). Filled for ``uses_hold_gap``.
+    hold_gap: float = 0.0
     reached: bool = False  # the target was reached (and no safety rule ended the episode)
     last_target: bool = False  # the target is the sequence's last
     safety_stop: bool = False  # a safety rule ended the episode
@@ -82,9 +102,14 @@ class PaperReward:
             steps_left = max(self.max_episode_steps - outcome.steps_done, 0) + 1
             if self.safety_penalty_steps is not None:
                 steps_left = min(steps_left, self.safety_penalty_steps)
-            per_step = (self.worst_step_reward if self.safety_penalty == "worst_case"
-                        else distance - self.smoothness_weight - self.effort_weight)
-            safety = steps_left * per_step
+            extras = self.smoothness_weight + self.effort_weight
+            hold = max(outcome.distance_rad, outcome.hold_distance_rad) + extras
+            if self.safety_penalty == "worst_case":
+                safety = steps_left * self.worst_step_reward
+            elif self.safety_penalty_steps is not None:
+                safety = -steps_left * hold
+            else:  # the gap to the best hold of the episode, and one step more
+                safety = -(max(outcome.hold_gap + distance + smoothness + effort, 0.0) + hold)
         elif outcome.reached:
             bonus = self.final_bonus if outcome.last_target else self.intermediate_bonus
         return {"reward_distance": distance, "reward_bonus": bonus, "reward_safety": safety,
@@ -94,6 +119,22 @@ class PaperReward:
     def uses_previous_action(self) -> bool:
         """Whether a term needs the previous action (the smoothness term)."""
         return bool(self.smoothness_weight)
+
+    @property
+    def uses_path(self) -> bool:
+        """Whether a term needs the path still to travel (not eq. (5))."""
+        return False
+
+    @property
+    def uses_hold_gap(self) -> bool:
+        """Whether the safety penalty needs :attr:`StepOutcome.hold_gap` (the default
+        uncapped ``"hold"`` penalty)."""
+        return self.safety_penalty == "hold" and self.safety_penalty_steps is None
+
+    def hold_step_cost(self, hold_distance_rad: float) -> float:
+        """What one step of holding still costs at most in a state at ``hold_distance_rad``
+        from its active target: the distance plus the extra terms' maxima."""
+        return hold_distance_rad + self.smoothness_weight + self.effort_weight
 
     def zero_terms(self) -> dict[str, float]:
         """Every term at 0 (the ``info`` of ``reset``)."""

@@ -1,0 +1,175 @@
+"""Audits of a reward design, measured in the sim: is reaching a target worth more than
+stalling short of it, and does a safety stop ever pay? (``benchmarks/reward_trap.py`` prints
+them; ``tests/test_reward_v1.py`` asserts them.)
+
+Both replay seeded episodes: the same seed, options and actions reproduce a state exactly
+(the envs are deterministic), so "what if the agent had held still from here" is measured by
+replaying the actions up to that step and then sending zero actions to the time limit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from rehabbot.rl.experts import ScriptedExpert
+
+THETA_STAR, THETA = slice(0, 6), slice(9, 15)  # the paper's observation order
+
+
+@dataclass(frozen=True)
+class StallCase:
+    """One target of one expert episode: the discounted value of going on (the expert) and
+    of holding still, from the last state short of the target."""
+
+    env_id: str
+    exercise: int
+    target: int
+    step: int  # the decision at which the two choices part
+    short_rad: float  # how far short of the target (inf-norm) the robot is there
+    gamma: float
+    reach_value: float
+    stall_value: float
+
+    @property
+    def reaching_pays(self) -> bool:
+        return self.reach_value > self.stall_value
+
+
+def _expert_episode(env: gym.Env, seed: int, options: dict) -> tuple[list, list, list]:
+    """Actions, rewards and per-step (target index, inf-norm error before the step)."""
+    expert = ScriptedExpert(env)
+    obs, _ = env.reset(seed=seed, options=options)
+    actions, rewards, states = [], [], []
+    base = env.unwrapped
+    while True:
+        error = float(np.max(np.abs(obs[THETA].astype(float) - obs[THETA_STAR].astype(float))))
+        states.append((base.target_index, error))
+        action, _ = expert.predict(obs, deterministic=True)
+        actions.append(action)
+        obs, reward, terminated, truncated, info = env.step(action)
+        rewards.append(reward)
+        if terminated or truncated:
+            if not info["is_success"]:
+                raise RuntimeError(f"the expert failed: {info['safety_violation']}")
+            return actions, rewards, states
+
+
+def _hold_rewards(env: gym.Env, seed: int, options: dict, actions: Sequence,
+                  servo: bool = False) -> list[float]:
+    """Rewards of replaying ``actions`` and then holding still to the end: zero actions, or
+    (``servo``, joint_delta mode) moving the setpoints so that the robot stays at the joint
+    angles it had when the replay ended (its setpoints may lead them)."""
+    obs, _ = env.reset(seed=seed, options=options)
+    for action in actions:
+        obs, *_ = env.step(action)
+    space = env.action_space
+    zero = np.zeros(space.shape, space.dtype)
+    hold_at = obs[THETA].astype(float)
+    rewards = []
+    while True:
+        action = zero
+        if servo:
+            action = np.clip(0.5 * (hold_at - obs[THETA].astype(float)), space.low,
+                             space.high).astype(space.dtype)
+        obs, reward, terminated, truncated, _info = env.step(action)
+        rewards.append(reward)
+        if terminated or truncated:
+            return rewards
+
+
+def _discounted(rewards: Sequence[float], gamma: float) -> float:
+    value = 0.0
+    for reward in reversed(rewards):
+        value = reward + gamma * value
+    return value
+
+
+def stall_cases(env_id: str, exercise: int, gammas: Sequence[float], seed: int = 0,
+                weight_level: int = 2, targets: Sequence[int] | None = None,
+                short_rad: float = 0.06, **env_kwargs) -> list[StallCase]:
+    """For each target (all, or ``targets``) of one expert episode, the last step before the
+    target is reached at which the robot is still ``short_rad`` or more short of it (inf-norm;
+    the tolerance is 0.05 rad): the discounted return of the expert's remaining episode
+    versus that of holding still there (servoing the setpoints to hold those angles)."""
+    env = gym.make(env_id, **env_kwargs)
+    options = {"exercise": exercise, "weight_level": weight_level}
+    try:
+        actions, rewards, states = _expert_episode(env, seed, options)
+        cases = []
+        n_targets = len(env.unwrapped.target_sequence)
+        for target in (range(n_targets) if targets is None else targets):
+            steps = [t for t, (index, error) in enumerate(states)
+                     if index == target and error >= short_rad]
+            if not steps:  # reached in the step it became active
+                continue
+            t = steps[-1]
+            held = _hold_rewards(env, seed, options, actions[:t], servo=True)
+            for gamma in gammas:
+                cases.append(StallCase(env_id, exercise, target, t, states[t][1], gamma,
+                                       _discounted(rewards[t:], gamma),
+                                       _discounted(held, gamma)))
+        return cases
+    finally:
+        env.close()
+
+
+@dataclass(frozen=True)
+class StopCase:
+    """Undiscounted returns from the reset state: driving one joint at the action bound until a
+    safety rule stops the episode, holding still (zero actions) to the time limit, and the
+    expert's episode."""
+
+    env_id: str
+    control_mode: str
+    joint: int
+    violation: str | None
+    stop_step: int
+    stop_return: float
+    hold_return: float
+    expert_return: float
+    # From the state before the stop: the stopping step's reward and the return of holding
+    # still from that state instead (setpoint modes only: with torques off nothing holds).
+    last_step_reward: float
+    hold_from_there: float | None
+
+
+def stop_cases(env_id: str, control_mode: str = "joint_delta", seed: int = 0,
+               exercise: int = 0, weight_level: int = 0,
+               joints: Sequence[int] = range(6)) -> list[StopCase]:
+    """The safety audit of one id (see :class:`StopCase`); a joint that its push never drives
+    into a rule within the episode is reported with ``violation=None``."""
+    options = {"exercise": exercise, "weight_level": weight_level}
+    env = gym.make(env_id, control_mode=control_mode)
+    expert_env = gym.make(env_id)
+    try:
+        # Holding still: the robot servoed at its reset angles (joint_delta mode; with torques
+        # alone nothing holds the limb up).
+        hold = sum(_hold_rewards(expert_env, seed, options, [], servo=True))
+        _actions, expert_rewards, _states = _expert_episode(expert_env, seed, options)
+        cases = []
+        for joint in joints:
+            push = np.zeros(env.action_space.shape, np.float32)
+            push[joint] = env.action_space.high[joint]
+            env.reset(seed=seed, options=options)
+            rewards = []
+            while True:
+                _obs, reward, terminated, truncated, info = env.step(push)
+                rewards.append(reward)
+                if terminated or truncated:
+                    break
+            violation = info["safety_violation"] if terminated else None
+            there = None
+            if control_mode != "torque":
+                there = float(sum(_hold_rewards(env, seed, options,
+                                                [push] * (len(rewards) - 1), servo=True)))
+            cases.append(StopCase(env_id, control_mode, joint, violation, len(rewards),
+                                  float(sum(rewards)), float(hold),
+                                  float(sum(expert_rewards)), float(rewards[-1]), there))
+        return cases
+    finally:
+        env.close()
+        expert_env.close()
