@@ -35,7 +35,7 @@ def trained_run(tmp_path_factory) -> Path:
         "n_steps": 64, "batch_size": 32, "n_epochs": 1,
         "policy_kwargs": "dict(net_arch=[8, 8])"},
         env_kwargs={**SHORT, "weight_level": 0}, eval_freq=0, checkpoint_freq=0,
-        progress_bar=False)
+        progress_bar=False, backend="sb3")
 
 
 # -- evaluate: the README's command, every argument checked first -------------------------
@@ -141,7 +141,7 @@ def test_a_short_sac_run_writes_a_small_replay_buffer(tmp_path) -> None:
     from rehabbot.rl.training import train_run
 
     run_dir = train_run(ENV, "sac", 0, 400, tmp_path, env_kwargs=SHORT, eval_freq=0,
-                        checkpoint_freq=0, progress_bar=False,
+                        checkpoint_freq=0, progress_bar=False, backend="sb3",
                         hyperparams={"learning_starts": 300, "batch_size": 16,
                                      "policy_kwargs": "dict(net_arch=[8, 8])"})
     buffer = run_dir / "checkpoints" / "rl_model_replay_buffer_400_steps.npz"

@@ -73,6 +73,7 @@ OLD_SPELLING: dict[str, tuple[str, dict[str, Any]]] = {
 }
 # Keep the off-policy models small: the shipped buffer holds a million transitions.
 SMALL = {"sac": {"buffer_size": 1000}, "td3": {"buffer_size": 1000},
+         "tqc": {"buffer_size": 1000}, "crossq": {"buffer_size": 1000},
          "ppo": {"n_steps": 64, "batch_size": 32, "n_epochs": 2}}
 
 

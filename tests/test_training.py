@@ -1,7 +1,8 @@
 """``rehabbot train`` (:mod:`rehabbot.rl.training`, :mod:`rehabbot.cli.train`): runs,
 checkpoints, resume, interruption,
 hyperparameter files and user errors. Kept short: 100-step episodes, tiny networks, few
-gradient steps."""
+gradient steps. These runs are Stable-Baselines3's (``--backend sb3``; the default, ``auto``,
+would pick SBX where it is installed); tests/test_training_backends.py covers SBX."""
 
 from __future__ import annotations
 
@@ -78,7 +79,7 @@ def _train_args(tmp_path: Path, algo: str, out: Path, *extra: str, hp: dict | No
     return _parse(ENV, "--algo", algo, "--hyperparams", str(hp_file), "--out", str(out),
                   "--checkpoint-freq", str(freq), "--eval-freq", str(freq),
                   "--eval-episodes", "1", "--env-kwargs", json.dumps(ENV_KWARGS),
-                  "--no-progress", *extra)
+                  "--no-progress", "--backend", "sb3", *extra)
 
 
 def _manifest(run_dir: Path) -> dict:
@@ -227,7 +228,7 @@ def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
     hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})
     argv = [ENV, "--algo", "sac", "--timesteps", "1000000", "--hyperparams", str(hp_file),
             "--out", str(out), "--checkpoint-freq", "500", "--eval-freq", "0",
-            "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress"]
+            "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress", "--backend", "sb3"]
     run_dir = out / ENV / "sac" / "seed0"
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     proc = subprocess.Popen([sys.executable, "-m", "rehabbot", "train", *argv], cwd=tmp_path,
@@ -280,7 +281,8 @@ def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path)
     hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})
     argv = [ENV, "--algo", "sac", "--timesteps", "1000000", "--hyperparams", str(hp_file),
             "--out", str(out), "--checkpoint-freq", "1000", "--eval-freq", "500",
-            "--eval-episodes", "1", "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress"]
+            "--eval-episodes", "1", "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress",
+            "--backend", "sb3"]
     run_dir = out / ENV / "sac" / "seed0"
     proc = subprocess.Popen([sys.executable, "-m", "rehabbot", "train", *argv], cwd=tmp_path,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -332,7 +334,7 @@ def test_sigterm_in_process_stops_and_restores_the_handlers(tmp_path: Path) -> N
     killer.start()
     with pytest.raises(TrainingInterrupted) as caught:
         train_run(ENV, "td3", 0, 1_000_000, out, env_kwargs=ENV_KWARGS, checkpoint_freq=300,
-                  eval_freq=0, progress_bar=False,
+                  eval_freq=0, progress_bar=False, backend="sb3",
                   hyperparams={**SMALL["td3"], "learning_starts": 1_000_000})
     killer.join()
     assert caught.value.exit_code == 143

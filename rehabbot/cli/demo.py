@@ -8,10 +8,11 @@ Usage::
 
 Steps, each with its output under ``OUT``:
 
-1. ``rehabbot train rehab-reach-v0 --algo sac --hyperparams sac`` (the settings of the
-   README's results, shipped with the package) → ``OUT/runs/rehab-reach-v0/sac/seed<k>/``
-   (model, checkpoints, monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run
-   the demo again: it resumes from the last checkpoint.
+1. ``rehabbot train rehab-reach-v0 --algo sac --hyperparams sac --backend sb3`` (the settings
+   of the README's results, shipped with the package, on Stable-Baselines3 as measured there)
+   → ``OUT/runs/rehab-reach-v0/sac/seed<k>/`` (model, checkpoints, monitor CSVs, TensorBoard
+   logs, manifest). Interrupted (Ctrl-C)? Run the demo again: it resumes from the last
+   checkpoint.
 2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the
    same episode seeds → ``OUT/evaluation/<policy>/evaluation.json`` and ``trace.npz``.
 3. ``rehabbot plot`` → ``OUT/figures/`` (Fig. 3 tool path, Fig. 4 learning curve, Fig. 5
@@ -40,6 +41,7 @@ DEFAULT_EPISODES = 10
 EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
 VIDEO_WIDTH_PX, VIDEO_HEIGHT_PX, VIDEO_FRAME_EVERY = 480, 360, 3  # 16.7 fps, software GL
 HYPERPARAMS = "sac"  # rehabbot/rl/hyperparams/sac.yml
+BACKEND = "sb3"  # the README's demo figures are Stable-Baselines3's (TrackingErrorFeatures)
 
 
 def add_demo_parser(commands: argparse._SubParsersAction) -> None:
@@ -94,11 +96,11 @@ def run_demo(args: argparse.Namespace) -> int:
           f"{' (resuming)' if resume else ''} -> {run_dir}", flush=True)
     training.train_run(ENV_ID, ALGO, args.seed, args.timesteps, run_root,
                        hyperparams=args.hyperparams, resume=resume,
-                       progress_bar=not args.no_progress)
+                       progress_bar=not args.no_progress, backend=BACKEND)
     stages["train"] = time.perf_counter() - started
     commands["train"] = (f"rehabbot train {env_short_name(ENV_ID)} --algo sac --timesteps "
                          f"{args.timesteps} --seeds {args.seed} --hyperparams {args.hyperparams}"
-                         f" --out {run_root}")
+                         f" --backend {BACKEND} --out {run_root}")
 
     started = time.perf_counter()
     print(f"[2/5] evaluating SAC, the scripted expert and random actions on "

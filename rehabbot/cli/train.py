@@ -8,14 +8,17 @@ import argparse
 import json
 import shlex
 import signal
+import sys
 from collections.abc import Sequence
 from typing import Any
 
 from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command
 from rehabbot.envs.registration import ENV_SPECS, env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS
+from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
 from rehabbot.rl.hyperparams import coerce_number, settings_names
 from rehabbot.rl.planning import (
+    DEFAULT_BC_EPISODES,
     DEFAULT_CHECKPOINT_FREQ,
     DEFAULT_EVAL_EPISODES,
     DEFAULT_EVAL_FREQ,
@@ -72,14 +75,26 @@ examples:
       --out runs/ppo-sweep
   rehabbot train rehab-reach-v0 --algo sac --env-kwargs '{"weight_level": 2}'
   rehabbot train rehab-reach-v0 --algo sac --timesteps 400000 --resume   # continue a run
+  rehabbot train rehab-reach-v0 --algo tqc --hyperparams tqc --backend sbx --demos 20
+  rehabbot train rehab-reach-v0 --algo ppo --hyperparams ppo --bc --demos 50
 
 Each seed writes OUT/<env>/<algo>/seed<k>/ with manifest.json, monitor/train_<i>.monitor.csv,
 eval/evaluations.npz, tb/ (tensorboard --logdir OUT), checkpoints/ and, at the end, model.zip.
 Ctrl+C (or SIGTERM) saves a checkpoint and prints the command that resumes; exit code 130
 (143 for SIGTERM). --resume continues every seed from its newest checkpoint to --timesteps
-(default: the total it was started with); settings come from the run's manifest. SAC/TD3
+(default: the total it was started with); settings come from the run's manifest. Off-policy
 checkpoints keep the replay buffer of the newest checkpoint only (it can take hundreds of MB).
-Runs end at exactly N steps (with one env); PPO does not train on a last, partial rollout.
+Runs end at exactly N steps with one env (an off-policy algorithm collects train_freq steps
+at a time, so it may run up to train_freq - 1 steps past N); PPO does not train on a last,
+partial rollout.
+
+Backends: --backend auto (the default) trains on SBX (JAX; pip install 'rehabbot[jax]') when
+it is installed and on Stable-Baselines3 (PyTorch) otherwise; sb3 or sbx force one. TQC and
+CrossQ come from sb3-contrib on sb3. A settings file is read for SBX with what only PyTorch
+runs translated or dropped (a PyTorch policy class becomes SBX's MlpPolicy, features
+extractors are dropped, nn.ReLU becomes flax.linen.relu, ...): each change is printed and
+listed in the manifest (hyperparameters.backend_changes). A resumed or evaluated run uses the
+backend it was trained with (manifest.json: backend, backend_version).
 
 Hyperparameter files are RL-Zoo-style YAML: env ids (full or short) mapped to hyperparameters,
 or one flat mapping. Keys: the SB3 constructor arguments of the algorithm, plus n_timesteps,
@@ -98,9 +113,10 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
     """Add the ``train`` subcommand (``func=cmd_train``) to ``commands``."""
     parser = commands.add_parser(
         "train",
-        help="train a Stable-Baselines3 agent (PPO, SAC, TD3) on an env",
-        description="Train a Stable-Baselines3 agent on a RehabBot env, one run per seed, "
-                    "with checkpoints, evaluation, TensorBoard logs and a manifest.",
+        help="train an agent (PPO, SAC, TD3, TQC, CrossQ) with SBX or Stable-Baselines3",
+        description="Train an agent on a RehabBot env with SBX (JAX) or Stable-Baselines3 "
+                    "(PyTorch), one run per seed, with checkpoints, evaluation, TensorBoard "
+                    "logs and a manifest.",
         epilog=TRAIN_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -122,7 +138,7 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--hyperparams", metavar="FILE.yml|NAME",
                         help="RL-Zoo-style hyperparameter file, or the name of one shipped "
                              f"with rehabbot ({', '.join(settings_names())}); default: "
-                             "SB3's defaults")
+                             "the library's defaults")
     parser.add_argument("--env-kwargs", metavar="JSON",
                         help="keyword arguments for the env, as a JSON object")
     parser.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
@@ -142,6 +158,21 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
                              f"{DEFAULT_EVAL_EPISODES})")
     parser.add_argument("--no-progress", action="store_true",
                         help="no progress bar")
+    parser.add_argument("--backend", choices=BACKEND_CHOICES, default=DEFAULT_BACKEND,
+                        type=str.lower,
+                        help="library that trains: sbx (JAX) if installed, else sb3 (auto, "
+                             "default); sb3 (Stable-Baselines3, PyTorch); sbx (fails if "
+                             "sbx-rl is not installed)")
+    parser.add_argument("--demos", type=_non_negative_count, metavar="N",
+                        help="run the scripted expert for N episodes of the training env "
+                             "(seeds: run seed + 20000 + i) and add every transition to the "
+                             "replay buffer before learning (sac, td3, tqc, crossq); with "
+                             f"--bc, the episodes to clone (default {DEFAULT_BC_EPISODES})")
+    parser.add_argument("--bc", action="store_true",
+                        help="PPO only: warm-start PPO's actor by behaviour cloning the "
+                             "expert's episodes (MSE of the mean action, in units of the "
+                             "action bound; Adam, a few epochs; loss before/after in the "
+                             "manifest); both backends (PyTorch on sb3, JAX on sbx)")
     parser.set_defaults(func=cmd_train)
 
 
@@ -164,7 +195,12 @@ def cmd_train(args: argparse.Namespace) -> int:
                        overwrite=args.overwrite, n_envs=args.n_envs,
                        checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq,
                        eval_episodes=args.eval_episodes, progress_bar=not args.no_progress,
-                       vec=args.vec)
+                       vec=args.vec, backend=args.backend, demos=args.demos, bc=args.bc)
+    new_runs = [plan for plan in plans if plan.skip is None and plan.resume is None]
+    for change in new_runs[0].hp.backend_changes if new_runs else ():
+        used = "dropped" if change["used"] is None else f"-> {change['used']}"
+        print(f"note: {new_runs[0].backend} backend: {change['key']} {change['given']!r} "
+              f"{used} ({change['why']})", file=sys.stderr, flush=True)
     for plan in plans:
         if plan.skip is not None:
             print(plan.skip, flush=True)
@@ -175,9 +211,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         else:
             action, source, start = "training", plan.hp.source, ""
         envs = f"{plan.n_envs} env{'s' if plan.n_envs > 1 else ''}"
-        print(f"{plan.run_dir}: {action} {plan.algo} on {plan.env_id}, seed {plan.seed}, "
-              f"{start}to {plan.total_timesteps} steps ({envs}, hyperparameters: {source})",
-              flush=True)
+        extra = ""
+        if plan.demos and plan.resume is None:
+            extra = f", {'cloning' if plan.bc else 'first'} {plan.demos} expert episodes"
+        print(f"{plan.run_dir}: {action} {plan.algo} on {plan.env_id} ({plan.backend}), seed "
+              f"{plan.seed}, {start}to {plan.total_timesteps} steps ({envs}, hyperparameters: "
+              f"{source}{extra})", flush=True)
         try:
             run_dir = execute(plan)
         except TrainingInterrupted as err:

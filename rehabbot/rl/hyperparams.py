@@ -1,6 +1,6 @@
 """Hyperparameters of the training runs: RL-Zoo-style YAML files and Python mappings,
-validated against Stable-Baselines3's constructors, and the settings files that ship with the
-package (:func:`settings_path`).
+validated against the constructors of the backend's classes, and the settings files that
+ship with the package (:func:`settings_path`).
 
 A file holds either env ids (full, or without ``rehabbot/``) mapped to hyperparameters, a
 ``default`` entry for every other id (as RL Zoo reads it), or one flat mapping. Keys: the SB3
@@ -9,8 +9,12 @@ constructor arguments of the algorithm plus the zoo keys ``n_timesteps``, ``n_en
 (``MlpPolicy``) or, as in RL Zoo, the dotted name of a policy class under ``rehabbot.`` or
 ``stable_baselines3.`` (``rehabbot.rl.features.TrackingErrorSACPolicy``); ``policy_kwargs`` may
 be a mapping or a zoo string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``,
-parsed without ``eval``; ``learning_rate``/``clip_range``/``clip_range_vf`` may be
-``"lin_<float>"``.
+parsed without ``eval`` (:mod:`rehabbot.rl.zoo_strings`);
+``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``.
+
+Files are read for one backend (``backend="sb3"``, the default, or ``"sbx"``): keys are checked
+against that library's class; for SBX, what only PyTorch can run is translated or dropped and
+listed (:mod:`rehabbot.rl.sbx_settings`).
 
 The settings shipped with the package are written so that RL Zoo reads them unchanged too
 (``python -m rl_zoo3.train --gym-packages rehabbot --conf-file .../sac.yml``): a ``default``
@@ -19,7 +23,6 @@ entry, classes named only as ``policy``, ``policy_kwargs`` as a string of litera
 
 from __future__ import annotations
 
-import ast
 import importlib
 import inspect
 import math
@@ -33,14 +36,19 @@ from typing import Any
 from rehabbot.common.errors import RehabbotError, UsageError
 from rehabbot.envs.registration import ENV_SPECS, env_short_name, resolve_env_id
 from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
+from rehabbot.rl.zoo_strings import TORCH_NAMES as TORCH_NAMES  # re-exported
+from rehabbot.rl.zoo_strings import _resolve_torch_names
+from rehabbot.rl.zoo_strings import parse_python_expression as parse_python_expression
 
 DEFAULT_POLICY = "MlpPolicy"
 DEFAULT_NOISE_STD = 0.1
 HYPERPARAMS_DEFAULT_SOURCE = "sb3 defaults"
+DEFAULT_SOURCES = {"sb3": HYPERPARAMS_DEFAULT_SOURCE, "sbx": "sbx defaults"}
 SETTINGS_FOLDER = "hyperparams"  # package data of rehabbot.rl
 DEFAULT_ENTRY = "default"  # RL Zoo's entry for every env id without its own
 # Packages a dotted ``policy`` may be imported from (a hyperparameter file names no other code).
 POLICY_PACKAGES = ("rehabbot", "stable_baselines3")
+SBX_POLICY_PACKAGES = ("sbx",)
 
 
 class HyperparameterError(UsageError):
@@ -116,97 +124,8 @@ OBJECT_KEYS = {
 }
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
-# Names a zoo string may use, and the torch classes they stand for.
-TORCH_NAMES = {
-    **{f"{prefix}{name}": ("torch.nn", name)
-       for prefix in ("nn.", "th.nn.", "torch.nn.")
-       for name in ("ReLU", "Tanh", "ELU", "LeakyReLU", "SiLU", "GELU")},
-    **{f"{prefix}{name}": ("torch.optim", name)
-       for prefix in ("optim.", "th.optim.", "torch.optim.")
-       for name in ("Adam", "AdamW", "RMSprop", "SGD")},
-    # RehabBot's own features extractor (observation + tracking errors).
-    **{name: ("rehabbot.rl.features", "TrackingErrorFeatures")
-       for name in ("TrackingErrorFeatures", "rehabbot.rl.features.TrackingErrorFeatures",
-                    "rehabbot.features.TrackingErrorFeatures")},
-}
 _NUMBER_RE = re.compile(r"^[+-]?(?:\d[\d_]*(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$")
 _INT_RE = re.compile(r"^[+-]?\d[\d_]*$")
-
-
-# --------------------------------------------------------------------------- safe zoo strings
-
-
-def parse_python_expression(text: str) -> Any:
-    """Evaluate a zoo-style string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``
-    without ``eval``: only ``dict(key=value, ...)`` calls, ``{...}`` dicts, lists, tuples,
-    numbers, strings, booleans, ``None`` and the torch names of :data:`TORCH_NAMES` are
-    accepted.
-
-    Raises:
-        ValueError: anything else (names the offending part).
-    """
-    try:
-        tree = ast.parse(str(text).strip(), mode="eval")
-    except SyntaxError as err:
-        raise ValueError(f"not a valid expression: {text!r} ({err.msg})") from err
-    return _literal(tree.body)
-
-
-def _dotted_name(node: ast.AST) -> str | None:
-    if isinstance(node, ast.Name):
-        return node.id
-    if isinstance(node, ast.Attribute):
-        base = _dotted_name(node.value)
-        return None if base is None else f"{base}.{node.attr}"
-    return None
-
-
-def _literal(node: ast.AST) -> Any:
-    if isinstance(node, ast.Constant) and (
-        node.value is None or isinstance(node.value, (bool, int, float, str))
-    ):
-        return node.value
-    if isinstance(node, ast.List):
-        return [_literal(item) for item in node.elts]
-    if isinstance(node, ast.Tuple):
-        return tuple(_literal(item) for item in node.elts)
-    if isinstance(node, ast.Dict) and all(key is not None for key in node.keys):
-        return {_literal(key): _literal(value) for key, value in zip(node.keys, node.values,
-                                                                      strict=True)}
-    if (isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd))
-            and isinstance(node.operand, ast.Constant)
-            and isinstance(node.operand.value, (int, float))
-            and not isinstance(node.operand.value, bool)):
-        value = node.operand.value
-        return -value if isinstance(node.op, ast.USub) else value
-    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
-            and node.func.id == "dict" and not node.args
-            and all(keyword.arg is not None for keyword in node.keywords)):
-        return {keyword.arg: _literal(keyword.value) for keyword in node.keywords}
-    dotted = _dotted_name(node)
-    if dotted is not None and dotted in TORCH_NAMES:
-        return _torch_object(dotted)
-    allowed = sorted({name for name in TORCH_NAMES if name.startswith(("nn.", "optim."))})
-    raise ValueError(
-        f"{ast.unparse(node)!r} is not allowed: only dict(...), literals, lists, tuples and "
-        f"the names {', '.join(allowed)}"
-    )
-
-
-def _torch_object(name: str) -> Any:
-    module_name, attr = TORCH_NAMES[name]
-    return getattr(importlib.import_module(module_name), attr)
-
-
-def _resolve_torch_names(value: Any) -> Any:
-    """Replace strings like ``"nn.ReLU"`` (from a YAML mapping) by the torch classes."""
-    if isinstance(value, str) and value.strip() in TORCH_NAMES:
-        return _torch_object(value.strip())
-    if isinstance(value, dict):
-        return {key: _resolve_torch_names(item) for key, item in value.items()}
-    if isinstance(value, list):
-        return [_resolve_torch_names(item) for item in value]
-    return value
 
 
 # --------------------------------------------------------------------------- hyperparameters
@@ -233,6 +152,9 @@ class Hyperparameters:
     normalize: dict[str, Any] | None = None
     noise_type: str | None = None
     noise_std: float | None = None
+    backend: str = "sb3"
+    # What reading the file for SBX translated or dropped (rehabbot.rl.sbx_settings.change).
+    backend_changes: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def policy_name(self) -> str:
@@ -241,7 +163,7 @@ class Hyperparameters:
 
     def effective_kwargs(self) -> dict[str, Any]:
         """Every constructor argument (SB3 defaults filled in) as JSON-able values."""
-        cls = algo_class(self.algo)
+        cls = algo_class(self.algo, self.backend)
         effective: dict[str, Any] = {}
         for name, param in inspect.signature(cls.__init__).parameters.items():
             if name in ("self", "env", "_init_setup_model", "tensorboard_log", "seed"):
@@ -271,6 +193,8 @@ class Hyperparameters:
             "noise_std": self.noise_std,
             "n_timesteps": self.n_timesteps,
             "n_envs": self.n_envs,
+            "backend": self.backend,
+            "backend_changes": jsonable(self.backend_changes),
         }
 
 
@@ -337,31 +261,37 @@ def _class_name(value: type) -> str:
     return f"{value.__module__}.{value.__qualname__}"
 
 
-def _policy_error(where: str, raw: Any, cls: Any, why: str) -> HyperparameterError:
+def _policy_error(where: str, raw: Any, cls: Any, why: str,
+                  packages: tuple[str, ...] = POLICY_PACKAGES) -> HyperparameterError:
     return HyperparameterError(
         f"{where}: policy {raw!r} {why}; valid: {', '.join(cls.policy_aliases)}, or the dotted "
         f"name of a subclass of {_class_name(cls.policy_aliases[DEFAULT_POLICY])} under "
-        f"{' or '.join(f'{package}.' for package in POLICY_PACKAGES)} (rehabbot.rl.features "
-        f"has one for each algorithm)")
+        f"{' or '.join(f'{package}.' for package in packages)}"
+        + (" (rehabbot.rl.features has one for each algorithm)" if "rehabbot" in packages
+           else ""))
 
 
-def _parse_policy(raw: Any, cls: Any, where: str) -> str | type:
+def _parse_policy(raw: Any, cls: Any, where: str,
+                  packages: tuple[str, ...] = POLICY_PACKAGES) -> str | type:
     """An SB3 alias (kept as the string) or a dotted class name (imported, as RL Zoo does):
-    only from :data:`POLICY_PACKAGES`, and only a subclass of the algorithm's MlpPolicy."""
+    only from ``packages``, and only a subclass of the algorithm's MlpPolicy."""
     if isinstance(raw, str) and raw in cls.policy_aliases:
         return raw
     if not isinstance(raw, str) or "." not in raw.strip(". "):
-        raise _policy_error(where, raw, cls, "is neither an alias nor a dotted class name")
+        raise _policy_error(where, raw, cls, "is neither an alias nor a dotted class name",
+                            packages)
     module_name, _, attr = raw.strip().rpartition(".")
-    if module_name.split(".")[0] not in POLICY_PACKAGES:
-        raise _policy_error(where, raw, cls, "is outside the packages policies may come from")
+    if module_name.split(".")[0] not in packages:
+        raise _policy_error(where, raw, cls, "is outside the packages policies may come from",
+                            packages)
     try:
         policy = getattr(importlib.import_module(module_name), attr)
     except (ImportError, AttributeError, ValueError) as err:
-        raise _policy_error(where, raw, cls, f"cannot be imported ({err})") from None
+        raise _policy_error(where, raw, cls, f"cannot be imported ({err})", packages) from None
     base = cls.policy_aliases[DEFAULT_POLICY]
     if not (isinstance(policy, type) and issubclass(policy, base)):
-        raise _policy_error(where, raw, cls, f"is not a subclass of {_class_name(base)}")
+        raise _policy_error(where, raw, cls, f"is not a subclass of {_class_name(base)}",
+                            packages)
     return policy
 
 
@@ -383,8 +313,11 @@ def _parse_schedule(value: Any, key: str, where: str) -> Any:
 
 def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
                                  source: str = "python mapping",
-                                 entry: str | None = None) -> Hyperparameters:
-    """Validate a flat mapping of hyperparameters for ``algo``.
+                                 entry: str | None = None,
+                                 backend: str = "sb3") -> Hyperparameters:
+    """Validate a flat mapping of hyperparameters for ``algo`` on ``backend`` (``sb3`` or
+    ``sbx``; for SBX, what only PyTorch runs is translated or dropped and listed in
+    ``backend_changes``, see :mod:`rehabbot.rl.sbx_settings`).
 
     Accepted keys: the SB3 constructor arguments of the algorithm (checked against its
     signature) and the zoo keys ``n_timesteps``, ``n_envs``, ``policy``, ``normalize``,
@@ -397,14 +330,17 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     """
     algo = _check_algo(algo)
     where = source if entry is None else f"{source} [{entry}]"
-    hp = Hyperparameters(algo=algo, source=source, entry=entry)
+    hp = Hyperparameters(algo=algo, source=source, entry=entry, backend=backend)
     if mapping is None:
         return hp
     if not isinstance(mapping, Mapping):
         raise HyperparameterError(f"{where}: hyperparameters must be a mapping, got "
                             f"{type(mapping).__name__}")
-    cls = algo_class(algo)
+    cls = algo_class(algo, backend)
     params = inspect.signature(cls.__init__).parameters
+    sbx = backend == "sbx"
+    if sbx:
+        from rehabbot.rl import sbx_settings
     noise_std_given = False
     for key, raw in mapping.items():
         if not isinstance(key, str):
@@ -413,8 +349,12 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
             hp.n_timesteps = _as_count(raw, key, where)
         elif key == "n_envs":
             hp.n_envs = _as_count(raw, key, where)
+        elif key == "policy" and sbx and sbx_settings.is_torch_policy(raw):
+            hp.policy = DEFAULT_POLICY
+            hp.backend_changes.append(sbx_settings.policy_change(raw))
         elif key == "policy":
-            hp.policy = _parse_policy(raw, cls, where)
+            hp.policy = _parse_policy(raw, cls, where,
+                                      SBX_POLICY_PACKAGES if sbx else POLICY_PACKAGES)
         elif key == "normalize":
             hp.normalize = _parse_normalize(raw, where)
         elif key == "noise_type":
@@ -433,6 +373,9 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
         elif key in MANAGED_KEYS:
             raise HyperparameterError(f"{where}: {key!r} cannot be set in a hyperparameter "
                                       f"file ({MANAGED_KEYS[key]})")
+        elif sbx and (key not in params or key == "self") \
+                and (why := sbx_settings.dropped_key_reason(key, algo)) is not None:
+            hp.backend_changes.append(sbx_settings.change(key, jsonable(raw), None, why))
         elif key not in params or key == "self":
             valid = [name for name in params
                      if name not in ("self", *MANAGED_KEYS, *OBJECT_KEYS)]
@@ -460,6 +403,11 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     if noise_std_given and hp.noise_type is None:
         raise HyperparameterError(f"{where}: noise_std needs noise_type "
                                   f"({' or '.join(NOISE_TYPES)})")
+    if sbx and "policy_kwargs" in hp.kwargs:
+        policy_class = hp.policy if isinstance(hp.policy, type) \
+            else cls.policy_aliases[hp.policy]
+        hp.kwargs["policy_kwargs"] = sbx_settings.translate_policy_kwargs(
+            hp.kwargs["policy_kwargs"], policy_class, hp.backend_changes)
     if hp.noise_type is not None:
         if algo not in OFF_POLICY:
             raise HyperparameterError(f"{where}: noise_type applies to SAC and TD3 only, not "
@@ -477,9 +425,10 @@ def _looks_like_env_key(key: Any) -> bool:
     return "/" in key or re.search(r"-v\d+$", key) is not None
 
 
-def load_hyperparameters(path: str | Path, env_id: str, algo: str) -> Hyperparameters:
-    """Read an RL-Zoo-style YAML file: either env ids (full or short) mapped to mappings of
-    hyperparameters, or one flat mapping of hyperparameters.
+def load_hyperparameters(path: str | Path, env_id: str, algo: str,
+                         backend: str = "sb3") -> Hyperparameters:
+    """Read an RL-Zoo-style YAML file for ``backend``: either env ids (full or short) mapped
+    to mappings of hyperparameters, or one flat mapping of hyperparameters.
 
     Raises:
         HyperparameterError: missing or unreadable file, invalid YAML, no entry for ``env_id``,
@@ -512,7 +461,7 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str) -> Hyperparam
     source = str(path)
     env_keys = [key for key in data if key == DEFAULT_ENTRY or _looks_like_env_key(key)]
     if not env_keys:
-        return hyperparameters_from_mapping(data, algo, source=source)
+        return hyperparameters_from_mapping(data, algo, source=source, backend=backend)
     others = [key for key in data if key not in env_keys]
     if others:
         raise HyperparameterError(
@@ -532,21 +481,31 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str) -> Hyperparam
     if entry is not None and not isinstance(entry, dict):
         raise HyperparameterError(f"{source} [{matches[0]}]: must be a mapping of "
                                   "hyperparameters")
-    return hyperparameters_from_mapping(entry, algo, source=source, entry=matches[0])
+    return hyperparameters_from_mapping(entry, algo, source=source, entry=matches[0],
+                                        backend=backend)
 
 
-def as_hyperparameters(hyperparams: Any, env_id: str, algo: str) -> Hyperparameters:
+def as_hyperparameters(hyperparams: Any, env_id: str, algo: str,
+                       backend: str = "sb3") -> Hyperparameters:
+    """``hyperparams`` (None, a :class:`Hyperparameters`, a file or name, a mapping) read for
+    ``algo`` on ``backend``; a :class:`Hyperparameters` read for the other backend is read
+    again from what was given."""
     if hyperparams is None:
-        return Hyperparameters(algo=algo)
+        return Hyperparameters(algo=algo, backend=backend, source=DEFAULT_SOURCES[backend])
     if isinstance(hyperparams, Hyperparameters):
         if hyperparams.algo != algo:
             raise HyperparameterError(f"the hyperparameters are for {hyperparams.algo}, not "
                                       f"{algo}")
+        if hyperparams.backend != backend:
+            source = DEFAULT_SOURCES[backend] if hyperparams.source in DEFAULT_SOURCES.values() \
+                else hyperparams.source
+            return hyperparameters_from_mapping(hyperparams.given, algo, source=source,
+                                                entry=hyperparams.entry, backend=backend)
         return hyperparams
     if isinstance(hyperparams, (str, Path)):
-        return load_hyperparameters(hyperparams, env_id, algo)
+        return load_hyperparameters(hyperparams, env_id, algo, backend)
     if isinstance(hyperparams, Mapping):
-        return hyperparameters_from_mapping(hyperparams, algo)
+        return hyperparameters_from_mapping(hyperparams, algo, backend=backend)
     raise HyperparameterError(f"hyperparams must be a file path, a settings name or a "
                               f"mapping, got {type(hyperparams).__name__}")
 
@@ -565,6 +524,8 @@ def jsonable(value: Any) -> Any:
         return [jsonable(item) for item in value]
     if isinstance(value, type):
         return f"{value.__module__}.{value.__qualname__}"
+    if callable(value) and isinstance(getattr(value, "__qualname__", None), str):
+        return f"{value.__module__}.{value.__qualname__}"  # e.g. flax.linen.relu
     item = getattr(value, "item", None)
     if callable(item) and getattr(value, "shape", None) == ():
         return jsonable(item())

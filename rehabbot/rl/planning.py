@@ -10,6 +10,8 @@ from typing import Any
 
 from rehabbot.common.errors import RehabbotError, UsageError
 from rehabbot.rl import runs
+from rehabbot.rl.algorithms import ALGO_NAMES, BACKENDS, OFF_POLICY
+from rehabbot.rl.backends import check_backend_choice, saved_backend, sbx_available
 from rehabbot.rl.hyperparams import Hyperparameters, jsonable
 
 DEFAULT_TIMESTEPS = 200_000
@@ -17,6 +19,7 @@ DEFAULT_CHECKPOINT_FREQ = 10_000
 DEFAULT_EVAL_FREQ = 10_000
 DEFAULT_EVAL_EPISODES = 5
 VEC_ENV_KINDS = ("dummy", "subproc")
+DEFAULT_BC_EPISODES = 20  # expert episodes behaviour cloning fits when --demos is not given
 
 
 class TrainingError(RehabbotError):
@@ -65,6 +68,34 @@ class RunPlan:
     resume: ResumePoint | None = None
     manifest: dict[str, Any] | None = None
     skip: str | None = None
+    backend: str = "sb3"  # "sb3" or "sbx": the library that trains (and trained) the run
+    demos: int = 0  # expert episodes: into the replay buffer (off-policy) or for --bc (PPO)
+    bc: bool = False  # PPO: warm-start the actor by behaviour cloning on the demos
+
+
+def check_demonstrations(algo: str, demos: int | None, bc: bool) -> tuple[int, bool]:
+    """``(episodes, bc)`` for ``--demos`` and ``--bc``: demos fill an off-policy algorithm's
+    replay buffer; PPO takes them only for behaviour cloning (``bc``, default
+    :data:`DEFAULT_BC_EPISODES` episodes).
+
+    Raises:
+        TrainingUsageError: a count that is not an integer >= 0; ``bc`` with an off-policy
+            algorithm; ``demos`` for PPO without ``bc``; ``bc`` with 0 episodes.
+    """
+    if demos is not None and (isinstance(demos, bool) or not isinstance(demos, int)
+                              or demos < 0):
+        raise TrainingUsageError(f"--demos must be an integer >= 0 (expert episodes), got "
+                                 f"{demos!r}")
+    if bc and algo in OFF_POLICY:
+        raise TrainingUsageError(f"--bc is for PPO only; {ALGO_NAMES[algo]} takes the expert's "
+                                 "episodes into its replay buffer with --demos N")
+    if algo not in OFF_POLICY and demos and not bc:
+        raise TrainingUsageError("--demos needs --bc with PPO (an on-policy algorithm has no "
+                                 "replay buffer): --demos N --bc clones the expert's N episodes")
+    if bc and demos == 0:
+        raise TrainingUsageError("--bc needs at least one expert episode (--demos N, N >= 1)")
+    episodes = (DEFAULT_BC_EPISODES if demos is None else demos) if bc else (demos or 0)
+    return episodes, bool(bc)
 
 
 def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumePoint | None:
@@ -87,8 +118,13 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
              out_dir: str | Path, *, n_envs: int | None, hp: Hyperparameters,
              env_kwargs: dict[str, Any] | None, resume: bool, overwrite: bool,
              checkpoint_freq: int | None, eval_freq: int | None, eval_episodes: int | None,
-             progress_bar: bool, vec: str) -> RunPlan:
-    """Validate one run and work out its settings; writes nothing."""
+             progress_bar: bool, vec: str, backend: str = "auto", demos: int | None = None,
+             bc: bool = False) -> RunPlan:
+    """Validate one run and work out its settings; writes nothing.
+
+    A new run trains on ``hp.backend``; a resumed one on the backend it was trained with
+    (``backend``, the user's choice, must then be ``auto`` or that backend), and ``demos``
+    and ``bc`` must be what it was started with (or not given)."""
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise TrainingUsageError(f"seed must be an integer >= 0, got {seed!r}")
     out = Path(out_dir)
@@ -105,6 +141,8 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
             raise TrainingUsageError(f"{name} must be an integer >= {minimum}, got {value!r}")
     if vec not in VEC_ENV_KINDS:
         raise TrainingUsageError(f"vec must be 'dummy' or 'subproc', got {vec!r}")
+    choice = check_backend_choice(backend)
+    episodes, bc = check_demonstrations(algo, demos, bc)
 
     if resume:
         if overwrite:
@@ -135,6 +173,21 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
             raise TrainingUsageError(f"cannot resume {run_dir} with env kwargs "
                                      f"{json.dumps(env_kwargs)}: it was trained with "
                                      f"{json.dumps(saved_kwargs)}")
+        trained_on = saved_backend(manifest)
+        if choice in BACKENDS and choice != trained_on:
+            raise TrainingUsageError(f"cannot resume {run_dir} with --backend {choice}: it was "
+                                     f"trained with the {trained_on} backend")
+        if trained_on == "sbx" and not sbx_available():
+            raise TrainingUsageError(f"cannot resume {run_dir}: it was trained with the sbx "
+                                     "backend, which is not installed (pip install "
+                                     "'rehabbot[jax]')")
+        saved_demos = int((manifest.get("demos") or {}).get("episodes", 0))
+        saved_bc = bool(manifest.get("bc"))
+        if (demos is not None and episodes != saved_demos) or (bc and not saved_bc):
+            started = f"{saved_demos} expert episodes" + (" and --bc" if saved_bc else "")
+            raise TrainingUsageError(f"cannot resume {run_dir} with different demonstrations: "
+                                     f"it was started with {started} (they are part of its "
+                                     "checkpoint)")
         saved_hp = manifest.get("hyperparameters") or {}
         saved_normalize = saved_hp.get("normalize", False)  # False, or VecNormalize kwargs
         normalize = None if saved_normalize in (None, False) else (
@@ -155,7 +208,7 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
             eval_episodes=eval_episodes if eval_episodes is not None
             else int(manifest.get("eval_episodes", DEFAULT_EVAL_EPISODES)),
             progress_bar=progress_bar, vec=str(manifest.get("vec_env", vec)), resume=point,
-            manifest=manifest)
+            manifest=manifest, backend=trained_on, demos=saved_demos, bc=saved_bc)
         if point.steps >= total:
             status = manifest.get("status")
             plan.skip = (f"{run_dir}: already {'finished' if status == 'finished' else 'at'} "
@@ -174,4 +227,5 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
         checkpoint_freq=DEFAULT_CHECKPOINT_FREQ if checkpoint_freq is None else checkpoint_freq,
         eval_freq=DEFAULT_EVAL_FREQ if eval_freq is None else eval_freq,
         eval_episodes=DEFAULT_EVAL_EPISODES if eval_episodes is None else eval_episodes,
-        progress_bar=progress_bar, vec=vec, overwrite=overwrite)
+        progress_bar=progress_bar, vec=vec, overwrite=overwrite, backend=hp.backend,
+        demos=episodes, bc=bc)

@@ -1,5 +1,7 @@
-"""Train Stable-Baselines3 agents (PPO, SAC, TD3) on the RehabBot envs: :func:`train_run`
-(one run, one seed), written to the run folder of :mod:`rehabbot.rl.runs`.
+"""Train agents (PPO, SAC, TD3, TQC, CrossQ) on the RehabBot envs with Stable-Baselines3 or
+SBX (:mod:`rehabbot.rl.backends`): :func:`train_run` (one run, one seed), written to the run
+folder of :mod:`rehabbot.rl.runs`. ``demos`` and ``bc`` start a run from the scripted
+expert's episodes (:mod:`rehabbot.rl.demonstrations`).
 
 Checkpoints, ``model.zip`` and ``manifest.json`` are written to a temporary file first and
 renamed into place, so a file with its final name is always complete. SIGINT or SIGTERM
@@ -8,8 +10,8 @@ during training stops at the next env step, saves a checkpoint, marks the manife
 ``resume=True`` continues from the newest checkpoint to the requested step count, appending to
 the monitor files, the evaluation log and the TensorBoard run.
 
-Stable-Baselines3 and PyTorch are imported only inside functions, so that importing this
-module stays cheap.
+Stable-Baselines3, PyTorch, SBX and JAX are imported only inside functions, so that
+importing this module stays cheap.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from rehabbot.common.signals import handling_signals
 from rehabbot.envs.registration import resolve_env_id
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
+from rehabbot.rl.backends import backend_version, backend_versions, resolve_backend
 from rehabbot.rl.callbacks import callback_classes
 from rehabbot.rl.hyperparams import Hyperparameters, as_hyperparameters, jsonable
 from rehabbot.rl.planning import (
@@ -90,6 +93,15 @@ def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
         raise TrainingUsageError(f"cannot make {env_id} with env kwargs "
                                  f"{json.dumps(env_kwargs)}: {err}") from err
     env.close()
+
+
+def _check_run_inputs(plan: RunPlan) -> None:
+    """Build the env (and the expert, for demos) before anything is written."""
+    check_env_kwargs(plan.env_id, plan.env_kwargs)
+    if plan.demos and plan.resume is None:
+        from rehabbot.rl.demonstrations import check_expert
+
+        check_expert(plan.env_id, plan.env_kwargs)
 
 
 def _make_env(env_id: str, env_kwargs: dict[str, Any], monitor_file: str | None,
@@ -205,20 +217,24 @@ class _Run:
             segment["ended_at"] = now_iso()
         atomic_write_json(self.plan.run_dir / runs.MANIFEST_NAME, self.manifest)
 
-    def start_manifest(self, seeds: dict[str, int], done: int) -> None:
+    def start_manifest(self, seeds: dict[str, int], done: int,
+                       learned_from: dict[str, Any] | None = None) -> None:
         plan = self.plan
+        versions = {**package_versions(), **backend_versions(plan.backend)}
         segment = {
             "started_at": self.segment_started_at, "ended_at": None,
             "start_timesteps": done, "end_timesteps": done, "status": "running",
             "resumed_from": self.rel(plan.resume.checkpoint) if plan.resume else None,
             "seeds": seeds, "wall_clock_s": 0.0, "command": list(sys.argv),
-            "versions": package_versions(), "git_commit": git_commit(),
+            "versions": versions, "git_commit": git_commit(),
         }
         if plan.resume is None:
             self.manifest = {
                 "format_version": runs.MANIFEST_FORMAT,
                 "env_id": plan.env_id,
                 "algo": plan.algo,
+                "backend": plan.backend,
+                "backend_version": backend_version(plan.backend),
                 "seed": plan.seed,
                 "seeds": seeds,
                 "total_timesteps": plan.total_timesteps,
@@ -231,7 +247,9 @@ class _Run:
                 "eval_freq": plan.eval_freq,
                 "eval_episodes": plan.eval_episodes,
                 "eval_deterministic": True,
-                "versions": package_versions(),
+                "demos": (learned_from or {}).get("demos"),
+                "bc": (learned_from or {}).get("bc"),
+                "versions": versions,
                 "git_commit": git_commit(),
                 "command": list(sys.argv),
                 "status": "running",
@@ -254,7 +272,7 @@ class _Run:
             self.manifest.update(
                 total_timesteps=plan.total_timesteps, timesteps_done=done,
                 checkpoint_freq=plan.checkpoint_freq, eval_freq=plan.eval_freq,
-                eval_episodes=plan.eval_episodes, versions=package_versions(),
+                eval_episodes=plan.eval_episodes, versions=versions,
                 git_commit=git_commit(), command=list(sys.argv), status="running",
                 finished_at=None, resumed_from=self.rel(plan.resume.checkpoint),
                 last_checkpoint=self.rel(plan.resume.checkpoint)
@@ -268,7 +286,7 @@ def _setup(plan: RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any]
     previous evaluations)."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    cls = algo_class(plan.algo)
+    cls = algo_class(plan.algo, plan.backend)
     run_dir = plan.run_dir
     done = plan.resume.steps if plan.resume else 0
     n_envs = plan.n_envs
@@ -314,6 +332,7 @@ def _setup(plan: RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any]
                 raise TrainingUsageError(f"invalid hyperparameters for "
                                          f"{ALGO_NAMES[plan.algo]} ({plan.hp.source}): "
                                          f"{err}") from err
+            learned_from = _learn_from_expert(model, plan)
         else:
             try:
                 with warnings.catch_warnings():
@@ -332,13 +351,30 @@ def _setup(plan: RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any]
                 else:
                     print(f"warning: no replay buffer saved with {plan.resume.checkpoint}; "
                           "continuing with an empty one", file=sys.stderr)
-        run.start_manifest(seeds, done)
+        run.start_manifest(seeds, done, learned_from if plan.resume is None else None)
     except BaseException:
         venv.close()
         if eval_venv is not None:
             eval_venv.close()
         raise
     return model, venv, eval_venv, done, previous_evals
+
+
+def _learn_from_expert(model: Any, plan: RunPlan) -> dict[str, Any]:
+    """``--demos`` into the replay buffer, or ``--bc`` for PPO; the manifest's records."""
+    if not plan.demos:
+        return {}
+    from rehabbot.rl import demonstrations
+
+    first_seed = demonstrations.demo_seed(plan.seed)
+    if plan.bc:
+        episodes = demonstrations.collect_expert_episodes(plan.env_id, dict(plan.env_kwargs),
+                                                          plan.demos, first_seed)
+        return {"bc": demonstrations.behaviour_clone(model, plan.backend, episodes,
+                                                     plan.seed)}
+    return {"demos": demonstrations.fill_replay_buffer(model, plan.env_id,
+                                                       dict(plan.env_kwargs), plan.demos,
+                                                       first_seed)}
 
 
 def execute(plan: RunPlan) -> Path:
@@ -446,7 +482,8 @@ def train_run(env_id: str, algo: str, seed: int, total_timesteps: int, out_dir: 
               | None = None, env_kwargs: Mapping[str, Any] | None = None, resume: bool = False,
               checkpoint_freq: int = DEFAULT_CHECKPOINT_FREQ,
               eval_freq: int = DEFAULT_EVAL_FREQ, eval_episodes: int = DEFAULT_EVAL_EPISODES,
-              progress_bar: bool = True, overwrite: bool = False, vec: str = "dummy") -> Path:
+              progress_bar: bool = True, overwrite: bool = False, vec: str = "dummy",
+              backend: str = "auto", demos: int | None = None, bc: bool = False) -> Path:
     """Train one agent and return its run directory ``out_dir/<env-short>/<algo>/seed<k>``.
 
     ``hyperparams`` is a YAML file path, the name of a settings file shipped with the package
@@ -454,7 +491,10 @@ def train_run(env_id: str, algo: str, seed: int, total_timesteps: int, out_dir: 
     ``checkpoint_freq``/``eval_freq`` count env steps (0 turns them off). With ``resume``, the
     run continues from its newest checkpoint until ``total_timesteps`` (n_envs and env_kwargs
     must match the manifest; the saved model's hyperparameters apply); a run that is already
-    there is left alone.
+    there is left alone. ``backend``: ``auto`` (SBX if installed, else Stable-Baselines3),
+    ``sb3`` or ``sbx``; a resumed run keeps its own. ``demos``: expert episodes added to an
+    off-policy algorithm's replay buffer before learning, or, with ``bc`` (PPO only), cloned
+    into PPO's actor (default :data:`~rehabbot.rl.planning.DEFAULT_BC_EPISODES`).
 
     Raises:
         UsageError: a bad id, algorithm, hyperparameter or value (``HyperparameterError``,
@@ -466,16 +506,17 @@ def train_run(env_id: str, algo: str, seed: int, total_timesteps: int, out_dir: 
     """
     env_id = resolve_env_id(env_id)
     algo = check_algo(algo)
-    hp = as_hyperparameters(hyperparams, env_id, algo)
+    hp = as_hyperparameters(hyperparams, env_id, algo, resolve_backend(backend, algo))
     kwargs = None if env_kwargs is None else dict(env_kwargs)
     check_writable_dir(Path(out_dir))
     plan = plan_run(env_id, algo, seed, total_timesteps, out_dir, n_envs=n_envs, hp=hp,
                     env_kwargs=kwargs, resume=resume, overwrite=overwrite,
                     checkpoint_freq=checkpoint_freq, eval_freq=eval_freq,
-                    eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec)
+                    eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec,
+                    backend=backend, demos=demos, bc=bc)
     if plan.skip is not None:
         return plan.run_dir
-    check_env_kwargs(env_id, plan.env_kwargs)
+    _check_run_inputs(plan)
     return execute(plan)
 
 
@@ -485,16 +526,18 @@ def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: in
                resume: bool = False, overwrite: bool = False, n_envs: int | None = None,
                checkpoint_freq: int | None = None, eval_freq: int | None = None,
                eval_episodes: int | None = None, progress_bar: bool = True,
-               vec: str = "dummy") -> list[RunPlan]:
+               vec: str = "dummy", backend: str = "auto", demos: int | None = None,
+               bc: bool = False) -> list[RunPlan]:
     """Plan one run per seed and check everything (ids, settings, resume points, the output
     folder, the env kwargs) before any of them starts; writes nothing.
 
     With ``resume``, seeds that have no run yet are started afresh (``--resume`` with more
     seeds than were started); it is an error only if no seed has anything to resume.
+    ``backend``, ``demos`` and ``bc`` are those of :func:`train_run`.
     """
     env_id = resolve_env_id(env_id)
     algo = check_algo(algo)
-    hp = as_hyperparameters(hyperparams, env_id, algo)
+    hp = as_hyperparameters(hyperparams, env_id, algo, resolve_backend(backend, algo))
     if resume and overwrite:
         raise TrainingUsageError("--resume and --overwrite exclude each other")
     seeds = list(dict.fromkeys(seeds))
@@ -505,7 +548,8 @@ def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: in
     kwargs = None if env_kwargs is None else dict(env_kwargs)
     common = dict(n_envs=n_envs, hp=hp, env_kwargs=kwargs, overwrite=overwrite,
                   checkpoint_freq=checkpoint_freq, eval_freq=eval_freq,
-                  eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec)
+                  eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec,
+                  backend=backend, demos=demos, bc=bc)
     plans: list[RunPlan | None] = []
     missing: list[NothingToResumeError] = []
     for seed in seeds:
@@ -529,7 +573,11 @@ def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: in
             plan = plan_run(env_id, algo, seed, total_timesteps, out_dir, resume=False,
                             **common)
         resolved.append(plan)
-    for checked in {json.dumps(p.env_kwargs, sort_keys=True) for p in resolved
-                    if p.skip is None}:
-        check_env_kwargs(env_id, json.loads(checked))
+    checked: set[str] = set()
+    for plan in resolved:
+        key = json.dumps([plan.env_kwargs, bool(plan.demos and plan.resume is None)],
+                         sort_keys=True)
+        if plan.skip is None and key not in checked:
+            checked.add(key)
+            _check_run_inputs(plan)
     return resolved
