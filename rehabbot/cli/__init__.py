@@ -6,6 +6,7 @@ Examples::
 
     rehabbot list                                  # the registered env ids
     rehabbot train rehab-reach-v0 --algo sac --hyperparams sac --seeds 0 1 2
+    rehabbot sweep sweeps/example.yaml             # a grid of runs on Ray Tune, resumable
     rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random
     rehabbot plot runs/rehab-reach-v0               # Figs. 3-6 of the paper for your runs
     rehabbot render expert --env rehab-reach-v0 --out expert.mp4
@@ -39,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     from rehabbot.cli.plot import add_plot_parser
     from rehabbot.cli.render import add_render_parser
     from rehabbot.cli.scenes import add_scene_parsers
+    from rehabbot.cli.sweep import add_sweep_parser
     from rehabbot.cli.train import add_train_parser
     from rehabbot.common.version import VERSION
 
@@ -60,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_list_parser(commands)
     add_train_parser(commands)
+    add_sweep_parser(commands)
     add_evaluate_parser(commands)
     add_plot_parser(commands)
     add_render_parser(commands)
