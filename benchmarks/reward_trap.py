@@ -47,6 +47,8 @@ def stop_table(ids: list[str], seed: int) -> None:
         for mode in ("joint_delta", "torque"):
             for c in stop_cases(env_id, mode, seed=seed):
                 there = "-" if c.hold_from_there is None else f"{c.hold_from_there:.1f}"
+                if c.hold_from_there_stop:
+                    there += f" (stops: {c.hold_from_there_stop})"
                 print(f"| {env_id.split('/')[-1]} | {mode} | {c.joint} | {c.violation} | "
                       f"{c.stop_step} | {c.stop_return:.1f} | {c.hold_return:.1f} | "
                       f"{c.expert_return:.1f} | {c.last_step_reward:.1f} | {there} |")

@@ -101,10 +101,10 @@ def _assert_stops_never_pay(cases):
         # expert finishing the exercise.
         assert case.stop_return < case.hold_return, case
         assert case.stop_return < case.expert_return, case
-        # From the state before the stop: the stopping step pays no more than holding still
-        # from there (equal only when holding still cannot avoid the same stop).
-        if case.hold_from_there is not None:
-            assert case.last_step_reward <= case.hold_from_there + 1e-9, case
+        # From the state before the stop: the stopping step pays less than holding still
+        # from there (when holding still there avoids a stop: else both are stops).
+        if case.hold_from_there is not None and case.hold_from_there_stop is None:
+            assert case.last_step_reward < case.hold_from_there, case
 
 
 def test_a_safety_stop_never_pays_on_reach_v1():

@@ -42,6 +42,7 @@ from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import runs
 from rehabbot.rl.policies import POLICY_KEYWORDS, env_for, load_policy, model_file
 from rehabbot.rl.rollout import Episode, run_episode
+from rehabbot.rl.zoo import is_zoo_spec
 from rehabbot.tasks.safety import RULES
 
 REPORT_NAME = "evaluation.json"
@@ -119,12 +120,14 @@ def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
                       episodes: int = DEFAULT_EPISODES, seed: int = 0,
                       env_kwargs: dict | None = None,
                       deterministic: bool = True) -> list[tuple[dict, dict]]:
-    """Evaluate several policies (``"expert"``, ``"random"`` or model paths) on the same
-    episodes of one env; returns each one's report (JSON-ready) and first episode's trace.
+    """Evaluate several policies (``"expert"``, ``"random"``, model paths or zoo agents
+    ``zoo:ENV/ALGO``) on the same episodes of one env; returns each one's report
+    (JSON-ready) and first episode's trace.
 
-    ``env_id`` may be None when a model of a ``rehabbot train`` run is among ``specs`` (its
-    manifest's id and env kwargs are used). Every spec is loaded and checked against the env
-    before the first episode runs, so a bad one fails before any work is done.
+    ``env_id`` may be None when a model of a ``rehabbot train`` run or a zoo agent is among
+    ``specs`` (its manifest's or zoo file's id and env kwargs are used). Every spec is
+    loaded and checked against the env before the first episode runs, so a bad one fails
+    before any work is done.
     """
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise UsageError(f"episodes={episodes!r} must be an integer >= 1")
@@ -132,6 +135,10 @@ def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
     env = gym.make(env_id, **kwargs)
     try:
         policies = [load_policy(spec, env, seed=seed) for spec in specs]
+        zoo = [p.label for p in policies if p.kind == "zoo"]
+        if zoo and not deterministic:
+            raise UsageError(f"{', '.join(zoo)}: zoo agents are deterministic only (their "
+                             "exploration noise is not exported); leave out --stochastic")
         results = []
         for policy in policies:
             started = time.perf_counter()
@@ -223,7 +230,7 @@ def format_table(reports: Sequence[dict]) -> str:
 def default_out_dir(specs: Sequence[str], env_id: str | None) -> Path:
     """``<run>/evaluation`` for one model of a training run, else ``runs/evaluation/<env>``."""
     run_dirs = {runs.find_run_dir(model_file(spec)) for spec in specs
-                if spec not in POLICY_KEYWORDS}
+                if spec not in POLICY_KEYWORDS and not is_zoo_spec(spec)}
     if len(specs) == 1 and len(run_dirs) == 1 and None not in run_dirs:
         return run_dirs.pop() / runs.EVALUATION_DIR
     return Path("runs") / "evaluation" / (env_short_name(env_id) if env_id else "models")

@@ -59,10 +59,11 @@ def _expert_episode(env: gym.Env, seed: int, options: dict) -> tuple[list, list,
 
 
 def _hold_rewards(env: gym.Env, seed: int, options: dict, actions: Sequence,
-                  servo: bool = False) -> list[float]:
+                  servo: bool = False, stops: list | None = None) -> list[float]:
     """Rewards of replaying ``actions`` and then holding still to the end: zero actions, or
     (``servo``, joint_delta mode) moving the setpoints so that the robot stays at the joint
-    angles it had when the replay ended (its setpoints may lead them)."""
+    angles it had when the replay ended (its setpoints may lead them). A safety stop while
+    holding is appended to ``stops``."""
     obs, _ = env.reset(seed=seed, options=options)
     for action in actions:
         obs, *_ = env.step(action)
@@ -75,9 +76,11 @@ def _hold_rewards(env: gym.Env, seed: int, options: dict, actions: Sequence,
         if servo:
             action = np.clip(0.5 * (hold_at - obs[THETA].astype(float)), space.low,
                              space.high).astype(space.dtype)
-        obs, reward, terminated, truncated, _info = env.step(action)
+        obs, reward, terminated, truncated, info = env.step(action)
         rewards.append(reward)
         if terminated or truncated:
+            if stops is not None and info["safety_violation"] is not None:
+                stops.append(info["safety_violation"])
             return rewards
 
 
@@ -132,9 +135,11 @@ class StopCase:
     hold_return: float
     expert_return: float
     # From the state before the stop: the stopping step's reward and the return of holding
-    # still from that state instead (setpoint modes only: with torques off nothing holds).
+    # still from that state instead (setpoint modes only: with torques off nothing holds),
+    # and the rule that ended that hold, if holding could not avoid a stop either.
     last_step_reward: float
     hold_from_there: float | None
+    hold_from_there_stop: str | None
 
 
 def stop_cases(env_id: str, control_mode: str = "joint_delta", seed: int = 0,
@@ -162,13 +167,14 @@ def stop_cases(env_id: str, control_mode: str = "joint_delta", seed: int = 0,
                 if terminated or truncated:
                     break
             violation = info["safety_violation"] if terminated else None
-            there = None
+            there, stops = None, []
             if control_mode != "torque":
-                there = float(sum(_hold_rewards(env, seed, options,
-                                                [push] * (len(rewards) - 1), servo=True)))
+                there = float(sum(_hold_rewards(env, seed, options, [push] * (len(rewards) - 1),
+                                                servo=True, stops=stops)))
             cases.append(StopCase(env_id, control_mode, joint, violation, len(rewards),
                                   float(sum(rewards)), float(hold),
-                                  float(sum(expert_rewards)), float(rewards[-1]), there))
+                                  float(sum(expert_rewards)), float(rewards[-1]), there,
+                                  stops[0] if stops else None))
         return cases
     finally:
         env.close()

@@ -34,17 +34,21 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
         epilog="examples:\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip\n"
                "  rehabbot evaluate expert random --env rehab-reach-v0 --episodes 20\n"
+               "  rehabbot evaluate zoo:rehab-reach-v1/sac expert\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random "
                "--episodes 20\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip --env-kwargs "
                "'{\"weight_level\": 4, \"profile\": {\"height_m\": 1.6, \"mass_kg\": 55, "
                "\"sex\": \"female\"}}'\n\n"
                "The env is --env, or the one the models were trained on (from their run's "
-               "manifest.json). Each policy's files go to OUT/<label>/evaluation.json and "
-               "OUT/<label>/trace.npz; with several policies, OUT/comparison.md.")
-    parser.add_argument("policies", nargs="+", metavar="MODEL|expert|random",
+               "manifest.json, or the zoo agent's file). Each policy's files go to "
+               "OUT/<label>/evaluation.json and OUT/<label>/trace.npz; with several "
+               "policies, OUT/comparison.md.")
+    parser.add_argument("policies", nargs="+", metavar="MODEL|zoo:ENV/ALGO|expert|random",
                         help="a model .zip saved by `rehabbot train` (or any SB3 PPO/SAC/TD3 "
-                             "zip), 'expert' (scripted expert) or 'random'")
+                             "zip), an agent shipped in the zoo (zoo:rehab-reach-v1/sac; "
+                             "python -m rehabbot.rl.zoo list), 'expert' (scripted expert) or "
+                             "'random'")
     parser.add_argument("--env", metavar="ENV",
                         help="env id, with or without 'rehabbot/' (default: the env the "
                              "models were trained on; required for expert and random alone)")

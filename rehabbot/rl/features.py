@@ -19,7 +19,9 @@ train`` also reads the older ``policy_kwargs: "dict(features_extractor_class=
 TrackingErrorFeatures)"``, which RL Zoo cannot; in Python pass the classes themselves.) The
 extractor needs the unnormalised observation layout of :mod:`rehabbot.tasks.observation` (23
 values); VecNormalize'd observations still work, since normalisation is affine per entry, but
-the errors are then in normalised units.
+the errors are then in normalised units. :func:`rehabbot.rl.features_numpy.
+tracking_error_features` computes the same features in NumPy (for exported agents,
+:mod:`rehabbot.rl.zoo`).
 """
 
 from __future__ import annotations
@@ -33,11 +35,10 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.sac.policies import SACPolicy
 from stable_baselines3.td3.policies import TD3Policy
 
+from rehabbot.rl.features_numpy import JOINT_ERROR_SCALE_RAD, TOOL_ERROR_SCALE_M
 from rehabbot.tasks.observation import OBS_SIZE, P_STAR, THETA, THETA_STAR, P
 
 ERROR_FEATURES = (THETA_STAR.stop - THETA_STAR.start) + (P_STAR.stop - P_STAR.start)
-JOINT_ERROR_SCALE_RAD = 0.5  # errors of a few key-pose spacings map to O(1) features
-TOOL_ERROR_SCALE_M = 0.1
 
 
 class TrackingErrorFeatures(BaseFeaturesExtractor):

@@ -1,5 +1,6 @@
 """The policies that ``rehabbot evaluate`` and ``rehabbot render`` run: a model saved by
-Stable-Baselines3 (``rehabbot train``), the scripted expert, or uniform random actions.
+Stable-Baselines3, sb3-contrib or SBX (``rehabbot train``), the scripted expert, or uniform
+random actions.
 
 =============================== =========================================================
 ``load_policy(spec, env)``      ``spec`` is ``"expert"``, ``"random"`` or the path of an SB3
@@ -8,12 +9,17 @@ Stable-Baselines3 (``rehabbot train``), the scripted expert, or uniform random a
                                 kwargs of the models' training runs; every spec is checked
                                 before any work starts
 ``RandomPolicy``                uniform actions from the action space, seeded
+``zoo:ENV/ALGO``                a spec naming an agent shipped in the zoo
+                                (:mod:`rehabbot.rl.zoo`), e.g. ``zoo:rehab-reach-v1/sac``;
+                                it runs in the env (and kwargs) it was trained on
 =============================== =========================================================
 
 A model is checked against the env before it runs: its observation and action spaces must
 equal the env's (:class:`PolicyError` names both otherwise). If the run directory holds
-VecNormalize statistics (``vecnormalize.pkl``), observations are normalised with them.
-Stable-Baselines3 is imported only when a model is loaded.
+VecNormalize statistics (``vecnormalize.pkl``), observations are normalised with them. A
+model is loaded with the library of the backend its run's manifest records (``backend``),
+else of the one its zip names (:func:`~rehabbot.rl.algorithms.detect_model`).
+Stable-Baselines3 (or SBX) is imported only when a model is loaded.
 """
 
 from __future__ import annotations
@@ -31,12 +37,20 @@ import numpy as np
 from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import resolve_env_id
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import PolicyError, algo_class, detect_algo
+from rehabbot.rl.algorithms import (
+    BackendUnavailableError,
+    PolicyError,
+    algo_class,
+    detect_algo,
+    detect_model,
+)
+from rehabbot.rl.backends import saved_backend
 
 POLICY_KEYWORDS = ("expert", "random")
 
 __all__ = ["POLICY_KEYWORDS", "LoadedPolicy", "PolicyError", "RandomPolicy", "check_spaces",
-           "detect_algo", "env_for", "load_model", "load_policy", "model_file"]
+           "detect_algo", "env_for", "load_model", "load_policy", "load_zoo_policy",
+           "model_file"]
 
 
 class RandomPolicy:
@@ -60,8 +74,9 @@ class LoadedPolicy:
 
     policy: Any  # has SB3's predict(obs, state, episode_start, deterministic)
     label: str  # "expert", "random", or "<algo>" / "<algo>-seed<k>" for a model
-    kind: str  # "expert", "random" or "model"
+    kind: str  # "expert", "random", "model" or "zoo"
     algo: str | None = None
+    backend: str | None = None  # "sb3" or "sbx" for a model
     model_path: Path | None = None
     run_dir: Path | None = None
     manifest: dict = field(default_factory=dict)
@@ -77,6 +92,7 @@ class LoadedPolicy:
     def describe(self) -> dict:
         """JSON-ready provenance of the policy."""
         return {"label": self.label, "kind": self.kind, "algo": self.algo,
+                "backend": self.backend,
                 "model_path": str(self.model_path) if self.model_path else None,
                 "run_dir": str(self.run_dir) if self.run_dir else None,
                 "train_seed": self.manifest.get("seed"),
@@ -133,23 +149,31 @@ def _load_normalizer(run_dir: Path | None) -> Callable[[np.ndarray], np.ndarray]
 
 
 def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
-    """An SB3 model from ``path``, checked against ``env``."""
-    algo = detect_algo(path)
+    """A model (SB3, sb3-contrib or SBX) from ``path``, checked against ``env``."""
+    algo, backend = detect_model(path)
     run_dir = runs.find_run_dir(path)
     manifest = _manifest(run_dir)
+    if manifest.get("backend"):
+        backend = saved_backend(manifest)
+    try:
+        cls = algo_class(algo, backend)
+    except BackendUnavailableError as err:
+        raise PolicyError(f"cannot load model {str(path)!r}: it was trained with the {backend} "
+                          f"backend; {err}") from err
     try:
         with warnings.catch_warnings():
             # SB3 warns that a saved n-step replay buffer class overrides ``n_steps``; acting
             # needs no replay buffer.
             warnings.filterwarnings("ignore", message=".*n_steps.*is ignored because a custom")
-            model = algo_class(algo).load(path, device="cpu")
+            model = cls.load(path, device="cpu")
     except Exception as err:  # SB3 raises many kinds on a damaged file
         raise PolicyError(f"cannot load model {str(path)!r}: {type(err).__name__}: "
                           f"{err}") from err
     check_spaces(model.observation_space, model.action_space, env, f"model {str(path)!r}")
     seed = manifest.get("seed")
     label = algo if seed is None else f"{algo}-seed{seed}"
-    return LoadedPolicy(policy=model, label=label, kind="model", algo=algo, model_path=path,
+    return LoadedPolicy(policy=model, label=label, kind="model", algo=algo, backend=backend,
+                        model_path=path,
                         run_dir=run_dir, manifest=manifest,
                         normalize_obs=_load_normalizer(run_dir))
 
@@ -167,6 +191,8 @@ def load_policy(spec: str | Path, env: gym.Env, seed: int | None = None) -> Load
     if str(spec) == "random":
         return LoadedPolicy(policy=RandomPolicy(env.action_space, seed), label="random",
                             kind="random")
+    if _is_zoo(spec):
+        return load_zoo_policy(str(spec), env)
     return load_model(model_file(spec), env)
 
 
@@ -186,12 +212,17 @@ def env_for(specs: Sequence[str], env_id: str | None = None,
     if env_id is not None:
         resolved = resolve_env_id(env_id)
         for spec in specs:
-            if spec not in POLICY_KEYWORDS:
+            if _is_zoo(spec):
+                _zoo_env(spec)  # UsageError / ZooError for a bad zoo spec, now
+            elif spec not in POLICY_KEYWORDS:
                 model_file(spec)  # PolicyError for a missing file, now
         return resolved, kwargs
     found: dict[str, tuple[str, dict]] = {}
     for spec in specs:
         if spec in POLICY_KEYWORDS:
+            continue
+        if _is_zoo(spec):
+            found[spec] = _zoo_env(spec)
             continue
         path = model_file(spec)
         run_dir = runs.find_run_dir(path)
@@ -214,3 +245,32 @@ def env_for(specs: Sequence[str], env_id: str | None = None,
         raise UsageError(f"the models were trained with different env kwargs ({listing}); "
                          "give --env-kwargs to run them all in the same env")
     return resolve_env_id(ids.pop()), {**saved[0], **kwargs}
+
+
+# --------------------------------------------------------------------------- zoo agents
+# ``zoo:ENV/ALGO`` specs (rehabbot.rl.zoo): NumPy actors shipped with the package.
+
+
+def _is_zoo(spec: str | Path) -> bool:
+    return isinstance(spec, str) and spec.startswith("zoo:")
+
+
+def _zoo_env(spec: str) -> tuple[str, dict]:
+    """The env id and kwargs a zoo agent was trained with."""
+    from rehabbot.rl import zoo
+
+    policy = zoo.load_spec(spec)
+    return policy.env_id, dict(policy.metadata.get("env_kwargs") or {})
+
+
+def load_zoo_policy(spec: str, env: gym.Env) -> LoadedPolicy:
+    """The zoo agent of ``spec`` (``zoo:ENV/ALGO``), checked against ``env``."""
+    from rehabbot.rl import zoo
+
+    policy = zoo.load_spec(spec)
+    check_spaces(policy.observation_space, policy.action_space, env, f"zoo agent {spec!r}")
+    meta = policy.metadata
+    return LoadedPolicy(policy=policy, label=f"zoo-{policy.algo}", kind="zoo",
+                        algo=policy.algo, model_path=policy.path,
+                        manifest={"seed": meta.get("seed"),
+                                  "timesteps_done": meta.get("training_steps")})

@@ -1,0 +1,55 @@
+"""The features of :class:`rehabbot.rl.features.TrackingErrorFeatures` in NumPy, without
+PyTorch: what an exported agent (:mod:`rehabbot.rl.zoo`) computes before its first layer.
+
+``tracking_error_features(obs, center, half_range, fine_scale_rad)`` is, for a batch of
+observations of the RehabBot layout (23 values for the UR5e)::
+
+    [(obs - center) / half_range,            23: the observation scaled to [-1, 1]
+     (theta* - theta) / 0.5 rad,              6: joint tracking errors
+     (p* - p) / 0.1 m,                        3: tool tracking errors
+     tanh((theta* - theta) / fine_scale_rad)] 6: only when fine_scale_rad is given
+
+in float32 and in the same order of operations as the PyTorch module, so both give the same
+numbers (``tests/test_zoo.py`` compares them). The scales are defined here, once; the PyTorch
+module imports them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
+
+JOINT_ERROR_SCALE_RAD = 0.5  # errors of a few key-pose spacings map to O(1) features
+TOOL_ERROR_SCALE_M = 0.1
+
+__all__ = ["JOINT_ERROR_SCALE_RAD", "TOOL_ERROR_SCALE_M", "bounds_scaling",
+           "tracking_error_features"]
+
+
+def bounds_scaling(low: np.ndarray, high: np.ndarray,
+                   scale_to_bounds: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """``(center, half_range)`` that map ``[low, high]`` onto ``[-1, 1]`` (float32); with
+    ``scale_to_bounds=False``, ``(0, 1)``: the observation is left as it is."""
+    low = np.asarray(low, dtype=np.float32)
+    high = np.asarray(high, dtype=np.float32)
+    if not scale_to_bounds:
+        low, high = -np.ones_like(low), np.ones_like(high)
+    return (high + low) / np.float32(2), (high - low) / np.float32(2)
+
+
+def tracking_error_features(obs: np.ndarray, center: np.ndarray, half_range: np.ndarray,
+                            fine_scale_rad: float | None = None) -> np.ndarray:
+    """The features of a batch ``obs`` of shape ``(n, 23)`` (float32, shape ``(n, 32)``, or
+    ``(n, 38)`` with ``fine_scale_rad``); see the module docstring."""
+    obs = np.asarray(obs, dtype=np.float32)
+    if obs.ndim != 2:
+        raise ValueError(f"tracking_error_features needs a batch of shape (n, size), got "
+                         f"{obs.shape}")
+    joint_error = (obs[:, THETA_STAR] - obs[:, THETA]) / JOINT_ERROR_SCALE_RAD
+    tool_error = (obs[:, P_STAR] - obs[:, P]) / TOOL_ERROR_SCALE_M
+    scaled = (obs - center) / half_range
+    parts = [scaled, joint_error, tool_error]
+    if fine_scale_rad is not None:
+        parts.append(np.tanh(joint_error * (JOINT_ERROR_SCALE_RAD / fine_scale_rad)))
+    return np.concatenate(parts, axis=1).astype(np.float32, copy=False)

@@ -1,0 +1,498 @@
+"""A zoo of trained agents shipped with the package: each one is the deterministic actor of a
+trained model, exported to a small ``.npz`` of float32 arrays and run with NumPy alone (no
+PyTorch, JAX or Stable-Baselines3, no download).
+
+=================================== ======================================================
+``load(env_id, algo)``              the shipped agent as a :class:`ZooPolicy` (SB3's
+                                    ``predict``); also ``rehabbot.zoo.load``
+``available()``                     the ``(env_id, algo)`` pairs shipped
+``load_file(path)``                 an agent from any zoo file
+``export_policy(model, env_id,      write a zoo file from a trained SB3 model (SAC, TD3, PPO;
+algo, out_path, metadata)``         TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
+                                    PPO, TQC, CrossQ), a model zip or a run folder
+``python -m rehabbot.rl.zoo``       ``export RUN_DIR --env ID --algo ALGO`` (default output:
+                                    the zoo folder of the package), ``list``
+=================================== ======================================================
+
+**Where the files are.** ``rehabbot/zoo/<env-short-name>/<algo>.npz`` (package data; e.g.
+``rehabbot/zoo/rehab-reach-v1/sac.npz``), or the folder named by the environment variable
+``REHABBOT_ZOO_DIR``. ``rehabbot/zoo/__init__.py`` only re-exports the loader from here, so
+that the loading code stays in the ``rl`` layer and the data folder imports nothing else.
+``rehabbot evaluate zoo:rehab-reach-v1/sac`` and ``rehabbot render zoo:rehab-reach-v1/sac``
+run an agent in the env it was trained on (:mod:`rehabbot.rl.policies`).
+
+**What a file holds.** The actor as a program of steps, run in order on a batch of
+observations: ``ops`` (a string array) names the steps, and ``op<k>.<param>`` hold their
+parameters:
+
+================= ==========================================================================
+``normalize``     VecNormalize's ``clip((x - mean) / sqrt(var + epsilon), -clip, clip)``
+``tracking_error`` :func:`rehabbot.rl.features_numpy.tracking_error_features` (``center``,
+                  ``half_range``, ``fine_scale_rad``; NaN for none)
+``dense``         ``x @ weight.T + bias`` (``weight`` has PyTorch's (out, in) shape)
+``batch_norm``    ``(x - mean) / sqrt(var + epsilon) * scale + bias`` (running statistics)
+activations       ``relu``, ``tanh``, ``elu`` (``alpha``), ``leaky_relu`` (``slope``),
+                  ``silu``, ``sigmoid``
+``clip``          ``clip(x, low, high)``
+``unscale``       ``low + (x + 1) / 2 * (high - low)``: a squashed action to the action box
+================= ==========================================================================
+
+plus ``observation_low``/``observation_high`` and ``action_low``/``action_high`` (the
+spaces, checked against the env) and ``metadata``, a JSON string: env id and kwargs,
+algorithm, backend, training steps and seed, the success rate measured on the exported
+actor, the command that trained it, the rehabbot version, and ``weights_sha256``, the
+SHA-256 of every other array (name, dtype, shape and bytes). A file whose arrays do not match
+that hash, or that lacks an array, is refused with :class:`ZooError` naming the file.
+
+The actor is deterministic: ``predict(..., deterministic=False)`` raises
+:class:`~rehabbot.common.errors.UsageError` (a ``ValueError``), since the exploration noise
+of the trained model is not exported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import sys
+import zipfile
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from rehabbot.common.errors import DataError, RehabbotError, UsageError
+from rehabbot.common.files import atomic_write
+from rehabbot.envs.registration import NAMESPACE, env_short_name
+from rehabbot.rl.features_numpy import tracking_error_features
+
+ZOO_DIR = Path(__file__).resolve().parents[1] / "zoo"
+ZOO_DIR_ENV = "REHABBOT_ZOO_DIR"
+ZOO_PREFIX = "zoo:"
+SUFFIX = ".npz"
+FORMAT_VERSION = 1
+METADATA_KEY = "metadata"
+SPACE_KEYS = ("observation_low", "observation_high", "action_low", "action_high")
+DEFAULT_EPISODES = 20
+DEFAULT_SEED = 1000
+# op name -> the parameters it needs
+OP_PARAMS: dict[str, tuple[str, ...]] = {
+    "normalize": ("mean", "var", "epsilon", "clip"),
+    "tracking_error": ("center", "half_range", "fine_scale_rad"),
+    "dense": ("weight", "bias"),
+    "batch_norm": ("mean", "var", "epsilon", "scale", "bias"),
+    "relu": (), "tanh": (), "silu": (), "sigmoid": (),
+    "elu": ("alpha",), "leaky_relu": ("slope",),
+    "clip": ("low", "high"),
+    "unscale": ("low", "high"),
+}
+
+__all__ = ["ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy", "available", "export_policy",
+           "is_zoo_spec", "load", "load_file", "load_spec", "parse_spec", "weights_sha256",
+           "write_zoo_file", "zoo_dir", "zoo_path"]
+
+
+class ZooError(DataError):
+    """A zoo file is missing, damaged, tampered with or of another format; names the file."""
+
+
+# --------------------------------------------------------------------------- the program
+
+
+def _op(name: str, p: Mapping[str, np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+    """The function of one step of the actor's program."""
+    f32 = np.float32
+    if name == "dense":
+        weight, bias = p["weight"], p["bias"]
+        return lambda x: x @ weight.T + bias
+    if name == "relu":
+        return lambda x: np.maximum(x, f32(0))
+    if name == "tanh":
+        return np.tanh
+    if name == "sigmoid":
+        return lambda x: f32(1) / (f32(1) + np.exp(-x))
+    if name == "silu":
+        return lambda x: x / (f32(1) + np.exp(-x))
+    if name == "elu":
+        alpha = f32(p["alpha"])
+        return lambda x: np.where(x > 0, x, alpha * np.expm1(np.minimum(x, f32(0))))
+    if name == "leaky_relu":
+        slope = f32(p["slope"])
+        return lambda x: np.where(x >= 0, x, slope * x)
+    if name == "clip":
+        low, high = p["low"], p["high"]
+        return lambda x: np.clip(x, low, high)
+    if name == "unscale":
+        low, high = p["low"], p["high"]
+        return lambda x: low + (f32(0.5) * (x + f32(1.0)) * (high - low))
+    if name == "batch_norm":
+        mean, scale, bias = p["mean"], p["scale"], p["bias"]
+        std = np.sqrt(p["var"] + f32(p["epsilon"]))
+        return lambda x: (x - mean) / std * scale + bias
+    if name == "normalize":
+        mean, clip = p["mean"].astype(np.float64), float(p["clip"])
+        std = np.sqrt(p["var"].astype(np.float64) + float(p["epsilon"]))
+        return lambda x: np.clip((x - mean) / std, -clip, clip).astype(f32)
+    if name == "tracking_error":
+        center, half_range = p["center"], p["half_range"]
+        fine = float(p["fine_scale_rad"])
+        fine_scale = None if np.isnan(fine) else fine
+        return lambda x: tracking_error_features(x, center, half_range, fine_scale)
+    raise KeyError(name)
+
+
+def weights_sha256(arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 over every array but the metadata: name, dtype, shape and bytes, by name."""
+    digest = hashlib.sha256()
+    for name in sorted(arrays):
+        if name == METADATA_KEY:
+            continue
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}|{value.dtype.str}|{value.shape}|".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
+
+
+def _program_arrays(ops: Sequence[tuple[str, Mapping[str, Any]]]) -> dict[str, np.ndarray]:
+    arrays: dict[str, np.ndarray] = {"ops": np.array([name for name, _ in ops], dtype=str)}
+    for k, (name, params) in enumerate(ops):
+        if name not in OP_PARAMS:
+            raise ValueError(f"unknown zoo op {name!r}; known: {', '.join(OP_PARAMS)}")
+        missing = set(OP_PARAMS[name]) - set(params)
+        if missing:
+            raise ValueError(f"zoo op {name!r} lacks {', '.join(sorted(missing))}")
+        for key in OP_PARAMS[name]:
+            arrays[f"op{k}.{key}"] = np.asarray(params[key], dtype=np.float32)
+    return arrays
+
+
+def write_zoo_file(path: Path, ops: Sequence[tuple[str, Mapping[str, Any]]],
+                   observation_space: gym.spaces.Box, action_space: gym.spaces.Box,
+                   metadata: Mapping[str, Any]) -> dict[str, Any]:
+    """Write the program ``ops`` (``(name, params)`` pairs) with the spaces and
+    ``metadata`` to ``path`` (atomically); returns the metadata written, with the format
+    version and ``weights_sha256`` filled in."""
+    arrays = _program_arrays(ops)
+    arrays.update(observation_low=np.asarray(observation_space.low, np.float32),
+                  observation_high=np.asarray(observation_space.high, np.float32),
+                  action_low=np.asarray(action_space.low, np.float32),
+                  action_high=np.asarray(action_space.high, np.float32))
+    meta = {**dict(metadata), "format": FORMAT_VERSION, "weights_sha256": weights_sha256(arrays)}
+    arrays[METADATA_KEY] = np.array(json.dumps(meta, sort_keys=True, default=_json_default))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
+    return meta
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    return str(value)
+
+
+# --------------------------------------------------------------------------- the policy
+
+
+class ZooPolicy:
+    """A deterministic actor read from a zoo file, run with NumPy; SB3's ``predict``.
+
+    ``metadata`` (dict), ``env_id``, ``algo``, ``path``, ``observation_space`` and
+    ``action_space`` (gymnasium Boxes) describe it.
+    """
+
+    def __init__(self, arrays: Mapping[str, np.ndarray], metadata: Mapping[str, Any],
+                 path: Path | None = None) -> None:
+        self.path = Path(path) if path is not None else None
+        self.metadata = dict(metadata)
+        self.env_id = str(self.metadata.get("env_id", ""))
+        self.algo = str(self.metadata.get("algo", ""))
+        where = str(self.path) if self.path is not None else "zoo arrays"
+        try:
+            self.observation_space = gym.spaces.Box(arrays["observation_low"],
+                                                    arrays["observation_high"],
+                                                    dtype=np.float32)
+            self.action_space = gym.spaces.Box(arrays["action_low"], arrays["action_high"],
+                                               dtype=np.float32)
+            names = [str(name) for name in np.atleast_1d(arrays["ops"])]
+            self._ops = []
+            for k, name in enumerate(names):
+                params = {key: np.asarray(arrays[f"op{k}.{key}"])
+                          for key in OP_PARAMS[name]}
+                self._ops.append(_op(name, params))
+        except KeyError as err:
+            raise ZooError(f"{where} is not a valid zoo file: it lacks {err}") from err
+        except ValueError as err:
+            raise ZooError(f"{where} is not a valid zoo file: {err}") from err
+        self.ops = tuple(names)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> ZooPolicy:
+        """Read and verify a zoo file (:class:`ZooError` naming it if it is bad)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ZooError(f"zoo file {str(path)!r} not found")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {name: data[name] for name in data.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as err:
+            raise ZooError(f"{path} is not a readable zoo file ({type(err).__name__}: "
+                           f"{err})") from err
+        missing = [key for key in (METADATA_KEY, "ops", *SPACE_KEYS) if key not in arrays]
+        if missing:
+            raise ZooError(f"{path} is not a valid zoo file: it lacks {', '.join(missing)}")
+        try:
+            metadata = json.loads(str(arrays[METADATA_KEY]))
+        except json.JSONDecodeError as err:
+            raise ZooError(f"{path} is not a valid zoo file: unreadable metadata ({err})"
+                           ) from err
+        if not isinstance(metadata, dict):
+            raise ZooError(f"{path} is not a valid zoo file: metadata is not a JSON object")
+        if metadata.get("format") != FORMAT_VERSION:
+            raise ZooError(f"{path} has zoo format {metadata.get('format')!r}; this rehabbot "
+                           f"reads format {FORMAT_VERSION}")
+        names = [str(name) for name in np.atleast_1d(arrays["ops"])]
+        unknown = [name for name in names if name not in OP_PARAMS]
+        if unknown:
+            raise ZooError(f"{path} is not a valid zoo file: unknown ops {unknown}")
+        lacking = [f"op{k}.{key}" for k, name in enumerate(names) for key in OP_PARAMS[name]
+                   if f"op{k}.{key}" not in arrays]
+        if lacking:
+            raise ZooError(f"{path} is not a valid zoo file: it lacks {', '.join(lacking)}")
+        expected = metadata.get("weights_sha256")
+        actual = weights_sha256(arrays)
+        if expected != actual:
+            raise ZooError(f"{path} is damaged or was modified: its arrays' sha256 is "
+                           f"{actual}, its metadata says {expected}")
+        return cls(arrays, metadata, path)
+
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        """The action for one observation (shape ``(obs_dim,)``) or a batch (``(n,
+        obs_dim)``, e.g. from a vector env); SB3's signature. Deterministic only."""
+        if not deterministic:
+            raise UsageError("zoo agents are deterministic (their exploration noise is not "
+                             "exported): call predict with deterministic=True")
+        obs = np.asarray(observation, dtype=np.float32)
+        size = self.observation_space.shape[0]
+        if obs.ndim not in (1, 2) or obs.shape[-1] != size:
+            raise UsageError(f"observation of shape {obs.shape} does not fit this zoo agent: "
+                             f"it takes ({size},) or (n, {size})")
+        x = obs.reshape(1, size) if obs.ndim == 1 else obs
+        for op in self._ops:
+            x = op(x)
+        action = np.asarray(x, dtype=np.float32)
+        return (action[0] if obs.ndim == 1 else action), None
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        return self.predict(observation)[0]
+
+    def __repr__(self) -> str:
+        return (f"ZooPolicy(env_id={self.env_id!r}, algo={self.algo!r}, "
+                f"ops={len(self.ops)}, path={str(self.path) if self.path else None!r})")
+
+
+# --------------------------------------------------------------------------- the zoo
+
+
+def zoo_dir() -> Path:
+    """The folder of zoo files: ``$REHABBOT_ZOO_DIR`` if set, else the package's."""
+    override = os.environ.get(ZOO_DIR_ENV)
+    return Path(override) if override else ZOO_DIR
+
+
+def _short(env_id: str) -> str:
+    return env_short_name(str(env_id).strip())
+
+
+def zoo_path(env_id: str, algo: str, root: Path | None = None) -> Path:
+    """``<zoo>/<env-short-name>/<algo>.npz`` (whether or not it exists)."""
+    return Path(root or zoo_dir()) / _short(env_id) / f"{str(algo).strip().lower()}{SUFFIX}"
+
+
+def available() -> list[tuple[str, str]]:
+    """The ``(env_id, algo)`` of every agent in the zoo, sorted (full ids, e.g.
+    ``("rehabbot/rehab-reach-v1", "sac")``)."""
+    root = zoo_dir()
+    if not root.is_dir():
+        return []
+    return sorted((f"{NAMESPACE}/{path.parent.name}", path.stem)
+                  for path in root.glob(f"*/*{SUFFIX}") if path.is_file())
+
+
+def _listing() -> str:
+    shipped = available()
+    if not shipped:
+        return (f"the zoo ({zoo_dir()}) holds no agents yet; build one with `python -m "
+                "rehabbot.rl.zoo export RUN_DIR`")
+    return "available: " + ", ".join(f"{env_short_name(e)}/{a}" for e, a in shipped)
+
+
+def load(env_id: str, algo: str) -> ZooPolicy:
+    """The zoo's agent for ``env_id`` (with or without ``rehabbot/``) and ``algo``.
+
+    Raises:
+        UsageError: no such agent (the message lists those there are).
+        ZooError: its file is damaged, tampered with or for another env.
+    """
+    path = zoo_path(env_id, algo)
+    if not path.is_file():
+        raise UsageError(f"the zoo has no agent {_short(env_id)}/{str(algo).strip().lower()}; "
+                         f"{_listing()}")
+    policy = ZooPolicy.from_file(path)
+    if _short(policy.env_id) != _short(env_id):
+        raise ZooError(f"{path} holds an agent for {policy.env_id!r}, not {env_id!r}")
+    return policy
+
+
+def load_file(path: str | Path) -> ZooPolicy:
+    """The agent of any zoo file (verified, :class:`ZooError` if bad)."""
+    return ZooPolicy.from_file(path)
+
+
+def is_zoo_spec(spec: object) -> bool:
+    """Whether a policy spec names a zoo agent (``zoo:ENV/ALGO``)."""
+    return str(spec).startswith(ZOO_PREFIX)
+
+
+def parse_spec(spec: str) -> tuple[str, str]:
+    """``zoo:rehab-reach-v1/sac`` (or ``zoo:rehabbot/rehab-reach-v1/sac``) -> the full env id
+    and the algorithm; :class:`UsageError` if malformed."""
+    body = str(spec)[len(ZOO_PREFIX):] if is_zoo_spec(spec) else str(spec)
+    env, sep, algo = body.strip().rpartition("/")
+    if not sep or not env or not algo:
+        raise UsageError(f"zoo spec {spec!r} must read zoo:ENV/ALGO, e.g. "
+                         f"zoo:rehab-reach-v1/sac; {_listing()}")
+    return f"{NAMESPACE}/{_short(env)}", algo.lower()
+
+
+def load_spec(spec: str) -> ZooPolicy:
+    """The agent a ``zoo:ENV/ALGO`` spec names."""
+    return load(*parse_spec(spec))
+
+
+# --------------------------------------------------------------------------- export
+
+
+def measure_success(policy: ZooPolicy, env_id: str, env_kwargs: Mapping[str, Any] | None,
+                    episodes: int, seed: int) -> dict[str, Any]:
+    """Run ``policy`` for ``episodes`` episodes reset with seeds ``seed, seed + 1, ...``;
+    the success rate and what was run."""
+    env = gym.make(env_id, **dict(env_kwargs or {}))
+    successes = []
+    try:
+        for k in range(episodes):
+            obs, info = env.reset(seed=seed + k)
+            while True:
+                obs, _reward, terminated, truncated, info = env.step(policy(obs))
+                if terminated or truncated:
+                    break
+            successes.append(bool(info.get("is_success", False)))
+    finally:
+        env.close()
+    return {"success_rate": float(np.mean(successes)) if successes else None,
+            "evaluation": {"episodes": episodes, "seed": seed, "deterministic": True,
+                           "successes": int(sum(successes))}}
+
+
+def export_policy(model_or_run_dir: Any, env_id: str | None, algo: str | None,
+                  out_path: str | Path, metadata: Mapping[str, Any] | None = None,
+                  episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED) -> dict[str, Any]:
+    """Export the deterministic actor of a trained model to the zoo file ``out_path``.
+
+    ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
+    train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
+    command, and its ``vecnormalize.pkl`` the observation normalisation). ``metadata`` adds
+    or overrides metadata fields. The exported actor then runs ``episodes`` episodes (seeds
+    ``seed, seed + 1, ...``; 0: none) and its success rate is recorded. Returns the metadata
+    written. Imports the model's library (PyTorch or JAX).
+    """
+    from rehabbot.common.version import VERSION
+    from rehabbot.rl import zoo_export
+
+    source = zoo_export.load_source(model_or_run_dir, algo)
+    meta: dict[str, Any] = dict(source.metadata)
+    env_id = env_id or meta.get("env_id")
+    if not env_id:
+        raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
+    meta.update(env_id=f"{NAMESPACE}/{_short(env_id)}", rehabbot_version=VERSION)
+    meta.update(dict(metadata or {}))
+    out_path = Path(out_path)
+    written = write_zoo_file(out_path, source.ops, source.observation_space,
+                             source.action_space, meta)
+    if episodes > 0:
+        policy = ZooPolicy.from_file(out_path)
+        measured = measure_success(policy, meta["env_id"], meta.get("env_kwargs"), episodes,
+                                   seed)
+        written = write_zoo_file(out_path, source.ops, source.observation_space,
+                                 source.action_space, {**meta, **measured})
+    return written
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m rehabbot.rl.zoo",
+        description="Build and list the zoo of trained agents shipped with rehabbot.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    export = commands.add_parser(
+        "export", help="export a trained model's deterministic actor to a zoo file",
+        description="Export a model (a `rehabbot train` run folder or a model zip, SB3 or "
+                    "SBX) to <zoo>/<env>/<algo>.npz, then measure its success rate.")
+    export.add_argument("source", type=Path, metavar="RUN_DIR|MODEL.zip")
+    export.add_argument("--env", metavar="ID", help="env id (default: the run's manifest)")
+    export.add_argument("--algo", help="sac, td3, ppo, tqc or crossq (default: the manifest)")
+    export.add_argument("--out", type=Path, metavar="FILE.npz",
+                        help="output file (default: the package's zoo folder, or "
+                             f"${ZOO_DIR_ENV}, /<env>/<algo>.npz)")
+    export.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
+                        help=f"episodes to measure the success rate on (default "
+                             f"{DEFAULT_EPISODES}; 0: none)")
+    export.add_argument("--seed", type=int, default=DEFAULT_SEED, metavar="S",
+                        help=f"episode k is reset with seed S + k (default {DEFAULT_SEED})")
+    commands.add_parser("list", help="the agents in the zoo and their metadata")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m rehabbot.rl.zoo export|list``; exit code 0, 1 (bad file) or 2 (usage)."""
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "list":
+            for env_id, algo in available():
+                meta = load(env_id, algo).metadata
+                print(f"{env_short_name(env_id)}/{algo}: backend {meta.get('backend')}, "
+                      f"{meta.get('training_steps')} steps, seed {meta.get('seed')}, success "
+                      f"{meta.get('success_rate')}")
+            if not available():
+                print(_listing())
+            return 0
+        from rehabbot.rl import runs
+
+        manifest = runs.read_manifest(args.source) if args.source.is_dir() else None
+        env_id = args.env or (manifest or {}).get("env_id")
+        algo = args.algo or (manifest or {}).get("algo")
+        if not env_id or not algo:
+            raise UsageError("give --env and --algo (the source has no run manifest)")
+        out = args.out or zoo_path(env_id, algo)
+        meta = export_policy(args.source, env_id, algo, out, episodes=args.episodes,
+                             seed=args.seed)
+        print(f"wrote {out}: {meta['env_id']} {meta['algo']} ({meta['backend']}), success "
+              f"rate {meta.get('success_rate')} on {args.episodes} episodes, sha256 "
+              f"{meta['weights_sha256'][:12]}")
+        return 0
+    except UsageError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except (RehabbotError, OSError, ImportError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,355 @@
+"""Reading the deterministic actor out of a trained model, for :func:`rehabbot.rl.zoo.
+export_policy`: the layers of its network as plain float32 arrays, in the step format of
+:mod:`rehabbot.rl.zoo`.
+
+============ ======================================== =========================================
+backend      algorithms                                actor read
+============ ======================================== =========================================
+``sb3``      SAC, TD3, PPO (Stable-Baselines3); TQC,   the features extractor (``Flatten`` or
+             CrossQ (sb3-contrib)                      :class:`~rehabbot.rl.features.
+                                                       TrackingErrorFeatures`), every module of
+                                                       the actor's MLP (Linear, activations,
+                                                       Hardtanh, BatchNorm/BatchRenorm with
+                                                       their running statistics), then tanh for
+                                                       SAC/TQC/CrossQ and squashed PPO
+``sbx``      SAC, TD3, PPO, TQC, CrossQ (SBX, JAX)     the flax parameters of the actor
+                                                       (``Dense_<k>``, ``BatchRenorm_<k>``) and
+                                                       its activation function
+============ ======================================== =========================================
+
+A squashed actor's output in [-1, 1] is mapped to the action box (``unscale``), an unsquashed
+one clipped to it, as the library's ``predict`` does. VecNormalize statistics of a run folder
+become a ``normalize`` step before the network. PyTorch, JAX and the libraries are imported
+only inside the functions that read their models; this module never imports
+:mod:`rehabbot.rl.zoo` (which imports it when exporting).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import pickle
+import shlex
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from rehabbot.common.errors import DataError, UsageError
+from rehabbot.rl import runs
+
+Op = tuple[str, dict[str, Any]]
+# (backend, algo) -> (module, class)
+MODEL_CLASSES = {
+    ("sb3", "sac"): ("stable_baselines3", "SAC"), ("sb3", "td3"): ("stable_baselines3", "TD3"),
+    ("sb3", "ppo"): ("stable_baselines3", "PPO"), ("sb3", "tqc"): ("sb3_contrib", "TQC"),
+    ("sb3", "crossq"): ("sb3_contrib", "CrossQ"),
+    ("sbx", "sac"): ("sbx", "SAC"), ("sbx", "td3"): ("sbx", "TD3"), ("sbx", "ppo"): ("sbx", "PPO"),
+    ("sbx", "tqc"): ("sbx", "TQC"), ("sbx", "crossq"): ("sbx", "CrossQ"),
+}
+EXPORT_ALGOS = ("sac", "td3", "ppo", "tqc", "crossq")
+# JAX activation function name -> zoo op (with its default parameter)
+JAX_ACTIVATIONS: dict[str, Op] = {
+    "relu": ("relu", {}), "tanh": ("tanh", {}), "silu": ("silu", {}), "swish": ("silu", {}),
+    "sigmoid": ("sigmoid", {}), "elu": ("elu", {"alpha": 1.0}),
+    "leaky_relu": ("leaky_relu", {"slope": 0.01}),
+}
+
+
+class ExportError(UsageError):
+    """A model whose actor the zoo format cannot hold (the message says which part)."""
+
+
+@dataclass
+class ExportSource:
+    """What a zoo file is written from: the actor's steps, its spaces and provenance."""
+
+    ops: list[Op]
+    observation_space: gym.spaces.Box
+    action_space: gym.spaces.Box
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+def _f32(value: Any) -> np.ndarray:
+    """A torch tensor or JAX / NumPy array as a float32 NumPy array."""
+    if hasattr(value, "detach"):
+        value = value.detach().cpu().numpy()
+    return np.asarray(value, dtype=np.float32)
+
+
+def _output_ops(action_space: gym.spaces.Box, squashed: bool) -> list[Op]:
+    low, high = _f32(action_space.low), _f32(action_space.high)
+    if squashed:
+        return [("unscale", {"low": low, "high": high})]
+    return [("clip", {"low": low, "high": high})]
+
+
+# --------------------------------------------------------------------------- SB3 (PyTorch)
+
+
+def _modules(module: Any) -> Iterator[Any]:
+    """The leaf modules of nested ``nn.Sequential`` containers, in order."""
+    from torch import nn
+
+    if isinstance(module, nn.Sequential):
+        for child in module:
+            yield from _modules(child)
+    else:
+        yield module
+
+
+def _torch_module_ops(module: Any) -> list[Op]:
+    """The zoo steps of one PyTorch module (a Sequential, a Linear, an activation ...)."""
+    from torch import nn
+
+    ops: list[Op] = []
+    for m in _modules(module):
+        name = type(m).__name__
+        if isinstance(m, nn.Linear):
+            bias = m.bias if m.bias is not None else np.zeros(m.out_features)
+            ops.append(("dense", {"weight": _f32(m.weight), "bias": _f32(bias)}))
+        elif isinstance(m, (nn.Identity, nn.Flatten, nn.Dropout)):
+            continue  # nothing to do at inference on a batch of vectors
+        elif isinstance(m, nn.ReLU):
+            ops.append(("relu", {}))
+        elif isinstance(m, nn.Tanh):
+            ops.append(("tanh", {}))
+        elif isinstance(m, nn.SiLU):
+            ops.append(("silu", {}))
+        elif isinstance(m, nn.Sigmoid):
+            ops.append(("sigmoid", {}))
+        elif isinstance(m, nn.ELU):
+            ops.append(("elu", {"alpha": m.alpha}))
+        elif isinstance(m, nn.LeakyReLU):
+            ops.append(("leaky_relu", {"slope": m.negative_slope}))
+        elif isinstance(m, nn.Hardtanh):
+            ops.append(("clip", {"low": m.min_val, "high": m.max_val}))
+        elif isinstance(m, nn.BatchNorm1d) or name == "BatchRenorm1d":
+            mean = m.running_mean if isinstance(m, nn.BatchNorm1d) else m.ra_mean
+            var = m.running_var if isinstance(m, nn.BatchNorm1d) else m.ra_var
+            affine = getattr(m, "affine", True)
+            scale = (m.weight if isinstance(m, nn.BatchNorm1d) else m.scale) if affine \
+                else np.ones(mean.shape[0])
+            bias = m.bias if affine else np.zeros(mean.shape[0])
+            ops.append(("batch_norm", {"mean": _f32(mean), "var": _f32(var),
+                                       "epsilon": m.eps, "scale": _f32(scale),
+                                       "bias": _f32(bias)}))
+        else:
+            raise ExportError(f"the zoo cannot export a {name} layer (supported: Linear, "
+                              "ReLU, Tanh, SiLU, Sigmoid, ELU, LeakyReLU, Hardtanh, "
+                              "BatchNorm1d, BatchRenorm1d)")
+    return ops
+
+
+def _sb3_features_ops(extractor: Any) -> list[Op]:
+    """The zoo steps of a parameter-free SB3 features extractor."""
+    name = type(extractor).__name__
+    if name == "FlattenExtractor":
+        return []
+    from rehabbot.rl.features import TrackingErrorFeatures
+
+    if isinstance(extractor, TrackingErrorFeatures):
+        fine = extractor.fine_scale_rad
+        return [("tracking_error", {"center": _f32(extractor._center),
+                                    "half_range": _f32(extractor._half_range),
+                                    "fine_scale_rad": np.nan if fine is None else fine})]
+    raise ExportError(f"the zoo cannot export the features extractor {name} (supported: "
+                      "FlattenExtractor, TrackingErrorFeatures)")
+
+
+def sb3_actor_ops(model: Any) -> list[Op]:
+    """The deterministic actor of an SB3 / sb3-contrib model (SAC, TD3, PPO, TQC, CrossQ)."""
+    policy = model.policy
+    if hasattr(policy, "mlp_extractor"):  # on-policy: PPO (and A2C)
+        extractor = policy.pi_features_extractor
+        body = [policy.mlp_extractor.policy_net, policy.action_net]
+        tanh = bool(policy.squash_output)  # gSDE with squash_output: mode is tanh(mean)
+    elif hasattr(policy, "actor"):
+        actor = policy.actor
+        extractor = actor.features_extractor
+        if hasattr(actor, "latent_pi"):  # SAC, TQC, CrossQ: tanh of the Gaussian's mean
+            body, tanh = [actor.latent_pi, actor.mu], True
+        else:  # TD3: the tanh is the last module of mu
+            body, tanh = [actor.mu], False
+    else:
+        raise ExportError(f"the zoo cannot export a {type(policy).__name__} policy")
+    ops = _sb3_features_ops(extractor)
+    for part in body:
+        ops.extend(_torch_module_ops(part))
+    if tanh:
+        ops.append(("tanh", {}))
+    return ops + _output_ops(model.action_space, bool(policy.squash_output))
+
+
+# --------------------------------------------------------------------------- SBX (JAX)
+
+
+def _jax_activation(function: Any) -> Op:
+    name = getattr(function, "__name__", type(function).__name__)
+    if name not in JAX_ACTIVATIONS:
+        raise ExportError(f"the zoo cannot export the activation {name!r} (supported: "
+                          f"{', '.join(JAX_ACTIVATIONS)})")
+    return JAX_ACTIVATIONS[name]
+
+
+def _dense(params: Any, k: int) -> Op:
+    layer = params[f"Dense_{k}"]
+    return ("dense", {"weight": _f32(layer["kernel"]).T.copy(), "bias": _f32(layer["bias"])})
+
+
+def sbx_actor_ops(model: Any) -> list[Op]:
+    """The deterministic actor of an SBX model (SAC, TD3, PPO, TQC, CrossQ)."""
+    policy = model.policy
+    actor = policy.actor
+    kind = f"{type(actor).__module__}.{type(actor).__name__}"
+    state = policy.actor_state
+    params = state.params.get("params", state.params)
+    activation = _jax_activation(policy.activation_fn)
+    n_hidden = len(actor.net_arch)
+    ops: list[Op] = []
+    if kind in ("sbx.common.policies.SquashedGaussianActor",  # SAC, TQC: tanh(mean)
+                "sbx.td3.policies.Actor"):  # TD3: tanh of the output layer
+        for k in range(n_hidden):
+            ops += [_dense(params, k), activation]
+        ops += [_dense(params, n_hidden), ("tanh", {})]
+    elif kind == "sbx.ppo.policies.Actor":
+        if actor.features_extractor is not None or actor.num_discrete_choices is not None:
+            raise ExportError("the zoo exports SBX PPO with an MLP on a Box action space only")
+        for k in range(n_hidden):
+            ops += [_dense(params, k), activation]
+        ops.append(_dense(params, n_hidden))
+    elif kind == "sbx.crossq.policies.Actor":
+        from sbx.common.jax_layers import BatchRenorm
+
+        stats = state.batch_stats
+
+        def renorm(k: int) -> Op:
+            name = f"BatchRenorm_{k}"
+            return ("batch_norm", {"mean": _f32(stats[name]["mean"]),
+                                   "var": _f32(stats[name]["var"]),
+                                   "epsilon": BatchRenorm.epsilon,
+                                   "scale": _f32(params[name]["scale"]),
+                                   "bias": _f32(params[name]["bias"])})
+
+        norm = bool(actor.use_batch_norm)
+        ops += [renorm(0)] if norm else []
+        for k in range(n_hidden):
+            ops += [_dense(params, k), activation] + ([renorm(k + 1)] if norm else [])
+        ops += [_dense(params, n_hidden), ("tanh", {})]
+    else:
+        raise ExportError(f"the zoo cannot export the SBX actor {kind}")
+    return ops + _output_ops(model.action_space, bool(policy.squash_output))
+
+
+# --------------------------------------------------------------------------- sources
+
+
+def _zip_policy_module(path: Path) -> str:
+    try:
+        with zipfile.ZipFile(path) as archive:
+            data = json.loads(archive.read("data"))
+    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, UnicodeDecodeError,
+            OSError) as err:
+        raise DataError(f"{str(path)!r} is not a Stable-Baselines3 / SBX model zip "
+                        f"({type(err).__name__}: {err})") from err
+    policy_class = data.get("policy_class", {})
+    return str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
+
+
+def load_model(path: Path, algo: str, backend: str | None = None) -> Any:
+    """A saved SB3 or SBX model (the backend from the zip's policy class unless given)."""
+    if backend is None:
+        backend = "sbx" if _zip_policy_module(path).split(".")[0] == "sbx" else "sb3"
+    key = (backend, algo)
+    if key not in MODEL_CLASSES:
+        raise UsageError(f"the zoo exports {', '.join(EXPORT_ALGOS)} (sb3 or sbx), not "
+                         f"{algo!r} on {backend!r}")
+    module_name, class_name = MODEL_CLASSES[key]
+    try:
+        cls = getattr(importlib.import_module(module_name), class_name)
+    except (ImportError, AttributeError) as err:
+        raise UsageError(f"exporting {class_name} ({backend}) needs {module_name}: {err}"
+                         ) from err
+    kwargs = {"device": "cpu"} if backend == "sb3" else {}
+    try:
+        return cls.load(path, **kwargs)
+    except Exception as err:  # the libraries raise many kinds on a damaged file
+        raise DataError(f"cannot load model {str(path)!r}: {type(err).__name__}: {err}"
+                        ) from err
+
+
+def _normalize_ops(run_dir: Path | None) -> list[Op]:
+    path = None if run_dir is None else run_dir / runs.VECNORMALIZE_NAME
+    if path is None or not path.is_file():
+        return []
+    try:
+        with open(path, "rb") as handle:
+            stats = pickle.load(handle)
+    except Exception as err:
+        raise DataError(f"corrupt normalisation statistics {str(path)!r}: {err}") from err
+    if not getattr(stats, "norm_obs", False):
+        return []
+    return [("normalize", {"mean": stats.obs_rms.mean, "var": stats.obs_rms.var,
+                           "epsilon": stats.epsilon, "clip": stats.clip_obs})]
+
+
+def _backend_of(model: Any) -> str:
+    return "sbx" if type(model).__module__.split(".")[0] == "sbx" else "sb3"
+
+
+def _manifest_metadata(manifest: dict[str, Any]) -> dict[str, Any]:
+    command = manifest.get("command")
+    if isinstance(command, list) and command:
+        command = shlex.join([Path(str(command[0])).name, *map(str, command[1:])])
+    return {key: value for key, value in {
+        "env_id": manifest.get("env_id"), "env_kwargs": manifest.get("env_kwargs") or {},
+        "seed": manifest.get("seed"), "training_steps": manifest.get("timesteps_done"),
+        "train_command": command, "git_commit": manifest.get("git_commit"),
+        "hyperparameters": manifest.get("hyperparameters"),
+        "training_versions": manifest.get("versions"),
+    }.items() if value is not None}
+
+
+def load_source(model_or_run_dir: Any, algo: str | None = None) -> ExportSource:
+    """The actor and provenance of a model object, a model zip or a run folder."""
+    manifest: dict[str, Any] = {}
+    run_dir = None
+    if isinstance(model_or_run_dir, (str, Path)):
+        path = Path(model_or_run_dir)
+        if path.is_dir():
+            run_dir, path = path, path / runs.MODEL_NAME
+        elif not path.is_file() and path.with_name(path.name + ".zip").is_file():
+            path = path.with_name(path.name + ".zip")
+        if not path.is_file():
+            raise DataError(f"model file {str(path)!r} not found")
+        run_dir = run_dir or runs.find_run_dir(path)
+        manifest = (runs.read_manifest(run_dir) if run_dir else None) or {}
+        algo = str(algo or manifest.get("algo") or "").lower()
+        if not algo:
+            raise UsageError(f"the algorithm of {str(path)!r} is unknown (no run manifest): "
+                             "give algo / --algo")
+        model = load_model(path, algo, manifest.get("backend"))
+    else:
+        model = model_or_run_dir
+        algo = str(algo or type(model).__name__).lower()
+    if algo not in EXPORT_ALGOS:
+        raise UsageError(f"the zoo exports {', '.join(EXPORT_ALGOS)}, not {algo!r}")
+    for name, space in (("observation", model.observation_space),
+                        ("action", model.action_space)):
+        if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
+            raise ExportError(f"the zoo exports models with flat Box spaces; the {name} "
+                              f"space is {space}")
+    backend = _backend_of(model)
+    actor = sbx_actor_ops(model) if backend == "sbx" else sb3_actor_ops(model)
+    policy = model.policy
+    metadata = {"algo": algo, "backend": backend,
+                "policy_class": f"{type(policy).__module__}.{type(policy).__qualname__}",
+                "training_steps": int(model.num_timesteps), "seed": model.seed,
+                **_manifest_metadata(manifest)}
+    return ExportSource(ops=_normalize_ops(run_dir) + actor,
+                        observation_space=model.observation_space,
+                        action_space=model.action_space, metadata=metadata)

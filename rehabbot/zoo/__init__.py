@@ -1,0 +1,24 @@
+"""The zoo of trained agents shipped with RehabBot, run with NumPy alone.
+
+::
+
+    import gymnasium as gym
+    import rehabbot.zoo
+
+    print(rehabbot.zoo.available())              # [("rehabbot/rehab-reach-v1", "sac"), ...]
+    agent = rehabbot.zoo.load("rehab-reach-v1", "sac")
+    env = gym.make(agent.env_id, **agent.metadata.get("env_kwargs", {}))
+    obs, info = env.reset(seed=0)
+    action, _ = agent.predict(obs)                # SB3's signature; deterministic only
+
+This package is the data folder: ``<env-short-name>/<algo>.npz``, one file per agent. The
+loader lives in :mod:`rehabbot.rl.zoo` (the ``rl`` layer), which also builds the files
+(``python -m rehabbot.rl.zoo export RUN_DIR --env ID --algo ALGO``) and documents their
+format; this module only re-exports it. Importing it loads neither PyTorch nor JAX.
+"""
+
+from __future__ import annotations
+
+from rehabbot.rl.zoo import ZooError, ZooPolicy, available, load, load_file, zoo_dir
+
+__all__ = ["ZooError", "ZooPolicy", "available", "load", "load_file", "zoo_dir"]

@@ -1,0 +1,404 @@
+"""The zoo of trained agents (``rehabbot.rl.zoo``, ``rehabbot.zoo``): exported NumPy actors
+reproduce the models they come from, damaged files are refused, ``zoo:ENV/ALGO`` runs in
+``rehabbot evaluate`` / ``render``, and every agent shipped in ``rehabbot/zoo/`` loads and
+succeeds as often as its metadata says."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rehabbot
+import rehabbot.zoo
+from rehabbot.common.errors import UsageError
+from rehabbot.envs.registration import env_short_name
+from rehabbot.rl import zoo
+from rehabbot.rl.zoo import ZooError, available, export_policy, load, load_file, write_zoo_file
+from rehabbot.tasks.observation import THETA, THETA_STAR
+
+FULL_ID = "rehabbot/rehab-reach-v0"
+ENV = "rehab-reach-v0"
+TOLERANCE = 1e-5
+SHIPPED_SUCCESS_MARGIN = 0.34  # one episode of three
+SHIPPED_EPISODES = 3
+REQUIRED_METADATA = ("env_id", "algo", "backend", "training_steps", "seed", "success_rate",
+                     "train_command", "rehabbot_version", "weights_sha256")
+SHIPPED = zoo.available() if "REHABBOT_ZOO_DIR" not in os.environ else []
+NOTHING_SHIPPED = pytest.param(
+    None, None, marks=pytest.mark.skip(reason="the zoo ships no agents yet (no .npz under "
+                                              "rehabbot/zoo/): nothing to check"))
+
+
+@pytest.fixture(scope="module")
+def env() -> gym.Env:
+    return gym.make(FULL_ID)
+
+
+@pytest.fixture(scope="module")
+def observations(env) -> np.ndarray:
+    """Reset observations and samples from the whole observation box."""
+    env.observation_space.seed(0)
+    resets = [env.reset(seed=k)[0] for k in range(4)]
+    return np.stack(resets + [env.observation_space.sample() for _ in range(60)])
+
+
+@pytest.fixture
+def zoo_root(tmp_path, monkeypatch) -> Path:
+    """An empty zoo folder in place of the package's."""
+    root = tmp_path / "zoo"
+    root.mkdir()
+    monkeypatch.delenv(zoo.ZOO_DIR_ENV, raising=False)
+    monkeypatch.setattr(zoo, "ZOO_DIR", root)
+    return root
+
+
+def linear_tracker(env: gym.Env, path: Path, env_id: str = FULL_ID, **metadata) -> Path:
+    """A zoo file written by hand: ``clip(0.5 (theta* - theta), action box)``, a linear
+    controller that finishes reach exercises (no library needed)."""
+    weight = np.zeros((6, env.observation_space.shape[0]), np.float32)
+    for j in range(6):
+        weight[j, THETA_STAR.start + j], weight[j, THETA.start + j] = 0.5, -0.5
+    ops = [("dense", {"weight": weight, "bias": np.zeros(6)}),
+           ("clip", {"low": env.action_space.low, "high": env.action_space.high})]
+    write_zoo_file(path, ops, env.observation_space, env.action_space,
+                   {"env_id": env_id, "algo": path.stem, **metadata})
+    return path
+
+
+def assert_same_actions(model, exported: zoo.ZooPolicy, observations: np.ndarray,
+                        action_space: gym.spaces.Box) -> None:
+    """The exported actor's actions equal the model's deterministic ones, batched and single,
+    in the env's units (and relative to the action box for a squashed actor)."""
+    expected, _ = model.predict(observations, deterministic=True)
+    actual, state = exported.predict(observations)
+    assert state is None and actual.shape == expected.shape and actual.dtype == np.float32
+    assert np.max(np.abs(actual - expected)) < TOLERANCE
+    if exported.ops[-1] == "unscale":  # squashed: also equal to 1e-5 of the action box
+        span = action_space.high - action_space.low
+        assert np.max(np.abs((actual - expected) / span)) < TOLERANCE
+    assert np.ptp(actual, axis=0).min() > 0  # the actions vary: a non-trivial network
+    for obs in observations[:3]:
+        single, _ = exported.predict(obs)
+        assert single.shape == action_space.shape
+        assert np.max(np.abs(single - model.predict(obs, deterministic=True)[0])) < TOLERANCE
+
+
+# --------------------------------------------------------------------------- features
+
+
+def test_numpy_features_equal_the_torch_extractor(env, observations) -> None:
+    torch = pytest.importorskip("torch")
+    from rehabbot.rl.features import TrackingErrorFeatures
+    from rehabbot.rl.features_numpy import bounds_scaling, tracking_error_features
+
+    space = env.observation_space
+    for kwargs in ({}, {"fine_scale_rad": 0.05}, {"scale_to_bounds": False,
+                                                  "fine_scale_rad": 0.2}):
+        extractor = TrackingErrorFeatures(space, **kwargs)
+        expected = extractor(torch.as_tensor(observations)).numpy()
+        center, half_range = bounds_scaling(space.low, space.high,
+                                            kwargs.get("scale_to_bounds", True))
+        actual = tracking_error_features(observations, center, half_range,
+                                         kwargs.get("fine_scale_rad"))
+        assert actual.shape == expected.shape and actual.dtype == np.float32
+        np.testing.assert_array_equal(actual[:, :32], expected[:, :32])  # bit for bit
+        np.testing.assert_allclose(actual[:, 32:], expected[:, 32:], rtol=0, atol=1e-6)
+
+
+# --------------------------------------------------------------------------- export
+
+
+def _perturbed(model, seed: int = 0):
+    """``model`` with its weights (and any running statistics) moved far from their
+    initial values, so that every layer matters."""
+    import torch
+
+    generator = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for param in model.policy.parameters():
+            param.add_(torch.randn(param.shape, generator=generator) * 0.3)
+        for module in model.policy.modules():
+            if type(module).__name__ == "BatchRenorm1d":
+                module.ra_mean.copy_(torch.randn(module.ra_mean.shape, generator=generator))
+                module.ra_var.copy_(torch.rand(module.ra_var.shape, generator=generator) + 0.5)
+    return model
+
+
+def _sb3_model(algo: str, env: gym.Env):
+    from rehabbot.rl.features import TRACKING_ERROR_POLICIES
+
+    if algo in ("tqc", "crossq"):
+        contrib = pytest.importorskip("sb3_contrib")
+        cls = getattr(contrib, {"tqc": "TQC", "crossq": "CrossQ"}[algo])
+        return cls("MlpPolicy", env, learning_starts=100, buffer_size=1000, seed=0,
+                   policy_kwargs={"net_arch": [32, 32]})
+    import stable_baselines3 as sb3
+
+    cls = {"sac": sb3.SAC, "td3": sb3.TD3, "ppo": sb3.PPO}[algo]
+    kwargs = ({"n_steps": 128, "batch_size": 64, "n_epochs": 1} if algo == "ppo"
+              else {"learning_starts": 100, "buffer_size": 1000})
+    policy_kwargs: dict = {"net_arch": [32, 32]}
+    if algo == "sac":
+        policy_kwargs["features_extractor_kwargs"] = {"fine_scale_rad": 0.05}
+    return cls(TRACKING_ERROR_POLICIES[algo], env, seed=0, policy_kwargs=policy_kwargs,
+               **kwargs)
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo", "tqc", "crossq"])
+def test_exported_sb3_actor_reproduces_the_model(algo, env, observations, tmp_path) -> None:
+    pytest.importorskip("stable_baselines3")
+    model = _perturbed(_sb3_model(algo, env))
+    meta = export_policy(model, ENV, algo, tmp_path / f"{algo}.npz", episodes=0)
+    exported = load_file(tmp_path / f"{algo}.npz")
+    assert meta["backend"] == "sb3" and meta["algo"] == algo and meta["env_id"] == FULL_ID
+    if algo in ("sac", "td3", "ppo"):
+        assert exported.ops[0] == "tracking_error"  # TrackingErrorFeatures, in NumPy
+    assert exported.ops[-1] == ("clip" if algo == "ppo" else "unscale")
+    assert_same_actions(model, exported, observations, env.action_space)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
+def test_exported_trained_sb3_run_reproduces_the_model(algo, env, observations,
+                                                       tmp_path) -> None:
+    """A few hundred steps of training, saved as a run folder and exported from it."""
+    pytest.importorskip("stable_baselines3")
+    model = _sb3_model(algo, env)
+    model.learn(300)
+    run = tmp_path / "run"
+    model.save(run / "model")
+    manifest = {"env_id": FULL_ID, "algo": algo, "seed": 7, "env_kwargs": {},
+                "timesteps_done": 300, "command": ["/somewhere/rehabbot", "train", ENV]}
+    (run / "manifest.json").write_text(json.dumps(manifest))
+    meta = export_policy(run, None, None, tmp_path / "out.npz", episodes=0)
+    assert meta["seed"] == 7 and meta["training_steps"] == 300
+    assert meta["train_command"] == f"rehabbot train {ENV}"
+    assert_same_actions(model, load_file(tmp_path / "out.npz"), observations,
+                        env.action_space)
+
+
+def test_vecnormalize_statistics_are_exported(env, observations, tmp_path) -> None:
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    venv = VecNormalize(DummyVecEnv([lambda: gym.make(FULL_ID)]), norm_reward=False)
+    venv.seed(0)
+    venv.reset()
+    for _ in range(50):
+        venv.step(np.array([venv.action_space.sample()]))
+    run = tmp_path / "run"
+    model = _perturbed(_sb3_model("ppo", env))
+    model.save(run / "model")
+    venv.save(run / "vecnormalize.pkl")
+    (run / "manifest.json").write_text(json.dumps({"env_id": FULL_ID, "algo": "ppo",
+                                                   "seed": 0}))
+    export_policy(run, None, None, tmp_path / "ppo.npz", episodes=0)
+    exported = load_file(tmp_path / "ppo.npz")
+    assert exported.ops[0] == "normalize"
+    expected, _ = model.predict(venv.normalize_obs(observations), deterministic=True)
+    assert np.max(np.abs(exported.predict(observations)[0] - expected)) < TOLERANCE
+
+
+@pytest.mark.slow
+def test_exported_sbx_sac_reproduces_the_model(env, observations, tmp_path) -> None:
+    sbx = pytest.importorskip("sbx")
+    model = sbx.SAC("MlpPolicy", env, learning_starts=100, buffer_size=1000, batch_size=64,
+                    seed=0, policy_kwargs={"net_arch": [32, 32]})
+    model.learn(300)
+    meta = export_policy(model, ENV, "sac", tmp_path / "sac.npz", episodes=0)
+    assert meta["backend"] == "sbx"
+    assert_same_actions(model, load_file(tmp_path / "sac.npz"), observations,
+                        env.action_space)
+
+
+# --------------------------------------------------------------------------- the files
+
+
+def test_policy_is_deterministic_numpy_with_sb3_signature(env, observations,
+                                                          tmp_path) -> None:
+    policy = load_file(linear_tracker(env, tmp_path / "linear.npz"))
+    action, state = policy.predict(observations[0], None, None, True)
+    assert action.shape == (6,) and state is None
+    batch, _ = policy.predict(observations[:5])
+    assert batch.shape == (5, 6)
+    np.testing.assert_array_equal(batch[0], action)
+    assert env.action_space.contains(action)
+    with pytest.raises(ValueError, match="deterministic"):
+        policy.predict(observations[0], deterministic=False)
+    with pytest.raises(ValueError, match="does not fit"):
+        policy.predict(np.zeros(5))
+
+
+def _rewrite(path: Path, change) -> None:
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    change(arrays)
+    np.savez(path, **arrays)
+
+
+def test_tampered_or_damaged_files_are_refused_by_name(env, tmp_path) -> None:
+    original = linear_tracker(env, tmp_path / "sac.npz")
+    load_file(original)  # intact
+
+    def bump_a_weight(arrays: dict) -> None:
+        arrays["op0.weight"] = arrays["op0.weight"].copy()
+        arrays["op0.weight"][0, 0] += 1e-3
+
+    cases = {
+        "modified": bump_a_weight,
+        "lacks": lambda arrays: arrays.pop("op1.high"),
+        "lacks metadata": lambda arrays: arrays.pop("metadata"),
+        "unreadable metadata": lambda arrays: arrays.update(metadata=np.array("{not json")),
+        "unknown ops": lambda arrays: arrays.update(ops=np.array(["dense", "softmax"])),
+    }
+    for message, change in cases.items():
+        path = tmp_path / f"{message.replace(' ', '_')}.npz"
+        path.write_bytes(original.read_bytes())
+        _rewrite(path, change)
+        with pytest.raises(ZooError, match=message) as err:
+            load_file(path)
+        assert str(path) in str(err.value)
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(original.read_bytes()[:200])
+    with pytest.raises(ZooError, match="not a readable zoo file") as err:
+        load_file(broken)
+    assert str(broken) in str(err.value)
+    with pytest.raises(ZooError, match="not found"):
+        load_file(tmp_path / "missing.npz")
+    assert zipfile.is_zipfile(original)
+
+
+def test_available_and_unknown_ids_or_algorithms(env, zoo_root) -> None:
+    with pytest.raises(UsageError, match="holds no agents yet"):
+        load(ENV, "sac")
+    assert available() == []
+    linear_tracker(env, zoo_root / ENV / "sac.npz")
+    assert available() == [(FULL_ID, "sac")]
+    assert load(FULL_ID, "SAC").env_id == FULL_ID  # full id or short name, any case
+    assert rehabbot.zoo.load(ENV, "sac").algo == "sac"
+    assert rehabbot.zoo.available() == [(FULL_ID, "sac")]
+    for env_id, algo in ((ENV, "td3"), ("rehab-bogus-v9", "sac")):
+        with pytest.raises(UsageError, match=f"available: {ENV}/sac"):
+            load(env_id, algo)
+    with pytest.raises(UsageError, match="zoo:ENV/ALGO"):
+        zoo.load_spec("zoo:sac")
+    # A file in the wrong folder says so.
+    linear_tracker(env, zoo_root / "rehab-knee-v0" / "sac.npz")
+    with pytest.raises(ZooError, match="holds an agent for 'rehabbot/rehab-reach-v0'"):
+        load("rehab-knee-v0", "sac")
+
+
+def test_loading_and_acting_import_no_torch_or_jax(env, tmp_path) -> None:
+    root = tmp_path / "zoo"
+    linear_tracker(env, root / ENV / "sac.npz")
+    probe = (
+        "import sys, numpy as np, rehabbot.zoo\n"
+        f"policy = rehabbot.zoo.load({ENV!r}, 'sac')\n"
+        "policy.predict(np.zeros(23, np.float32))\n"
+        "from rehabbot.rl.policies import env_for\n"
+        f"env_for(['zoo:{ENV}/sac'])\n"
+        "heavy = ('torch', 'jax', 'flax', 'sbx', 'stable_baselines3', 'sb3_contrib')\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy))\n")
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                            env={**os.environ, zoo.ZOO_DIR_ENV: str(root)}, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "[]"
+
+
+# --------------------------------------------------------------------------- the CLI
+
+
+def test_evaluate_runs_a_zoo_spec_in_the_agents_env(env, zoo_root, tmp_path,
+                                                    capsys) -> None:
+    from rehabbot.cli import main
+
+    pytest.importorskip("stable_baselines3")
+    model = _perturbed(_sb3_model("sac", env))
+    meta = export_policy(model, ENV, "sac", zoo.zoo_path(ENV, "sac"), episodes=1, seed=5)
+    assert meta["evaluation"] == {"episodes": 1, "seed": 5, "deterministic": True,
+                                  "successes": int(meta["success_rate"])}
+    linear_tracker(env, zoo_root / ENV / "linear.npz")
+    out = tmp_path / "evaluation"
+    code = main(["evaluate", f"zoo:{ENV}/sac", f"zoo:{ENV}/linear", "--episodes", "1",
+                 "--seed", "5", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    report = json.loads((out / "zoo-sac" / "evaluation.json").read_text())
+    assert report["env_id"] == FULL_ID  # from the zoo file, without --env
+    assert report["policy"]["kind"] == "zoo" and report["policy"]["train_seed"] == 0
+    assert report["summary"]["success_rate"] == meta["success_rate"]
+    linear = json.loads((out / "zoo-linear" / "evaluation.json").read_text())
+    assert linear["summary"]["success_rate"] == 1.0
+    assert main(["evaluate", f"zoo:{ENV}/td3", "--out", str(out)]) == 2
+    assert "available:" in capsys.readouterr().err
+    assert main(["evaluate", f"zoo:{ENV}/linear", "--stochastic", "--episodes", "1",
+                 "--out", str(out)]) == 2
+    assert "deterministic" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_render_runs_a_zoo_spec(env, zoo_root, tmp_path) -> None:
+    pytest.importorskip("imageio")
+    from rehabbot.cli import main
+
+    linear_tracker(env, zoo_root / ENV / "sac.npz")
+    out = tmp_path / "zoo.gif"
+    assert main(["render", f"zoo:{ENV}/sac", "--out", str(out), "--width", "64",
+                 "--height", "48", "--frame-every", "25"]) == 0
+    assert out.stat().st_size > 0
+
+
+def test_export_command_writes_the_zoo_file(env, zoo_root, tmp_path, capsys) -> None:
+    pytest.importorskip("stable_baselines3")
+    run = tmp_path / "run"
+    _perturbed(_sb3_model("td3", env)).save(run / "model")
+    (run / "manifest.json").write_text(json.dumps({"env_id": FULL_ID, "algo": "td3",
+                                                   "seed": 3, "timesteps_done": 10}))
+    assert zoo.main(["export", str(run), "--episodes", "0"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert load(ENV, "td3").metadata["seed"] == 3
+    assert zoo.main(["list"]) == 0
+    assert f"{ENV}/td3" in capsys.readouterr().out
+    assert zoo.main(["export", str(run / "model.zip"), "--env", ENV, "--algo", "a2c"]) == 2
+    assert zoo.main(["export", str(tmp_path / "nowhere.zip"), "--env", ENV,
+                     "--algo", "sac"]) == 1
+
+
+# --------------------------------------------------------------------------- shipped agents
+
+
+@pytest.mark.parametrize("env_id, algo", SHIPPED or [NOTHING_SHIPPED])
+def test_each_shipped_agent_loads_and_fits_its_env(env_id, algo) -> None:
+    policy = load(env_id, algo)
+    missing = [key for key in REQUIRED_METADATA if key not in policy.metadata]
+    assert missing == [], f"{policy.path} lacks metadata {missing}"
+    assert policy.path.stat().st_size < 2_000_000, "zoo files should stay small"
+    shipped_env = gym.make(env_id, **policy.metadata.get("env_kwargs", {}))
+    assert policy.observation_space == shipped_env.observation_space
+    assert policy.action_space == shipped_env.action_space
+    obs, _ = shipped_env.reset(seed=0)
+    assert shipped_env.action_space.contains(policy.predict(obs)[0])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id, algo", SHIPPED or [NOTHING_SHIPPED])
+def test_each_shipped_agent_succeeds_as_recorded(env_id, algo) -> None:
+    """3 episodes on the first seeds of the recorded evaluation: the success rate is at
+    least the recorded one minus one episode in three."""
+    from rehabbot.analysis.evaluation import evaluate
+
+    meta = load(env_id, algo).metadata
+    seed = int((meta.get("evaluation") or {}).get("seed", zoo.DEFAULT_SEED))
+    report, _trace = evaluate(f"zoo:{env_short_name(env_id)}/{algo}", episodes=SHIPPED_EPISODES,
+                              seed=seed)
+    measured = report["summary"]["success_rate"]
+    assert measured >= meta["success_rate"] - SHIPPED_SUCCESS_MARGIN, (
+        f"{env_id} {algo}: {measured:.0%} success on seeds {seed}..{seed + 2}, "
+        f"recorded {meta['success_rate']:.0%}")
