@@ -62,7 +62,7 @@ Named terms, each reported as ``info["reward_<name>"]``; the reward is their sum
 * ``reward="progress"`` (the -v1 ids), :mod:`rehabbot.tasks.progress_reward`:
   ``reward_progress = progress_weight x`` the decrease of the joint-space path still to travel,
   ``reward_bonus`` as above, ``reward_time = -time_cost``, the optional terms, and
-  ``reward_safety`` on a stop (the worst pose plus the time cost to the limit). Reaching each
+  ``reward_safety`` on a stop (the step's progress back, the time cost to the limit). Reaching each
   target is worth more than stalling for every gamma in [0.95, 0.999], and a stop pays less
   than holding still from the state before it.
 

@@ -21,12 +21,12 @@ term                value
 ``bonus``           ``intermediate_bonus`` (10) or ``final_bonus`` (100) when a target is
                     reached, as in eq. (5)
 ``time``            ``-time_cost`` every step (0.05): holding still costs this, and only this
-``safety``          on a safety stop: ``-(progress_weight x (D_cap - D_after) + (steps left + 1)
-                    x (time_cost + extra maxima))``; ``D_cap`` is the largest ``D`` the
-                    patient's box allows. The stop is paid as if the robot had been thrown to
-                    the worst pose and then held still to the time limit, so from any state a
-                    step that ends in a stop pays less than holding still from that state
-                    (which costs ``time_cost`` a step and cannot raise ``D`` above ``D_cap``)
+``safety``          on a safety stop: ``-(progress_weight x max(D_before - D_after, 0) +
+                    (steps left + 1) x (time_cost + extra maxima))``: the step's progress is
+                    taken back and the time cost is paid to the time limit and one step more.
+                    From the state before the stop, holding still instead costs ``time_cost`` a
+                    step to the limit, so the stop pays less, by at least one step's cost. The
+                    penalty stays small (at most about 50) because holding still costs little
 ``smoothness``      as eq. (5)'s optional term (0 by default)
 ``effort``          as eq. (5)'s optional term (0 by default)
 ==================  ===========================================================================
@@ -61,7 +61,8 @@ def remaining_path_rad(targets_rad: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ProgressReward:
-    """The ``-v1`` reward (module docstring). ``path_cap_rad`` is ``D_cap``; ``action_range``
+    """The ``-v1`` reward (module docstring). ``path_cap_rad`` is the largest ``D`` the
+    patient's box allows (reported, not used in the pay); ``action_range``
     and ``torque_limit_nm`` scale the optional terms as in
     :class:`rehabbot.tasks.reward.PaperReward`."""
 
@@ -96,8 +97,8 @@ class ProgressReward:
             if self.safety_penalty_steps is not None:
                 steps_left = min(steps_left, self.safety_penalty_steps)
             per_step = self.time_cost + self.smoothness_weight + self.effort_weight
-            worst_pose = max(self.path_cap_rad - outcome.path_left_rad, 0.0)
-            safety = -(self.progress_weight * worst_pose + steps_left * per_step)
+            gained = max(outcome.path_left_before_rad - outcome.path_left_rad, 0.0)
+            safety = -(self.progress_weight * gained + steps_left * per_step)
         elif outcome.reached:
             bonus = self.final_bonus if outcome.last_target else self.intermediate_bonus
         return {"reward_progress": progress, "reward_bonus": bonus,
