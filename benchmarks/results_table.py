@@ -1,16 +1,19 @@
 """The README's results table: every training run under the given folders, evaluated on the
-same episode seeds, next to the scripted expert and random actions.
+same held-out episodes, next to the scripted expert and random actions.
 
 For each run folder (``.../<env>/<algo>/seed<k>/`` with a ``model.zip``) the final model is
 evaluated with :func:`rehabbot.analysis.evaluation.evaluate` on ``--episodes`` episodes seeded
-``--seed``, ``--seed`` + 1, ... (deterministic actions); runs of one algorithm and env are then
-pooled (mean ± std over seeds of each seed's mean; success over all episodes). Wall-clock is
-the training time from each run's manifest. Rows are printed as a Markdown table, and with
-``--json`` written to a file.
+``--seed``, ``--seed`` + 1, ... (deterministic actions), split evenly over the patient profiles
+of ``--profiles``: the default profile the runs trained on and, unless ``--profiles default``,
+two held-out ones (a 1.60 m, 60 kg woman and a 1.85 m, 90 kg man). Runs of one algorithm and env
+are then aggregated across seeds as rliable recommends: the interquartile mean of each seed's
+success rate and return, with a 95 % percentile-bootstrap interval
+(:mod:`rehabbot.analysis.aggregate`). Wall-clock is the training time from each run's
+manifest. Rows are printed as a Markdown table, and with ``--json`` written to a file.
 
 Usage::
 
-    python benchmarks/results_table.py runs/results [--episodes 20] [--seed 1000] [--json F]
+    python benchmarks/results_table.py runs/results [--episodes 50] [--seed 1000] [--json F]
 """
 
 from __future__ import annotations
@@ -24,8 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from rehabbot.analysis.aggregate import iqm_interval
 from rehabbot.analysis.evaluation import evaluate
 from rehabbot.envs.registration import env_short_name
+
+HELD_OUT_PROFILES = {
+    "default": None,  # 1.75 m, 75 kg, male: the profile training uses
+    "f160": {"height_m": 1.60, "mass_kg": 60.0, "sex": "female"},
+    "m185": {"height_m": 1.85, "mass_kg": 90.0, "sex": "male"},
+}
 
 
 def find_runs(roots: Sequence[Path]) -> list[Path]:
@@ -46,30 +56,55 @@ def _fmt(values: list[float], digits: int = 0) -> str:
     return f"{np.mean(finite):.{digits}f} ± {np.std(finite):.{digits}f}"
 
 
-def table_rows(roots: Sequence[Path], episodes: int, seed: int) -> list[dict]:
+def _evaluate(spec: str, env_id: str | None, episodes: int, seed: int,
+              profiles: Sequence[str]) -> dict:
+    """One policy on ``episodes`` episodes split over ``profiles``: a report whose
+    ``per_episode`` list holds every episode (with its profile)."""
+    per_episode = []
+    share = [episodes // len(profiles) + (k < episodes % len(profiles))
+             for k in range(len(profiles))]
+    first = seed
+    for name, count in zip(profiles, share, strict=True):
+        if count == 0:
+            continue
+        profile = HELD_OUT_PROFILES[name]
+        kwargs = None if profile is None else {"profile": profile}
+        report, _trace = evaluate(spec, env_id, count, first, env_kwargs=kwargs)
+        per_episode += [{**e, "profile": name} for e in report["per_episode"]]
+        first += count
+    return {"per_episode": per_episode}
+
+
+def table_rows(roots: Sequence[Path], episodes: int, seed: int,
+               profiles: Sequence[str] = tuple(HELD_OUT_PROFILES)) -> list[dict]:
     groups: dict[tuple[str, str, str], list[dict]] = defaultdict(list)
     env_ids = set()
     for run in find_runs(roots):
         manifest = json.loads((run / "manifest.json").read_text())
-        report, _trace = evaluate(str(run / "model.zip"), None, episodes, seed)
+        report = _evaluate(str(run / "model.zip"), None, episodes, seed, profiles)
         key = (manifest["env_id"], manifest["algo"], str(manifest["hyperparameters"]
                                                           .get("source", "sb3 defaults")))
         env_ids.add(manifest["env_id"])
         groups[key].append({"manifest": manifest, "report": report})
     rows = []
     for (env_id, algo, source), runs in sorted(groups.items()):
-        rows.append(_row(env_id, algo.upper(), source, runs))
+        backend = "/".join(sorted({r["manifest"].get("backend", "sb3") for r in runs}))
+        rows.append(_row(env_id, f"{algo.upper()} ({backend})", source, runs))
     for env_id in sorted(env_ids):
         for policy in ("expert", "random"):
-            report, _trace = evaluate(policy, env_id, episodes, seed)
+            report = _evaluate(policy, env_id, episodes, seed, profiles)
             rows.append(_row(env_id, policy, "-", [{"manifest": {}, "report": report}]))
     return rows
 
 
 def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
-    per_seed = [r["report"]["summary"] for r in runs]
     episodes = [e for r in runs for e in r["report"]["per_episode"]]
     seeds = [r["manifest"].get("seed") for r in runs]
+    success = iqm_interval([np.mean([e["success"] for e in r["report"]["per_episode"]])
+                            for r in runs])
+    returns = iqm_interval([np.mean([e["return"] for e in r["report"]["per_episode"]])
+                            for r in runs])
+    held_out = [e for e in episodes if e["profile"] != "default"]
     return {
         "env": env_short_name(env_id),
         "policy": name,
@@ -77,12 +112,14 @@ def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
         "steps": sorted({r["manifest"].get("timesteps_done") for r in runs} - {None}),
         "seeds": [s for s in seeds if s is not None],
         "success_rate": float(np.mean([e["success"] for e in episodes])),
-        "return": _fmt([s["return"]["mean"] for s in per_seed]) if len(runs) > 1 else
-        _fmt([e["return"] for e in episodes]),
-        "length": _fmt([e["length"] for e in episodes]),
+        "success_iqm": success.format(0, 100),
+        "held_out_success_rate": float(np.mean([e["success"] for e in held_out]))
+        if held_out else None,
+        "return_iqm": returns.format(0),
         "steps_to_finish": _fmt([e["steps_to_finish"] for e in episodes
                                  if e["steps_to_finish"] is not None]),
         "sparc": _fmt([e["sparc"] for e in episodes], 2),
+        "peak_cuff_force_n": _fmt([e["peak_cuff_force_n"] for e in episodes]),
         "safety_stops": sum(e["safety_violation"] is not None for e in episodes),
         "episodes": len(episodes),
         "wall_clock_min": _fmt([r["manifest"]["wall_clock_s"] / 60 for r in runs
@@ -91,23 +128,31 @@ def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
 
 
 def format_rows(rows: list[dict]) -> str:
-    header = ("| env | policy | settings | steps | seeds | success | return | length "
-              "| steps to finish | SPARC | safety stops | wall-clock [min] |")
-    lines = [header, "|" + "---|" * 12]
+    header = ("| env | policy | settings | steps | seeds | success, IQM [95 % CI] | "
+              "success, all episodes (held-out profiles) | return, IQM [95 % CI] | "
+              "steps to finish | SPARC | peak cuff force [N] | safety stops | "
+              "wall-clock [min] |")
+    lines = [header, "|" + "---|" * 13]
     for r in rows:
         steps = "/".join(f"{s // 1000}k" for s in r["steps"]) or "-"
         seeds = ",".join(str(s) for s in r["seeds"]) or "-"
+        held = r["held_out_success_rate"]
+        held = "" if held is None else f" ({100 * held:.0f} %)"
         lines.append(f"| {r['env']} | {r['policy']} | {r['settings']} | {steps} | {seeds} | "
-                     f"{100 * r['success_rate']:.0f} % ({r['episodes']} ep.) | {r['return']} | "
-                     f"{r['length']} | {r['steps_to_finish']} | {r['sparc']} | "
-                     f"{r['safety_stops']} | {r['wall_clock_min']} |")
+                     f"{r['success_iqm']} % | {100 * r['success_rate']:.0f} %{held} of "
+                     f"{r['episodes']} | {r['return_iqm']} | {r['steps_to_finish']} | "
+                     f"{r['sparc']} | {r['peak_cuff_force_n']} | {r['safety_stops']} | "
+                     f"{r['wall_clock_min']} |")
     return "\n".join(lines)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("roots", nargs="+", type=Path, help="folders holding training runs")
-    parser.add_argument("--episodes", type=int, default=20, help="episodes per run (20)")
+    parser.add_argument("--episodes", type=int, default=50, help="episodes per run (50)")
+    parser.add_argument("--profiles", nargs="+", choices=tuple(HELD_OUT_PROFILES),
+                        default=list(HELD_OUT_PROFILES),
+                        help="patient profiles the episodes are split over (default: all)")
     parser.add_argument("--seed", type=int, default=1000, help="first episode seed (1000)")
     parser.add_argument("--json", type=Path, help="also write the rows as JSON")
     args = parser.parse_args(argv)
@@ -115,9 +160,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if missing:
         print(f"not a folder: {', '.join(missing)}", file=sys.stderr)
         return 2
-    rows = table_rows(args.roots, args.episodes, args.seed)
-    print(f"episodes {args.seed}..{args.seed + args.episodes - 1} per run, deterministic "
-          "actions; return: mean ± std over seeds (one seed: over episodes)\n")
+    rows = table_rows(args.roots, args.episodes, args.seed, args.profiles)
+    print(f"episodes {args.seed}..{args.seed + args.episodes - 1} per run over profiles "
+          f"{', '.join(args.profiles)}, deterministic actions; IQM over seeds with a 95 % "
+          "percentile-bootstrap interval (one seed: no interval)\n")
     print(format_rows(rows))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")

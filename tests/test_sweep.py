@@ -263,7 +263,7 @@ def test_a_sweep_on_a_local_ray_writes_run_folders_and_resumes(tmp_path, capsys,
     assert len(list((out / "_ray").iterdir())) == 1
 
     rows = results_table.table_rows([out], episodes=1, seed=1000)
-    sac = [row for row in rows if row["policy"] == "SAC"]
+    sac = [row for row in rows if row["policy"].startswith("SAC (")]
     assert len(sac) == 1 and sac[0]["seeds"] == [0, 1] and sac[0]["steps"] == [200]
 
     pytest.importorskip("matplotlib", reason='figures need "rehabbot[plot]"')
