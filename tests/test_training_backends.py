@@ -385,6 +385,16 @@ def test_bc_warm_starts_sb3_ppo_close_to_the_expert(tmp_path: Path) -> None:
     seen, unseen = _clone_error(model_path)
     assert seen <= bc["loss_after"] + 1e-6  # predict clips the mean to the action box
     assert seen < 0.15 and unseen < 0.25
+    # The run resumes with the flags it was started with (the cloned episodes are recorded
+    # under "bc", not "demos"), and refuses other counts.
+    out = tmp_path / "sb3"
+    resume = ("--eval-freq", "0", "--checkpoint-freq", "0", "--resume", "--backend", "sb3")
+    err = _cli_error(_args(tmp_path, "ppo", out, PPO_FROZEN, "--timesteps", "128", "--bc",
+                           "--demos", "4", *resume))
+    assert "started with 3 expert episodes and --bc" in str(err)
+    assert cmd_train(_args(tmp_path, "ppo", out, PPO_FROZEN, "--timesteps", "128", "--bc",
+                           "--demos", "3", *resume)) == 0
+    assert _manifest(out / ENV / "ppo" / "seed0")["timesteps_done"] >= 128
 
 
 @pytest.mark.slow

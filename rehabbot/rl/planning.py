@@ -181,8 +181,10 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
             raise TrainingUsageError(f"cannot resume {run_dir}: it was trained with the sbx "
                                      "backend, which is not installed (pip install "
                                      "'rehabbot[jax]')")
-        saved_demos = int((manifest.get("demos") or {}).get("episodes", 0))
         saved_bc = bool(manifest.get("bc"))
+        # With --bc the episodes are cloned (manifest "bc"), else put in the replay buffer.
+        saved_record = (manifest.get("bc") if saved_bc else manifest.get("demos")) or {}
+        saved_demos = int(saved_record.get("episodes", 0))
         if (demos is not None and episodes != saved_demos) or (bc and not saved_bc):
             started = f"{saved_demos} expert episodes" + (" and --bc" if saved_bc else "")
             raise TrainingUsageError(f"cannot resume {run_dir} with different demonstrations: "
