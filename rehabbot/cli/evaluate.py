@@ -34,7 +34,7 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
         epilog="examples:\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip\n"
                "  rehabbot evaluate expert random --env rehab-reach-v0 --episodes 20\n"
-               "  rehabbot evaluate zoo:rehab-reach-v1/sac expert\n"
+               "  rehabbot evaluate zoo:rehab-reach-v1/ppo expert\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random "
                "--episodes 20\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip --env-kwargs "
@@ -46,7 +46,7 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
                "policies, OUT/comparison.md.")
     parser.add_argument("policies", nargs="+", metavar="MODEL|zoo:ENV/ALGO|expert|random",
                         help="a model .zip saved by `rehabbot train` (or any SB3 PPO/SAC/TD3 "
-                             "zip), an agent shipped in the zoo (zoo:rehab-reach-v1/sac; "
+                             "zip), an agent shipped in the zoo (zoo:rehab-reach-v1/ppo; "
                              "python -m rehabbot.rl.zoo list), 'expert' (scripted expert) or "
                              "'random'")
     parser.add_argument("--env", metavar="ENV",

@@ -22,12 +22,12 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n"
                "  rehabbot render expert --env rehab-reach-v0 --out expert.mp4\n"
-               "  rehabbot render zoo:rehab-reach-v1/sac --out sac.mp4\n"
+               "  rehabbot render zoo:rehab-reach-v1/ppo --out ppo.mp4\n"
                "  rehabbot render runs/rehab-reach-v0/sac/seed0/model.zip --out sac.gif "
                "--width 480 --height 360")
     parser.add_argument("policy", metavar="MODEL|zoo:ENV/ALGO|expert|random",
                         help="a model .zip saved by `rehabbot train`, an agent shipped in the "
-                             "zoo (zoo:rehab-reach-v1/sac), 'expert' or 'random'")
+                             "zoo (zoo:rehab-reach-v1/ppo), 'expert' or 'random'")
     parser.add_argument("--env", metavar="ENV",
                         help="env id (default: the model's run manifest or the zoo agent's "
                              "env; required for expert and random)")

@@ -6,7 +6,7 @@
     import rehabbot.zoo
 
     print(rehabbot.zoo.available())              # [("rehabbot/rehab-reach-v1", "sac"), ...]
-    agent = rehabbot.zoo.load("rehab-reach-v1", "sac")
+    agent = rehabbot.zoo.load("rehab-reach-v1", "ppo")
     env = gym.make(agent.env_id, **agent.metadata.get("env_kwargs", {}))
     obs, info = env.reset(seed=0)
     action, _ = agent.predict(obs)                # SB3's signature; deterministic only
