@@ -20,7 +20,8 @@ from benchmarks.soak import END_REASONS, SoakReport, main, run_soak
 from rehabbot.envs.control import CONTROL_MODES
 from rehabbot.envs.registration import ENV_SPECS
 
-SHORT_STEPS = 20_000  # 1250 per cell over the 16 cells
+N_CELLS = len(ENV_SPECS) * len(CONTROL_MODES)  # 8 ids x 4 modes
+SHORT_STEPS = 20_000  # 625 per cell over the 32 cells
 FAULT_EVERY = 100  # the faulty envs misbehave on every 100th step call
 
 
@@ -39,12 +40,12 @@ def test_short_soak_of_every_cell_is_clean(short_soak: SoakReport) -> None:
     report = short_soak
     cells = {(cell.env_id, cell.control_mode) for cell in report.cells}
     assert cells == {(env_id, mode) for env_id in ENV_SPECS for mode in CONTROL_MODES}
-    assert len(report.cells) == 16
+    assert len(report.cells) == N_CELLS
     assert report.complete and report.interrupted_by is None
     assert report.steps == SHORT_STEPS
     for cell in report.cells:
         assert cell.status == "complete", cell.name
-        assert cell.steps == cell.steps_planned == SHORT_STEPS // 16, cell.name
+        assert cell.steps == cell.steps_planned == SHORT_STEPS // N_CELLS, cell.name
         assert cell.exceptions == 0, (cell.name, cell.exception_examples)
         assert cell.non_finite == 0, (cell.name, cell.non_finite_example)
         assert cell.obs_outside == 0, (cell.name, cell.obs_outside_example)
@@ -58,7 +59,7 @@ def test_short_soak_of_every_cell_is_clean(short_soak: SoakReport) -> None:
     assert report.exit_code() == 0
     assert sum(report.ends().values()) == report.episodes
     (process,) = report.processes
-    assert process.pid == os.getpid() and process.cells == 16
+    assert process.pid == os.getpid() and process.cells == N_CELLS
     assert process.steps_since_baseline == SHORT_STEPS - report.cells[0].warmup_steps
     assert process.growth_mib is not None and math.isfinite(process.growth_mib)
 
@@ -66,7 +67,7 @@ def test_short_soak_of_every_cell_is_clean(short_soak: SoakReport) -> None:
 @pytest.mark.slow
 def test_same_seed_gives_the_same_counts(short_soak: SoakReport) -> None:
     # A subset of the cells, with the same share each: the same episodes, whatever the filter.
-    share = SHORT_STEPS // 16
+    share = SHORT_STEPS // N_CELLS
     again = run_soak(2 * share, env_ids=["rehabbot/rehab-knee-v0", "rehab-reach-v0"],
                      control_modes=["torque"], seed=0)
     first = _counts(short_soak)
