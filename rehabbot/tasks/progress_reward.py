@@ -44,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rehabbot.tasks.reward import StepOutcome
+from rehabbot.tasks.reward import StepOutcome, optional_terms
 
 PROGRESS_WEIGHT_PER_RAD = 10.0
 TIME_COST_PER_STEP = 0.05
@@ -84,14 +84,8 @@ class ProgressReward:
     def __call__(self, outcome: StepOutcome) -> dict[str, float]:
         """The terms of one step, ``{"reward_progress": ..., ...}``."""
         progress = self.progress_weight * (outcome.path_left_before_rad - outcome.path_left_rad)
-        smoothness = effort = safety = bonus = 0.0
-        if self.smoothness_weight:
-            change = (outcome.action - outcome.previous_action) / self.action_range
-            smoothness = -self.smoothness_weight * float(change @ change) / len(change)
-        if self.effort_weight:
-            torque = outcome.torque_nm / self.torque_limit_nm
-            if np.all(np.isfinite(torque)):
-                effort = -self.effort_weight * float(torque @ torque) / len(torque)
+        safety = bonus = 0.0
+        smoothness, effort = optional_terms(self, outcome)
         if outcome.safety_stop:
             steps_left = max(self.max_episode_steps - outcome.steps_done, 0) + 1
             if self.safety_penalty_steps is not None:

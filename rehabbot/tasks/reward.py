@@ -90,14 +90,8 @@ class PaperReward:
     def __call__(self, outcome: StepOutcome) -> dict[str, float]:
         """The terms of one step, ``{"reward_distance": ..., "reward_bonus": ..., ...}``."""
         distance = -outcome.distance_rad
-        smoothness = effort = safety = bonus = 0.0
-        if self.smoothness_weight:
-            change = (outcome.action - outcome.previous_action) / self.action_range
-            smoothness = -self.smoothness_weight * float(change @ change) / len(change)
-        if self.effort_weight:
-            torque = outcome.torque_nm / self.torque_limit_nm
-            if np.all(np.isfinite(torque)):
-                effort = -self.effort_weight * float(torque @ torque) / len(torque)
+        safety = bonus = 0.0
+        smoothness, effort = optional_terms(self, outcome)
         if outcome.safety_stop:
             steps_left = max(self.max_episode_steps - outcome.steps_done, 0) + 1
             if self.safety_penalty_steps is not None:
@@ -153,3 +147,18 @@ def total(terms: dict[str, float]) -> float:
     for value in values:
         reward += value
     return reward
+
+
+def optional_terms(reward, outcome: StepOutcome) -> tuple[float, float]:
+    """The optional ``smoothness`` and ``effort`` terms of a reward function with
+    ``smoothness_weight``, ``effort_weight``, ``action_range`` and ``torque_limit_nm`` (0.0
+    where the weight is 0): shared by every reward design."""
+    smoothness = effort = 0.0
+    if reward.smoothness_weight:
+        change = (outcome.action - outcome.previous_action) / reward.action_range
+        smoothness = -reward.smoothness_weight * float(change @ change) / len(change)
+    if reward.effort_weight:
+        torque = outcome.torque_nm / reward.torque_limit_nm
+        if np.all(np.isfinite(torque)):
+            effort = -reward.effort_weight * float(torque @ torque) / len(torque)
+    return smoothness, effort
