@@ -87,7 +87,8 @@ def algo_class(algo: str, backend: str = "sb3") -> Any:
     return cls
 
 
-def _read_data(path: Path) -> dict[str, Any]:
+def read_model_data(path: Path) -> dict[str, Any]:
+    """The ``data`` entry of a Stable-Baselines3 / SBX model zip (PolicyError if unreadable)."""
     try:
         with zipfile.ZipFile(path) as archive:
             data = json.loads(archive.read("data"))
@@ -108,7 +109,7 @@ def detect_model(path: Path) -> tuple[str, str]:
     Raises:
         PolicyError: not a model zip of SB3, sb3-contrib or SBX, or one of another algorithm.
     """
-    data = _read_data(path)
+    data = read_model_data(path)
     policy_class = data.get("policy_class", {})
     module = policy_class.get("__module__", "") if isinstance(policy_class, dict) else ""
     parts = str(module).split(".")

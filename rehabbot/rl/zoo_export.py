@@ -27,10 +27,8 @@ only inside the functions that read their models; this module never imports
 from __future__ import annotations
 
 import importlib
-import json
 import pickle
 import shlex
-import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +39,7 @@ import numpy as np
 
 from rehabbot.common.errors import DataError, UsageError
 from rehabbot.rl import runs
+from rehabbot.rl.algorithms import read_model_data
 
 Op = tuple[str, dict[str, Any]]
 # (backend, algo) -> (module, class)
@@ -249,14 +248,7 @@ def sbx_actor_ops(model: Any) -> list[Op]:
 
 
 def _zip_policy_module(path: Path) -> str:
-    try:
-        with zipfile.ZipFile(path) as archive:
-            data = json.loads(archive.read("data"))
-    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, UnicodeDecodeError,
-            OSError) as err:
-        raise DataError(f"{str(path)!r} is not a Stable-Baselines3 / SBX model zip "
-                        f"({type(err).__name__}: {err})") from err
-    policy_class = data.get("policy_class", {})
+    policy_class = read_model_data(path).get("policy_class", {})
     return str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
 
 
