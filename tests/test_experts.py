@@ -70,3 +70,27 @@ def test_expert_is_evaluated_by_stable_baselines3():
     env = monitor.Monitor(gym.make("rehabbot/rehab-reach-v0", exercise=0, weight_level=0))
     mean, std = evaluation.evaluate_policy(ScriptedExpert(env), env, n_eval_episodes=2)
     assert mean > 0 and std == pytest.approx(0.0, abs=1e-6)
+
+
+# Held-out patients of the results table (benchmarks/results_table.py) and the edges of the
+# arm scenes' promised range (README, Failure modes).
+ARM_PROFILES = ({"height_m": 1.50, "mass_kg": 50.0, "sex": "female"},
+                {"height_m": 1.60, "mass_kg": 60.0, "sex": "female"},
+                {"height_m": 1.85, "mass_kg": 90.0, "sex": "male"},
+                {"height_m": 2.00, "mass_kg": 100.0, "sex": "male"})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ["rehabbot/rehab-reach-v1", "rehabbot/rehab-reach-l-v1"])
+@pytest.mark.parametrize("profile", ARM_PROFILES, ids=lambda p: f"{p['height_m']}m")
+def test_expert_finishes_both_arm_exercises_for_short_and_tall_patients(env_id, profile):
+    """The robot stands at a fixed offset from the shoulder: when the offset scaled with the
+    patient's height, a 1.60 m patient's elbow extension drove the robot's forearm into its
+    own stand (unintended_contact) and the left arm past the cuff-force limit."""
+    env = gym.make(env_id, profile=profile)
+    expert = ScriptedExpert(env)
+    for exercise in (0, 1):
+        _steps, _ret, info, peak = run_expert(env, expert, exercise, level=2)
+        assert info["safety_violation"] is None, (profile, exercise, info["safety_violation"])
+        assert info["is_success"], (profile, exercise)
+        assert peak < env.unwrapped.safety.force_limit_n

@@ -43,7 +43,7 @@ REFUSAL_WORDS = ("does not support", "at rest", "cannot reach")
 # height [m] by limb (or limb and side), and the highest mass [kg] by limb.
 # The grid's lowest fully accepted height + 5 cm (its spacing), so that heights between grid
 # points are covered too.
-SUPPORTED_HEIGHT_M = {"arm": 1.45, "hip": pt.HEIGHT_RANGE_M[0], "knee": 1.65,
+SUPPORTED_HEIGHT_M = {"arm": pt.HEIGHT_RANGE_M[0], "hip": pt.HEIGHT_RANGE_M[0], "knee": 1.65,
                       ("knee", "left"): 1.70}
 SUPPORTED_MASS_KG = {"hip": 100.0}
 GYM_ID = "rehabbot/rehab-reach-v0"

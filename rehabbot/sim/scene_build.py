@@ -296,12 +296,17 @@ def _add_furniture(spec, posture, profile, geometry, seg, torso_pos, lowest, gap
 
 
 def _robot_base_pose(limb, posture, profile, seg, geometry, torso_pos, torso_quat):
-    """Where the robot base stands (world) and its yaw: beside the limb, within easy reach."""
+    """Where the robot base stands (world) and its yaw: beside the limb, within easy reach.
+
+    An arm's robot stands at a fixed offset from the shoulder: the robot's links keep their
+    size whatever the patient's, so an offset scaled with the patient's height folded the
+    robot into its own stand for short patients (a 1.60 m patient's elbow extension put the
+    forearm 18 mm into the column) and past its cuff-force limit on the left arm."""
     side = -1.0 if limb.endswith("_r") else 1.0
     h_scale = profile.height_m / 1.75
     if limb.startswith("arm"):
         shoulder = torso_pos + (geometry.shoulder_r if side < 0 else geometry.shoulder_l)
-        pos = shoulder + np.array([0.42, side * 0.52, -0.42]) * h_scale
+        pos = shoulder + np.array([0.42, side * 0.52, -0.42])
         yaw = math.pi / 2 * (1 if side < 0 else -1)
         return pos, yaw
     rot = np.zeros(9)
