@@ -1,28 +1,31 @@
-"""The main job (``make demo``, ``rehabbot demo``): train SAC on ``rehabbot/rehab-reach-v0``,
-evaluate it against the scripted expert and random actions, and write the paper's figures, a
-video and a summary.
+"""The main job (``make demo``, ``rehabbot demo``): train PPO with a behaviour-cloned start on
+``rehabbot/rehab-reach-v1``, evaluate it against the scripted expert and random actions, and
+write the paper's figures, a video and a summary.
 
 Usage::
 
-    rehabbot demo --out runs/demo [--timesteps 40000] [--episodes 10] [--seed 0]
+    rehabbot demo --out runs/demo [--timesteps 100000] [--demos 40] [--episodes 10] [--seed 0]
 
 Steps, each with its output under ``OUT``:
 
-1. ``rehabbot train rehab-reach-v0 --algo sac --hyperparams sac --backend sb3`` (the settings
-   of the README's results, shipped with the package, on Stable-Baselines3 as measured there)
-   → ``OUT/runs/rehab-reach-v0/sac/seed<k>/`` (model, checkpoints, monitor CSVs, TensorBoard
-   logs, manifest). Interrupted (Ctrl-C)? Run the demo again: it resumes from the last
-   checkpoint.
+1. ``rehabbot train rehab-reach-v1 --algo ppo --hyperparams ppo --backend sb3 --bc --demos 40``
+   (the settings of the README's ``-v1`` results, shipped with the package, on
+   Stable-Baselines3 as measured there): PPO's actor is first cloned from 40 scripted-expert
+   episodes, then trained on the ``-v1`` reward → ``OUT/runs/rehab-reach-v1/ppo/seed<k>/``
+   (model, checkpoints, monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run
+   the demo again: it resumes from the last checkpoint.
 2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the
    same episode seeds → ``OUT/evaluation/<policy>/evaluation.json`` and ``trace.npz``.
 3. ``rehabbot plot`` → ``OUT/figures/`` (Fig. 3 tool path, Fig. 4 learning curve, Fig. 5
    kinematics, Fig. 6 torques; PNG and PDF).
-4. ``rehabbot render`` of one episode of the trained model → ``OUT/sac.mp4``.
+4. ``rehabbot render`` of one episode of the trained model → ``OUT/ppo.mp4``.
 5. ``OUT/summary.md`` and ``OUT/summary.json``: the comparison table, the wall-clock time of
    every step, and the commands that reproduce each step; the table is printed at the end.
 
-The default budget (40 000 steps) finishes within 15 minutes on 2 CPU cores; it is a
-demonstration of the pipeline, not a converged policy (see the README's results).
+The default budget (100 000 steps) trains in about 5 minutes on one CPU core and ends with an
+agent that finishes most episodes (the README's "Demo" section has the measured table). Before
+0.3.0 the demo trained SAC on ``rehab-reach-v0``, whose reward traps agents short of the
+targets (README, "Results"): it ended with a 0 % agent.
 """
 
 from __future__ import annotations
@@ -34,31 +37,36 @@ from pathlib import Path
 from rehabbot.cli.errors import cli_command
 from rehabbot.envs.registration import env_short_name
 
-ENV_ID = "rehabbot/rehab-reach-v0"
-ALGO = "sac"
-DEFAULT_TIMESTEPS = 40_000
+ENV_ID = "rehabbot/rehab-reach-v1"
+ALGO = "ppo"
+DEFAULT_TIMESTEPS = 100_000
+DEFAULT_DEMOS = 40  # scripted-expert episodes cloned into PPO's actor (--bc)
 DEFAULT_EPISODES = 10
 EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
 VIDEO_WIDTH_PX, VIDEO_HEIGHT_PX, VIDEO_FRAME_EVERY = 480, 360, 3  # 16.7 fps, software GL
-HYPERPARAMS = "sac"  # rehabbot/rl/hyperparams/sac.yml
-BACKEND = "sb3"  # the README's demo figures are Stable-Baselines3's (TrackingErrorFeatures)
+HYPERPARAMS = "ppo"  # rehabbot/rl/hyperparams/ppo.yml
+BACKEND = "sb3"  # the README's -v1 results are Stable-Baselines3's (TrackingErrorFeatures)
 
 
 def add_demo_parser(commands: argparse._SubParsersAction) -> None:
     """Add ``demo`` to the ``rehabbot`` subcommands."""
-    parser = commands.add_parser("demo", help="the main job: train SAC, evaluate, plot, "
-                                 "render, summarise (make demo)",
+    parser = commands.add_parser("demo", help="the main job: train PPO (cloned start), evaluate, "
+                                 "plot, render, summarise (make demo)",
                                  description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/demo"), metavar="DIR",
                         help="output folder (default: runs/demo)")
     parser.add_argument("--timesteps", type=int, default=DEFAULT_TIMESTEPS, metavar="N",
-                        help=f"SAC training steps (default: {DEFAULT_TIMESTEPS})")
+                        help=f"PPO training steps, in whole rollouts of 2048 (default: "
+                        f"{DEFAULT_TIMESTEPS})")
+    parser.add_argument("--demos", type=int, default=DEFAULT_DEMOS, metavar="N",
+                        help=f"expert episodes cloned into PPO's actor before training "
+                        f"(default: {DEFAULT_DEMOS})")
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
                         help=f"evaluation episodes per policy (default: {DEFAULT_EPISODES})")
     parser.add_argument("--seed", type=int, default=0, metavar="S", help="training seed (0)")
     parser.add_argument("--hyperparams", default=HYPERPARAMS, metavar="FILE.yml|NAME",
-                        help="SAC hyperparameters (default: sac, shipped with rehabbot)")
+                        help="PPO hyperparameters (default: ppo, shipped with rehabbot)")
     parser.add_argument("--no-video", action="store_true", help="skip the video")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=cmd_demo)
@@ -92,18 +100,20 @@ def run_demo(args: argparse.Namespace) -> int:
     run_root = out / "runs"
     run_dir = runs.run_directory(run_root, ENV_ID, ALGO, args.seed)
     resume = (run_dir / runs.MANIFEST_NAME).is_file()
-    print(f"[1/5] training SAC on {ENV_ID} for {args.timesteps} steps"
+    print(f"[1/5] cloning {args.demos} expert episodes into PPO's actor, then training PPO on "
+          f"{ENV_ID} for {args.timesteps} steps"
           f"{' (resuming)' if resume else ''} -> {run_dir}", flush=True)
     training.train_run(ENV_ID, ALGO, args.seed, args.timesteps, run_root,
                        hyperparams=args.hyperparams, resume=resume,
-                       progress_bar=not args.no_progress, backend=BACKEND)
+                       progress_bar=not args.no_progress, backend=BACKEND,
+                       demos=args.demos, bc=True)
     stages["train"] = time.perf_counter() - started
-    commands["train"] = (f"rehabbot train {env_short_name(ENV_ID)} --algo sac --timesteps "
+    commands["train"] = (f"rehabbot train {env_short_name(ENV_ID)} --algo {ALGO} --timesteps "
                          f"{args.timesteps} --seeds {args.seed} --hyperparams {args.hyperparams}"
-                         f" --backend {BACKEND} --out {run_root}")
+                         f" --backend {BACKEND} --bc --demos {args.demos} --out {run_root}")
 
     started = time.perf_counter()
-    print(f"[2/5] evaluating SAC, the scripted expert and random actions on "
+    print(f"[2/5] evaluating PPO, the scripted expert and random actions on "
           f"{args.episodes} episodes (seeds {EVAL_SEED}..{EVAL_SEED + args.episodes - 1})",
           flush=True)
     reports = []
@@ -126,8 +136,8 @@ def run_demo(args: argparse.Namespace) -> int:
     video_path = None
     if not args.no_video:
         started = time.perf_counter()
-        video_path = out / "sac.mp4"
-        print(f"[4/5] rendering one SAC episode -> {video_path}", flush=True)
+        video_path = out / f"{ALGO}.mp4"
+        print(f"[4/5] rendering one PPO episode -> {video_path}", flush=True)
         video.render_episode(model, ENV_ID, video_path, seed=EVAL_SEED,
                              width=VIDEO_WIDTH_PX, height=VIDEO_HEIGHT_PX,
                              frame_every=VIDEO_FRAME_EVERY)
@@ -143,6 +153,7 @@ def run_demo(args: argparse.Namespace) -> int:
         "env_id": ENV_ID,
         "algo": ALGO,
         "train_seed": args.seed,
+        "bc_expert_episodes": args.demos,
         "train_timesteps": manifest.get("timesteps_done"),
         "train_wall_clock_s": manifest.get("wall_clock_s"),
         "eval_seeds": reports[0]["episode_seeds"],
@@ -154,8 +165,9 @@ def run_demo(args: argparse.Namespace) -> int:
     }
     atomic_write_json(out / "summary.json", summary)
     timing = ", ".join(f"{name} {seconds:.0f} s" for name, seconds in stages.items())
-    text = (f"# RehabBot demo: SAC on {ENV_ID}\n\n"
-            f"SAC trained {summary['train_timesteps']} steps (seed {args.seed}); evaluated on "
+    text = (f"# RehabBot demo: PPO (behaviour-cloned start) on {ENV_ID}\n\n"
+            f"PPO cloned {args.demos} expert episodes, then trained "
+            f"{summary['train_timesteps']} steps (seed {args.seed}); evaluated on "
             f"{args.episodes} episodes with seeds {EVAL_SEED}..{EVAL_SEED + args.episodes - 1}"
             f" (mean ± std over episodes).\n\n{table}\n\nWall clock: {timing}.\n\n"
             "Reproduce each step:\n\n"
