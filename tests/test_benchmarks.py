@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import re
 
+import pytest
+
 from benchmarks import expert_agreement, step_throughput
 
 ENV = "rehabbot/rehab-reach-v0"
@@ -29,6 +31,7 @@ def test_step_throughput_refuses_unknown_ids(capsys) -> None:
     assert "unknown id(s) rehabbot/rehab-elbow-v9" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_expert_agreement_tells_a_trained_agent_from_one_that_pushes_the_wrong_way() -> None:
     # The shipped PPO agent finishes reach-v1 episodes: it moves the way the expert does.
     rows = expert_agreement.agreement("zoo:rehab-reach-v1/ppo", episodes=1, seed=1000,
