@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from rehabbot.sim.robots import ur5e as ur
+from rehabbot.tasks.exercises import Exercise
 from rehabbot.tasks.safety import (
     BLOWUP_FORCE_N,
     BLOWUP_SPEED_RAD_S,
@@ -135,12 +136,20 @@ def test_profiles_that_cannot_do_the_exercise_are_refused_when_the_env_is_built(
     with pytest.raises(ValueError, match="foot_l touches forearm_wrist1"):
         gym.make("rehabbot/rehab-knee-v0", side="left",
                  profile={"height_m": 1.5, "mass_kg": 60.0, "sex": "male"})
-    with pytest.raises(ValueError, match="outside its setpoint bounds"):
-        gym.make("rehabbot/rehab-reach-l-v0",
-                 profile={"height_m": 1.35, "mass_kg": 30.0, "sex": "male"})
-    with pytest.raises(ValueError, match="cannot reach the patient's cuff"):
-        gym.make("rehabbot/rehab-reach-v0",
-                 profile={"height_m": 1.2, "mass_kg": 30.0, "sex": "male"})
+    # An exercise beyond the paper's ranges: its target needs a robot angle outside the
+    # setpoint bounds.
+    beyond = Exercise("shoulder_flexion_150", "shoulder flexion to 150 deg",
+                      ({"shoulder_flexion": 150.0},))
+    with pytest.raises(ValueError, match=r"target 0 of exercise 'shoulder_flexion_150' needs "
+                                         r"robot joint 2 at .* outside its setpoint bounds"):
+        gym.make("rehabbot/rehab-reach-v0", exercises=(beyond,))
+    # Short patients' arms were refused until the robot's stand stopped moving with the
+    # patient's height (0.2.0: "outside its setpoint bounds" at 1.35 m on the left arm,
+    # "cannot reach the patient's cuff" at 1.20 m); every arm profile builds now.
+    for env_id in ("rehabbot/rehab-reach-l-v0", "rehabbot/rehab-reach-v0"):
+        env = gym.make(env_id, profile={"height_m": 1.2, "mass_kg": 30.0, "sex": "male"})
+        _, info = env.reset(seed=0)
+        assert info["interaction_force_n"] < env.unwrapped.safety.force_limit_n
 
 
 def test_driving_the_robot_into_the_patient_or_furniture_is_unintended_contact():
