@@ -22,8 +22,8 @@ Steps, each with its output under ``OUT``:
 5. ``OUT/summary.md`` and ``OUT/summary.json``: the comparison table, the wall-clock time of
    every step, and the commands that reproduce each step; the table is printed at the end.
 
-The default budget (100 000 steps) trains in about 5 minutes on one CPU core and ends with an
-agent that finishes most episodes (the README's "Demo" section has the measured table). Before
+The default budget (100 000 steps) trains in about 6 minutes on one CPU core and ends with an
+agent that finishes most episodes (the README's Quickstart has the measured table). Before
 0.3.0 the demo trained SAC on ``rehab-reach-v0``, whose reward traps agents short of the
 targets (README, "Results"): it ended with a 0 % agent.
 """
