@@ -7,7 +7,7 @@ For every step of each episode (deterministic actions, the env and its kwargs fr
 manifest) it compares the policy's action ``a`` with the action ``e`` the scripted expert would
 take in the same state: the cosine ``a·e / (|a| |e|)`` (1: same direction, -1: opposite) and
 ``|a| / |e|``. It prints, per episode, the exercise, the mean cosine, the share of steps with a
-cosine below 0, the path still to travel at the end, and how the episode ended. A policy that
+cosine below 0, the median size ratio, the targets reached, and how the episode ended. A policy that
 pushes every episode the same way whatever the target shows mean cosines near 0 or below.
 """
 
