@@ -109,6 +109,14 @@ def test_the_shipped_sweep_files_load() -> None:
     steps = {t.algo: t.total_timesteps for t in trials}
     assert steps == {"sac": 200_000, "td3": 200_000, "ppo": 1_000_000}
     assert {t.hyperparams["source"] for t in trials} == {"sac", "td3", "ppo"}
+    assert {t.algo: t.demos for t in trials} == {"sac": 20, "td3": 20, "ppo": None}
+    # The grids behind the README's -v1 tables: PPO with a cloned start, and SAC on SBX.
+    ppo = load_sweep_config(ROOT / "sweeps" / "ppo-bc-v1.yaml").trials()
+    assert len(ppo) == 12 and {(t.algo, t.demos, t.bc) for t in ppo} == {("ppo", 40, True)}
+    sac = load_sweep_config(ROOT / "sweeps" / "sac-v1.yaml").trials()
+    assert len(sac) == 12 and {(t.algo, t.backend, t.demos, t.total_timesteps) for t in sac} \
+        == {("sac", "sbx", 20, 100_000)}
+    assert {t.seed for t in sac} == {0, 1, 2}
 
 
 @pytest.mark.parametrize(("change", "message"), [

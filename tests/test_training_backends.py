@@ -106,18 +106,18 @@ def test_sbx_trains_the_same_run_folder_as_sb3_and_it_evaluates(sbx, tmp_path: P
             "checkpoints/rl_model_replay_buffer_300_steps.npz"} <= _files(run_dirs["sbx"])
     err = capsys.readouterr().err
     assert "note: sbx backend: policy 'rehabbot.rl.features.TrackingErrorSACPolicy' -> " \
-           "MlpPolicy" in err
+           "rehabbot.rl.features_jax.TrackingErrorSBXSACPolicy" in err
 
     manifest = _manifest(run_dirs["sbx"])
     assert manifest["backend"] == "sbx" and manifest["status"] == "finished"
     assert manifest["backend_version"] == backends.backend_version("sbx")
     assert manifest["versions"]["sbx"] and manifest["versions"]["jax"]
     hp_block = manifest["hyperparameters"]
-    assert hp_block["backend"] == "sbx" and hp_block["policy"] == "MlpPolicy"
-    assert {c["key"] for c in hp_block["backend_changes"]} == \
-        {"policy", "policy_kwargs.features_extractor_kwargs"}
+    assert hp_block["backend"] == "sbx"
+    assert hp_block["policy"] == "rehabbot.rl.features_jax.TrackingErrorSBXSACPolicy"
+    assert [c["key"] for c in hp_block["backend_changes"]] == ["policy"]
     assert hp_block["kwargs"]["train_freq"] == 4 and hp_block["kwargs"]["policy_kwargs"] == \
-        {"net_arch": [16, 16]}
+        {"fine_scale_rad": 0.05, "net_arch": [16, 16]}
     assert _manifest(run_dirs["sb3"])["backend"] == "sb3"
     assert _manifest(run_dirs["sb3"])["hyperparameters"]["backend_changes"] == []
 
@@ -202,6 +202,15 @@ def test_detect_model_knows_every_sbx_algorithm(sbx, tmp_path: Path) -> None:
                                         **extra)
         model.save(tmp_path / algo)
         assert detect_model(tmp_path / f"{algo}.zip") == (algo, "sbx"), algo
+    # RehabBot's own SBX policies (rehabbot.rl.features_jax) name their algorithm.
+    from rehabbot.rl.features_jax import SBX_TRACKING_ERROR_POLICIES
+
+    for policy in SBX_TRACKING_ERROR_POLICIES.values():
+        model = algo_class(policy.ALGO, "sbx")(policy, gym.make("rehabbot/rehab-reach-v1"),
+                                               policy_kwargs={"net_arch": [8, 8]},
+                                               buffer_size=10)
+        model.save(tmp_path / f"features-{policy.ALGO}")
+        assert detect_model(tmp_path / f"features-{policy.ALGO}.zip") == (policy.ALGO, "sbx")
 
 
 # --------------------------------------------------------------------------- settings
@@ -209,13 +218,28 @@ def test_detect_model_knows_every_sbx_algorithm(sbx, tmp_path: Path) -> None:
 
 def test_settings_for_sbx_list_what_changed(sbx) -> None:
     hp = load_hyperparameters("sac", FULL_ID, "sac", "sbx")
-    assert hp.backend == "sbx" and hp.policy == "MlpPolicy"
-    assert hp.kwargs == {"n_steps": 10, "policy_kwargs": {"net_arch": [64, 64]}}
+    assert hp.backend == "sbx" and hp.policy.__name__ == "TrackingErrorSBXSACPolicy"
+    assert hp.kwargs == {"n_steps": 10, "policy_kwargs": {"fine_scale_rad": 0.05,
+                                                          "net_arch": [64, 64]}}
     changes = {c["key"]: c for c in hp.to_manifest()["backend_changes"]}
     assert changes["policy"]["given"] == "rehabbot.rl.features.TrackingErrorSACPolicy"
-    assert changes["policy"]["used"] == "MlpPolicy"
-    assert changes["policy_kwargs.features_extractor_kwargs"]["used"] is None
+    assert changes["policy"]["used"] == "rehabbot.rl.features_jax.TrackingErrorSBXSACPolicy"
+    assert set(changes) == {"policy"}
     assert load_hyperparameters("sac", FULL_ID, "sac").backend_changes == []
+    # PPO's tracking-error policy has no JAX counterpart: SBX's MlpPolicy, extractor dropped.
+    ppo = load_hyperparameters("ppo", FULL_ID, "ppo", "sbx")
+    assert ppo.policy == "MlpPolicy"
+    assert {c["key"]: c["used"] for c in ppo.backend_changes}["policy"] == "MlpPolicy"
+    # Another extractor class with the JAX tracking-error policy is dropped, by name.
+    other = hyperparameters_from_mapping(
+        {"policy": "rehabbot.rl.features.TrackingErrorSACPolicy",
+         "policy_kwargs": {"features_extractor_class": "my.Extractor",
+                           "features_extractor_kwargs": {"fine_scale_rad": 0.1, "bogus": 1}}},
+        "sac", backend="sbx")
+    assert other.kwargs["policy_kwargs"] == {"fine_scale_rad": 0.1}
+    dropped = {c["key"] for c in other.backend_changes if c["used"] is None}
+    assert dropped == {"policy_kwargs.features_extractor_class",
+                       "policy_kwargs.features_extractor_kwargs.bogus"}
 
     import flax.linen
     import optax

@@ -30,6 +30,16 @@ DISTRIBUTIONS = {"stable_baselines3": "stable-baselines3", "sb3_contrib": "sb3-c
 # Top-level package of a saved model's policy class -> backend.
 POLICY_PACKAGE_BACKENDS = {"stable_baselines3": "sb3", "sb3_contrib": "sb3", "rehabbot": "sb3",
                            "sbx": "sbx"}
+# RehabBot's own policy modules for SBX (the rest of rehabbot's are PyTorch policies).
+SBX_POLICY_MODULES = ("rehabbot.rl.features_jax",)
+
+
+def policy_module_backend(module: str) -> str | None:
+    """The backend whose policy classes live in ``module`` (None: not a known one)."""
+    if module in SBX_POLICY_MODULES:
+        return "sbx"
+    return POLICY_PACKAGE_BACKENDS.get(module.split(".")[0])
+
 # Each SB3 algorithm saves its own constructor arguments: they tell the three apart when the
 # policy class is RehabBot's own (rehabbot.rl.features), whose module names no algorithm.
 SIGNATURE_KEYS = {"td3": ("policy_delay", "target_policy_noise"),
@@ -113,9 +123,11 @@ def detect_model(path: Path) -> tuple[str, str]:
     policy_class = data.get("policy_class", {})
     module = policy_class.get("__module__", "") if isinstance(policy_class, dict) else ""
     parts = str(module).split(".")
-    backend = POLICY_PACKAGE_BACKENDS.get(parts[0])
+    backend = policy_module_backend(str(module))
     if backend is not None and len(parts) > 1 and parts[1] in ALGORITHMS:
         return parts[1], backend
+    if module in SBX_POLICY_MODULES and policy_class.get("ALGO") in ALGORITHMS:
+        return policy_class["ALGO"], backend  # rehabbot.rl.features_jax names its algorithm
     if backend is not None:
         for algo, keys in SIGNATURE_KEYS.items():
             if all(key in data for key in keys):

@@ -350,8 +350,10 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
         elif key == "n_envs":
             hp.n_envs = _as_count(raw, key, where)
         elif key == "policy" and sbx and sbx_settings.is_torch_policy(raw):
-            hp.policy = DEFAULT_POLICY
-            hp.backend_changes.append(sbx_settings.policy_change(raw))
+            counterpart = sbx_settings.jax_counterpart(raw, algo)
+            hp.policy = DEFAULT_POLICY if counterpart is None else counterpart
+            hp.backend_changes.append(sbx_settings.policy_change(raw) if counterpart is None
+                                      else sbx_settings.counterpart_change(raw, counterpart))
         elif key == "policy":
             hp.policy = _parse_policy(raw, cls, where,
                                       SBX_POLICY_PACKAGES if sbx else POLICY_PACKAGES)

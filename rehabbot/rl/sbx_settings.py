@@ -7,9 +7,13 @@ rules, and the run's manifest lists each change (``hyperparameters.backend_chang
 what was given, what is used instead or ``null`` when dropped, and why):
 
 =================================== =======================================================
-``policy``: a PyTorch policy class  SBX's ``MlpPolicy`` (e.g. ``TrackingErrorSACPolicy``:
-(``rehabbot.rl.features.*``, SB3's) its TrackingErrorFeatures extractor is PyTorch; the SBX
-                                    network reads the observation as it is)
+``policy``: ``TrackingErrorSACPolicy`` its JAX counterpart in :mod:`rehabbot.rl.features_jax`
+or ``TrackingErrorTD3Policy``       (the same features, computed inside SBX's actor and
+(``rehabbot.rl.features``)          critics); ``features_extractor_kwargs`` become its own
+                                    kwargs
+``policy``: any other PyTorch       SBX's ``MlpPolicy`` (e.g. ``TrackingErrorActorCritic``
+policy class (``rehabbot.rl.``,     ``Policy`` for PPO: the SBX network reads the
+SB3's)                              observation as it is)
 ``policy_kwargs``:
   ``features_extractor_class/_kwargs`` dropped (SBX's MLP policies have no extractor)
   ``activation_fn`` (``nn.ReLU``, …) the Flax function of the same name (``flax.linen.relu``)
@@ -82,6 +86,28 @@ def policy_change(raw: Any) -> dict[str, Any]:
                   "(without a features extractor: the network reads the observation as it is)")
 
 
+def _dotted(raw: Any) -> str:
+    if isinstance(raw, type):
+        return f"{raw.__module__}.{raw.__qualname__}"
+    return str(raw).strip()
+
+
+def jax_counterpart(raw: Any, algo: str) -> type | None:
+    """SBX's policy with the same network as the PyTorch ``policy`` ``raw`` (the tracking-error
+    policies of :mod:`rehabbot.rl.features` for SAC and TD3), or None."""
+    from rehabbot.rl.features_jax import SBX_TRACKING_ERROR_POLICIES
+
+    found = SBX_TRACKING_ERROR_POLICIES.get(_dotted(raw))
+    return found if found is not None and algo == found.ALGO else None
+
+
+def counterpart_change(raw: Any, used: type) -> dict[str, Any]:
+    """The change record for a PyTorch ``policy`` replaced by its JAX counterpart."""
+    return change("policy", raw, _dotted(used),
+                  "the same network on JAX: SBX's MlpPolicy with TrackingErrorFeatures computed "
+                  "inside the actor and the critics (rehabbot.rl.features_jax)")
+
+
 def dropped_key_reason(key: str, algo: str) -> str | None:
     """Why an SB3 constructor argument that SBX's class lacks is dropped; None if ``key`` is
     not an argument of the SB3 class either (then it is simply unknown)."""
@@ -143,16 +169,53 @@ def _optimizer_kwargs(given: dict[str, Any], optimizer: Any,
     return out
 
 
+def _init_params(cls: type) -> dict[str, inspect.Parameter]:
+    """The keyword arguments ``cls`` takes, through the classes whose ``__init__`` passes
+    ``**kwargs`` on to its base."""
+    params: dict[str, inspect.Parameter] = {}
+    for klass in cls.__mro__:
+        if "__init__" not in vars(klass):
+            continue
+        own = inspect.signature(klass.__init__).parameters
+        params.update({k: v for k, v in own.items() if v.kind not in (v.VAR_POSITIONAL,
+                                                                          v.VAR_KEYWORD)})
+        if not any(v.kind is v.VAR_KEYWORD for v in own.values()):
+            break
+    return params
+
+
+def _feature_kwargs(key: str, value: Any, policy_class: type,
+                    changes: list[dict[str, Any]]) -> dict[str, Any]:
+    """``features_extractor_class/_kwargs`` for a policy that computes TrackingErrorFeatures
+    itself: the class must be TrackingErrorFeatures, the kwargs become the policy's own."""
+    where = f"policy_kwargs.{key}"
+    if key == "features_extractor_class":
+        if _dotted(value).rsplit(".", 1)[-1] != "TrackingErrorFeatures":
+            changes.append(change(where, value, None, f"{policy_class.__name__} computes "
+                                  "TrackingErrorFeatures itself; no other extractor runs on JAX"))
+        return {}
+    kept = {}
+    for name, item in (value or {}).items():
+        if name in policy_class.FEATURE_KWARGS:
+            kept[name] = item
+        else:
+            changes.append(change(f"{where}.{name}", item, None, "not an argument of "
+                                  "TrackingErrorFeatures in JAX"))
+    return kept
+
+
 def translate_policy_kwargs(kwargs: dict[str, Any], policy_class: type,
                             changes: list[dict[str, Any]]) -> dict[str, Any]:
     """``policy_kwargs`` parsed for SB3 (torch classes resolved) as SBX's ``policy_class``
     takes them; appends a record to ``changes`` for each key translated or dropped."""
-    params = inspect.signature(policy_class.__init__).parameters
+    params = _init_params(policy_class)
     out: dict[str, Any] = {}
     optimizer = None
     for key, value in kwargs.items():
         where = f"policy_kwargs.{key}"
-        if key in EXTRACTOR_KEYS:
+        if key in EXTRACTOR_KEYS and hasattr(policy_class, "FEATURE_KWARGS"):
+            out.update(_feature_kwargs(key, value, policy_class, changes))
+        elif key in EXTRACTOR_KEYS:
             changes.append(change(where, value, None, "SBX's MLP policies have no features "
                                   "extractor: the network reads the observation as it is"))
         elif key == "activation_fn" and _is_torch(value):

@@ -39,7 +39,7 @@ import numpy as np
 
 from rehabbot.common.errors import DataError, UsageError
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import read_model_data
+from rehabbot.rl.algorithms import policy_module_backend, read_model_data
 
 Op = tuple[str, dict[str, Any]]
 # (backend, algo) -> (module, class)
@@ -210,6 +210,14 @@ def sbx_actor_ops(model: Any) -> list[Op]:
     activation = _jax_activation(policy.activation_fn)
     n_hidden = len(actor.net_arch)
     ops: list[Op] = []
+    if kind.startswith("rehabbot.rl.features_jax."):  # TrackingErrorFeatures, then the MLP
+        fine = actor.fine_scale_rad
+        ops.append(("tracking_error", {"center": _f32(actor.center),
+                                       "half_range": _f32(actor.half_range),
+                                       "fine_scale_rad": np.nan if fine is None else fine}))
+        kind = {"TrackingErrorActor": "sbx.common.policies.SquashedGaussianActor",
+                "TrackingErrorTD3Actor": "sbx.td3.policies.Actor"}.get(type(actor).__name__,
+                                                                         kind)
     if kind in ("sbx.common.policies.SquashedGaussianActor",  # SAC, TQC: tanh(mean)
                 "sbx.td3.policies.Actor"):  # TD3: tanh of the output layer
         for k in range(n_hidden):
@@ -255,7 +263,7 @@ def _zip_policy_module(path: Path) -> str:
 def load_model(path: Path, algo: str, backend: str | None = None) -> Any:
     """A saved SB3 or SBX model (the backend from the zip's policy class unless given)."""
     if backend is None:
-        backend = "sbx" if _zip_policy_module(path).split(".")[0] == "sbx" else "sb3"
+        backend = "sbx" if policy_module_backend(_zip_policy_module(path)) == "sbx" else "sb3"
     key = (backend, algo)
     if key not in MODEL_CLASSES:
         raise UsageError(f"the zoo exports {', '.join(EXPORT_ALGOS)} (sb3 or sbx), not "
