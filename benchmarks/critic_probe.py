@@ -70,17 +70,17 @@ def probe(model_path: str, episodes: int, seed: int) -> list[dict]:
     rows = []
     for k in range(episodes):
         obs, info = env.reset(seed=seed + k)
-        states, targets = [], []
+        states, targets, actions = [], [], []
         while True:
             states.append(obs)
             targets.append(int(info["target_index"]))
             action, _ = expert.predict(obs, deterministic=True)
+            actions.append(action)
             obs, _r, terminated, truncated, info = env.step(action)
             if terminated or truncated:
                 break
         obs_batch = np.asarray(states, dtype=np.float32)
-        expert_act = np.stack([model.policy.scale_action(expert.predict(o)[0])
-                               for o in obs_batch]).astype(np.float32)
+        expert_act = np.stack([model.policy.scale_action(a) for a in actions]).astype(np.float32)
         policy_act = np.stack([model.policy.scale_action(model.predict(o, deterministic=True)[0])
                                for o in obs_batch]).astype(np.float32)
         gap = q(obs_batch, expert_act) - q(obs_batch, -expert_act)
