@@ -1,7 +1,7 @@
 """Tracking-error features on the SBX backend (``rehabbot.rl.features_jax``): the JAX features
-equal the NumPy and PyTorch ones, SBX's SAC and TD3 networks read them (their first layer has
-38 inputs, not 23), the shipped ``sac``/``td3`` settings build them on SBX, a saved model
-loads with them, and the zoo exports them."""
+equal the NumPy and PyTorch ones, SBX's SAC, TD3 and PPO networks read them (their first layer
+has 38 inputs, or 32 without the fine errors, not 23), the shipped ``sac``/``td3``/``ppo``
+settings build them on SBX, a saved model loads with them, and the zoo exports them."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from rehabbot.rl.hyperparams import load_hyperparameters
 
 pytest.importorskip("sbx")
 from rehabbot.rl.features_jax import (
+    TrackingErrorSBXPPOPolicy,
     TrackingErrorSBXSACPolicy,
     TrackingErrorSBXTD3Policy,
     tracking_error_features_jax,
@@ -64,28 +65,46 @@ def _first_kernel_inputs(params) -> int:
     return int(tree["Dense_0"]["kernel"].shape[-2])
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("algo", ["sac", "td3"])
-def test_shipped_settings_build_the_feature_network_on_sbx(algo, env, tmp_path) -> None:
+SHIPPED = {"sac": (TrackingErrorSBXSACPolicy, {"fine_scale_rad": 0.05, "net_arch": [64, 64]},
+                   FEATURES),
+           "td3": (TrackingErrorSBXTD3Policy, {"fine_scale_rad": 0.05, "net_arch": [64, 64]},
+                   FEATURES),
+           "ppo": (TrackingErrorSBXPPOPolicy, {}, FEATURES - 6)}  # ppo.yml: no fine errors
+
+
+def _small_model(algo: str, policy, env, policy_kwargs):
     import sbx
 
+    if algo == "ppo":
+        return sbx.PPO(policy, env, n_steps=64, batch_size=32, n_epochs=2, seed=0,
+                       policy_kwargs=policy_kwargs)
+    cls = {"sac": sbx.SAC, "td3": sbx.TD3}[algo]
+    return cls(policy, env, learning_starts=50, batch_size=32, buffer_size=500, seed=0,
+               policy_kwargs=policy_kwargs)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
+def test_shipped_settings_build_the_feature_network_on_sbx(algo, env, tmp_path) -> None:
     hp = load_hyperparameters(algo, FULL_ID, algo, "sbx")
-    expected_class = TrackingErrorSBXSACPolicy if algo == "sac" else TrackingErrorSBXTD3Policy
+    expected_class, expected_kwargs, n_features = SHIPPED[algo]
     assert hp.policy is expected_class
-    assert hp.kwargs["policy_kwargs"] == {"fine_scale_rad": 0.05, "net_arch": [64, 64]}
+    assert (hp.kwargs.get("policy_kwargs") or {}) == expected_kwargs
     assert [c["key"] for c in hp.backend_changes] == ["policy"]
     assert hp.backend_changes[0]["used"] == f"rehabbot.rl.features_jax.{expected_class.__name__}"
 
-    cls = {"sac": sbx.SAC, "td3": sbx.TD3}[algo]
-    model = cls(hp.policy, env, learning_starts=50, batch_size=32, buffer_size=500, seed=0,
-                policy_kwargs=hp.kwargs["policy_kwargs"])
-    model.learn(120)
-    # The actor and both critics read the 38 features (the critics: 38 + the 6 actions).
-    assert _first_kernel_inputs(model.policy.actor_state.params) == FEATURES
-    assert _first_kernel_inputs(model.policy.qf_state.params) == FEATURES + 6
+    model = _small_model(algo, hp.policy, env, hp.kwargs.get("policy_kwargs"))
+    model.learn(130)
+    # The actor and the critics read the features (Q-critics: the features + the 6 actions;
+    # PPO's value network: the features).
+    assert _first_kernel_inputs(model.policy.actor_state.params) == n_features
+    if algo == "ppo":
+        assert _first_kernel_inputs(model.policy.vf_state.params) == n_features
+    else:
+        assert _first_kernel_inputs(model.policy.qf_state.params) == n_features + 6
     # Saved and loaded, the model acts the same.
     model.save(tmp_path / "model.zip")
-    loaded = cls.load(tmp_path / "model.zip")
+    loaded = type(model).load(tmp_path / "model.zip")
     assert type(loaded.policy) is expected_class
     obs = env.reset(seed=3)[0]
     assert np.array_equal(model.predict(obs, deterministic=True)[0],
@@ -118,17 +137,13 @@ def test_non_rehabbot_observation_and_bad_scale_are_refused() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("algo", ["sac", "td3"])
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
 def test_zoo_exports_the_feature_actor(algo, env, observations, tmp_path) -> None:
-    import sbx
-
     from rehabbot.rl.zoo import export_policy, load_file
 
-    cls, policy = {"sac": (sbx.SAC, TrackingErrorSBXSACPolicy),
-                   "td3": (sbx.TD3, TrackingErrorSBXTD3Policy)}[algo]
-    model = cls(policy, env, learning_starts=50, batch_size=32, buffer_size=500, seed=0,
-                policy_kwargs={"fine_scale_rad": 0.05, "net_arch": [32, 32]})
-    model.learn(120)
+    policy = SHIPPED[algo][0]
+    model = _small_model(algo, policy, env, {"fine_scale_rad": 0.05, "net_arch": [32, 32]})
+    model.learn(130)
     export_policy(model, "rehab-reach-v1", algo, tmp_path / f"{algo}.npz", episodes=0)
     exported = load_file(tmp_path / f"{algo}.npz")
     assert exported.ops[0] == "tracking_error"

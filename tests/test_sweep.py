@@ -110,13 +110,23 @@ def test_the_shipped_sweep_files_load() -> None:
     assert steps == {"sac": 200_000, "td3": 200_000, "ppo": 1_000_000}
     assert {t.hyperparams["source"] for t in trials} == {"sac", "td3", "ppo"}
     assert {t.algo: t.demos for t in trials} == {"sac": 20, "td3": 20, "ppo": None}
-    # The grids behind the README's -v1 tables: PPO with a cloned start, and SAC on SBX.
+    # The grids behind the README's -v1 tables: PPO with a cloned start, SAC and TD3 on SBX.
     ppo = load_sweep_config(ROOT / "sweeps" / "ppo-bc-v1.yaml").trials()
     assert len(ppo) == 12 and {(t.algo, t.demos, t.bc) for t in ppo} == {("ppo", 40, True)}
+    assert {t.hyperparams["source"] for t in ppo} == {"ablations/ppo-raw-actions"}
+    ppo_v1 = load_sweep_config(ROOT / "sweeps" / "ppo-v1.yaml").trials()
+    assert len(ppo_v1) == 12 and {(t.algo, t.backend, t.demos, t.bc, t.total_timesteps)
+                                  for t in ppo_v1} == {("ppo", "sbx", 40, True, 300_000)}
+    assert {t.hyperparams["given"]["policy"] for t in ppo_v1} == \
+        {"rehabbot.rl.features.TrackingErrorNormalizedActionPolicy"}
     sac = load_sweep_config(ROOT / "sweeps" / "sac-v1.yaml").trials()
     assert len(sac) == 12 and {(t.algo, t.backend, t.demos, t.total_timesteps) for t in sac} \
         == {("sac", "sbx", 20, 100_000)}
     assert {t.seed for t in sac} == {0, 1, 2}
+    td3 = load_sweep_config(ROOT / "sweeps" / "td3-v1.yaml").trials()
+    assert len(td3) == 12 and {(t.algo, t.backend, t.demos, t.total_timesteps) for t in td3} \
+        == {("td3", "sbx", 20, 100_000)}
+    assert {t.hyperparams["source"] for t in td3} == {"td3"}
 
 
 @pytest.mark.parametrize(("change", "message"), [

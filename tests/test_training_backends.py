@@ -226,10 +226,14 @@ def test_settings_for_sbx_list_what_changed(sbx) -> None:
     assert changes["policy"]["used"] == "rehabbot.rl.features_jax.TrackingErrorSBXSACPolicy"
     assert set(changes) == {"policy"}
     assert load_hyperparameters("sac", FULL_ID, "sac").backend_changes == []
-    # PPO's tracking-error policy has no JAX counterpart: SBX's MlpPolicy, extractor dropped.
+    # PPO's tracking-error policy has its JAX counterpart too.
     ppo = load_hyperparameters("ppo", FULL_ID, "ppo", "sbx")
-    assert ppo.policy == "MlpPolicy"
-    assert {c["key"]: c["used"] for c in ppo.backend_changes}["policy"] == "MlpPolicy"
+    assert ppo.policy.__name__ == "TrackingErrorSBXPPOPolicy"
+    # A PyTorch policy class without one becomes SBX's MlpPolicy, and the change is listed.
+    plain = hyperparameters_from_mapping(
+        {"policy": "stable_baselines3.common.policies.ActorCriticPolicy"}, "ppo", backend="sbx")
+    assert plain.policy == "MlpPolicy"
+    assert {c["key"]: c["used"] for c in plain.backend_changes}["policy"] == "MlpPolicy"
     # Another extractor class with the JAX tracking-error policy is dropped, by name.
     other = hyperparameters_from_mapping(
         {"policy": "rehabbot.rl.features.TrackingErrorSACPolicy",
@@ -430,6 +434,20 @@ def test_bc_warm_starts_sbx_ppo_close_to_the_expert(sbx, tmp_path: Path) -> None
     assert bc["loss_after"] < bc["loss_before"] / 5
     seen, unseen = _clone_error(model_path)
     assert seen <= bc["loss_after"] + 1e-6  # predict clips the mean to the action box
+    assert seen < 0.15 and unseen < 0.25
+
+
+@pytest.mark.slow
+def test_bc_clones_the_normalized_action_policy_on_sbx(sbx, tmp_path: Path) -> None:
+    """In units of the bound, SBX's default (not orthogonal) initialisation starts with a
+    clone error of order one (in the action's own units: hundreds), and cloning gets close."""
+    manifest, model_path = _bc_run(tmp_path, "sbx", {
+        **PPO_FROZEN, "policy": "rehabbot.rl.features.TrackingErrorNormalizedActionPolicy"})
+    bc = manifest["bc"]
+    assert manifest["hyperparameters"]["policy"] == \
+        "rehabbot.rl.features_jax.TrackingErrorSBXNormalizedPPOPolicy"
+    assert bc["loss_before"] < 5 and bc["loss_after"] < bc["loss_before"] / 5
+    seen, unseen = _clone_error(model_path)
     assert seen < 0.15 and unseen < 0.25
 
 

@@ -35,7 +35,11 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.sac.policies import SACPolicy
 from stable_baselines3.td3.policies import TD3Policy
 
-from rehabbot.rl.features_numpy import JOINT_ERROR_SCALE_RAD, TOOL_ERROR_SCALE_M
+from rehabbot.rl.features_numpy import (
+    JOINT_ERROR_SCALE_RAD,
+    TOOL_ERROR_SCALE_M,
+    action_bound_units,
+)
 from rehabbot.tasks.observation import OBS_SIZE, P_STAR, THETA, THETA_STAR, P
 
 ERROR_FEATURES = (THETA_STAR.stop - THETA_STAR.start) + (P_STAR.stop - P_STAR.start)
@@ -107,6 +111,40 @@ class TrackingErrorActorCriticPolicy(ActorCriticPolicy):
                  features_extractor_class: type[BaseFeaturesExtractor] = TrackingErrorFeatures,
                  **kwargs: Any) -> None:
         super().__init__(*args, features_extractor_class=features_extractor_class, **kwargs)
+
+
+class TrackingErrorNormalizedActionPolicy(TrackingErrorActorCriticPolicy):
+    """:class:`TrackingErrorActorCriticPolicy` whose Gaussian lives in units of the action bound:
+    the network's output ``u`` and ``log_std`` give the action ``center + half * u`` with
+    standard deviation ``half * exp(log_std)``, where ``center`` and ``half`` are the middle and
+    half-width of the action box.
+
+    Why: the RehabBot action is a setpoint step of at most ``pi/400`` rad, and SB3's PPO draws
+    its Gaussian in the action's own units. With ``log_std_init=0`` its standard deviation is
+    127 times the bound (``-2``: 17 times), so nearly every sampled action is clipped to a
+    corner of the box whatever the mean: exploration is bang-bang noise, which on the leg ids
+    drives the cuff into its force limit, and one Adam step on the output layer moves the mean
+    by more than the whole bound. Here the noise is a fraction of the bound and the network's
+    output is of order one, as for an env whose action box is ``[-1, 1]`` (Stable-Baselines3's
+    advice), while the env keeps its action space. gSDE is not supported.
+    """
+
+    ACTIONS_IN_BOUND_UNITS = True
+
+    def __init__(self, observation_space: gym.spaces.Space, action_space: gym.spaces.Space,
+                 *args: Any, **kwargs: Any) -> None:
+        center, half = action_bound_units(action_space)
+        if kwargs.get("use_sde"):
+            raise ValueError(f"{type(self).__name__} does not support gSDE (use_sde=True)")
+        super().__init__(observation_space, action_space, *args, **kwargs)
+        self.register_buffer("action_center", torch.as_tensor(center))
+        self.register_buffer("action_half", torch.as_tensor(half))
+
+    def _get_action_dist_from_latent(self, latent_pi: torch.Tensor) -> Any:
+        mean_units = self.action_net(latent_pi)
+        return self.action_dist.proba_distribution(
+            self.action_center + self.action_half * mean_units,
+            self.log_std + torch.log(self.action_half))
 
 
 # The policy of each algorithm in the shipped settings files.

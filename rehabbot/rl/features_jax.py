@@ -26,6 +26,10 @@ Classes:
   and both critics (``policy_kwargs``: ``fine_scale_rad``, ``scale_to_bounds`` as
   ``features_extractor_kwargs`` of the PyTorch policy).
 * :class:`TrackingErrorSBXTD3Policy`: the same for SBX's TD3.
+* :class:`TrackingErrorSBXPPOPolicy`: the same for SBX's PPO (its Gaussian actor and its value
+  network), the counterpart of ``TrackingErrorActorCriticPolicy``;
+  :class:`TrackingErrorSBXNormalizedPPOPolicy` also draws the Gaussian in units of the action
+  bound (``TrackingErrorNormalizedActionPolicy``).
 
 This module imports JAX, Flax and SBX: import it only when the SBX backend is used.
 """
@@ -37,7 +41,11 @@ from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
+import tensorflow_probability.substrates.jax as tfp
 from sbx.common.policies import SquashedGaussianActor, VectorCritic
+from sbx.ppo.policies import Actor as PPOActor
+from sbx.ppo.policies import Critic as PPOCritic
+from sbx.ppo.policies import PPOPolicy
 from sbx.sac.policies import SACPolicy
 from sbx.td3.policies import Actor as TD3Actor
 from sbx.td3.policies import TD3Policy
@@ -45,6 +53,7 @@ from sbx.td3.policies import TD3Policy
 from rehabbot.rl.features_numpy import (
     JOINT_ERROR_SCALE_RAD,
     TOOL_ERROR_SCALE_M,
+    action_bound_units,
     bounds_scaling,
 )
 from rehabbot.tasks.observation import OBS_SIZE, P_STAR, THETA, THETA_STAR, P
@@ -105,6 +114,49 @@ class TrackingErrorVectorCritic(VectorCritic):
         features = tracking_error_features_jax(obs, self.center, self.half_range,
                                                self.fine_scale_rad)
         return VectorCritic.__call__(self, features, action)
+
+
+class TrackingErrorPPOActor(PPOActor):
+    """SBX's PPO actor (a diagonal Gaussian) reading the tracking-error features."""
+
+    center: tuple[float, ...] = ()
+    half_range: tuple[float, ...] = ()
+    fine_scale_rad: float | None = None
+
+    def __call__(self, x: jnp.ndarray) -> Any:
+        features = tracking_error_features_jax(x, self.center, self.half_range,
+                                               self.fine_scale_rad)
+        return PPOActor.__call__(self, features)
+
+
+class TrackingErrorPPOCritic(PPOCritic):
+    """SBX's PPO value network reading the tracking-error features."""
+
+    center: tuple[float, ...] = ()
+    half_range: tuple[float, ...] = ()
+    fine_scale_rad: float | None = None
+
+    def __call__(self, x: jnp.ndarray) -> jnp.ndarray:
+        features = tracking_error_features_jax(x, self.center, self.half_range,
+                                               self.fine_scale_rad)
+        return PPOCritic.__call__(self, features)
+
+
+class TrackingErrorNormalizedPPOActor(TrackingErrorPPOActor):
+    """:class:`TrackingErrorPPOActor` whose Gaussian lives in units of the action bound: the
+    action is ``action_center + action_half * u`` with standard deviation
+    ``action_half * exp(log_std)`` (see
+    :class:`rehabbot.rl.features.TrackingErrorNormalizedActionPolicy`)."""
+
+    action_center: tuple[float, ...] = ()
+    action_half: tuple[float, ...] = ()
+
+    def __call__(self, x: jnp.ndarray) -> Any:
+        units = TrackingErrorPPOActor.__call__(self, x)
+        center = jnp.asarray(self.action_center, jnp.float32)
+        half = jnp.asarray(self.action_half, jnp.float32)
+        return tfp.distributions.MultivariateNormalDiag(loc=center + half * units.mean(),
+                                                        scale_diag=half * units.stddev())
 
 
 def _feature_fields(observation_space: Any, scale_to_bounds: bool,
@@ -170,13 +222,55 @@ class TrackingErrorSBXTD3Policy(TD3Policy):
             td3_policies.Actor, td3_policies.VectorCritic = saved
 
 
+class TrackingErrorSBXPPOPolicy(PPOPolicy):
+    """SBX's PPO ``MlpPolicy`` whose actor and value network read the tracking-error features
+    (SB3's counterpart: :class:`rehabbot.rl.features.TrackingErrorActorCriticPolicy`)."""
+
+    ALGO = "ppo"
+    FEATURE_KWARGS = ("scale_to_bounds", "fine_scale_rad")
+
+    def __init__(self, observation_space: Any, action_space: Any, lr_schedule: Any,
+                 *args: Any, scale_to_bounds: bool = True,
+                 fine_scale_rad: float | None = None, **kwargs: Any) -> None:
+        fields = _feature_fields(observation_space, scale_to_bounds, fine_scale_rad)
+        kwargs.setdefault("actor_class", functools.partial(TrackingErrorPPOActor, **fields))
+        kwargs.setdefault("critic_class", functools.partial(TrackingErrorPPOCritic, **fields))
+        super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
+        self.feature_fields = fields
+
+
+class TrackingErrorSBXNormalizedPPOPolicy(TrackingErrorSBXPPOPolicy):
+    """:class:`TrackingErrorSBXPPOPolicy` with its Gaussian in units of the action bound (SB3's
+    counterpart: :class:`rehabbot.rl.features.TrackingErrorNormalizedActionPolicy`)."""
+
+    ACTIONS_IN_BOUND_UNITS = True
+
+    def __init__(self, observation_space: Any, action_space: Any, lr_schedule: Any,
+                 *args: Any, scale_to_bounds: bool = True,
+                 fine_scale_rad: float | None = None, **kwargs: Any) -> None:
+        fields = _feature_fields(observation_space, scale_to_bounds, fine_scale_rad)
+        center, half = action_bound_units(action_space)
+        kwargs.setdefault("actor_class", functools.partial(
+            TrackingErrorNormalizedPPOActor, **fields,
+            action_center=tuple(float(v) for v in center),
+            action_half=tuple(float(v) for v in half)))
+        super().__init__(observation_space, action_space, lr_schedule, *args,
+                         scale_to_bounds=scale_to_bounds, fine_scale_rad=fine_scale_rad,
+                         **kwargs)
+
+
 # The SBX counterpart of each PyTorch policy of rehabbot.rl.features that the shipped
 # settings files name.
 SBX_TRACKING_ERROR_POLICIES = {
     "rehabbot.rl.features.TrackingErrorSACPolicy": TrackingErrorSBXSACPolicy,
     "rehabbot.rl.features.TrackingErrorTD3Policy": TrackingErrorSBXTD3Policy,
+    "rehabbot.rl.features.TrackingErrorActorCriticPolicy": TrackingErrorSBXPPOPolicy,
+    "rehabbot.rl.features.TrackingErrorNormalizedActionPolicy":
+        TrackingErrorSBXNormalizedPPOPolicy,
 }
 
-__all__ = ["SBX_TRACKING_ERROR_POLICIES", "TrackingErrorActor", "TrackingErrorSBXSACPolicy",
+__all__ = ["SBX_TRACKING_ERROR_POLICIES", "TrackingErrorActor", "TrackingErrorNormalizedPPOActor",
+           "TrackingErrorPPOActor", "TrackingErrorPPOCritic", "TrackingErrorSBXNormalizedPPOPolicy",
+           "TrackingErrorSBXPPOPolicy", "TrackingErrorSBXSACPolicy",
            "TrackingErrorSBXTD3Policy", "TrackingErrorTD3Actor", "TrackingErrorVectorCritic",
            "tracking_error_features_jax"]

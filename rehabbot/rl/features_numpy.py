@@ -16,6 +16,8 @@ module imports them.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
@@ -23,7 +25,7 @@ from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
 JOINT_ERROR_SCALE_RAD = 0.5  # errors of a few key-pose spacings map to O(1) features
 TOOL_ERROR_SCALE_M = 0.1
 
-__all__ = ["JOINT_ERROR_SCALE_RAD", "TOOL_ERROR_SCALE_M", "bounds_scaling",
+__all__ = ["JOINT_ERROR_SCALE_RAD", "TOOL_ERROR_SCALE_M", "action_bound_units", "bounds_scaling",
            "tracking_error_features"]
 
 
@@ -53,3 +55,15 @@ def tracking_error_features(obs: np.ndarray, center: np.ndarray, half_range: np.
     if fine_scale_rad is not None:
         parts.append(np.tanh(joint_error * (JOINT_ERROR_SCALE_RAD / fine_scale_rad)))
     return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
+
+
+def action_bound_units(action_space: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``(center, half)`` of a bounded Box action space (float32): the action is
+    ``center + half * u`` for ``u`` in ``[-1, 1]``. A ValueError names any other space."""
+    low, high = getattr(action_space, "low", None), getattr(action_space, "high", None)
+    if not isinstance(low, np.ndarray) or not isinstance(high, np.ndarray) or \
+            not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(high > low)):
+        raise ValueError(f"actions in units of the bound need a bounded Box action space, "
+                         f"got {action_space}")
+    low, high = low.astype(np.float64), high.astype(np.float64)
+    return ((high + low) / 2).astype(np.float32), ((high - low) / 2).astype(np.float32)

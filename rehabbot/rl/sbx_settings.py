@@ -7,13 +7,13 @@ rules, and the run's manifest lists each change (``hyperparameters.backend_chang
 what was given, what is used instead or ``null`` when dropped, and why):
 
 =================================== =======================================================
-``policy``: ``TrackingErrorSACPolicy`` its JAX counterpart in :mod:`rehabbot.rl.features_jax`
-or ``TrackingErrorTD3Policy``       (the same features, computed inside SBX's actor and
-(``rehabbot.rl.features``)          critics); ``features_extractor_kwargs`` become its own
-                                    kwargs
-``policy``: any other PyTorch       SBX's ``MlpPolicy`` (e.g. ``TrackingErrorActorCritic``
-policy class (``rehabbot.rl.``,     ``Policy`` for PPO: the SBX network reads the
-SB3's)                              observation as it is)
+``policy``: ``TrackingErrorSACPolicy``, its JAX counterpart in :mod:`rehabbot.rl.features_jax`
+``TrackingErrorTD3Policy`` or       (the same features, computed inside SBX's actor and
+``TrackingErrorActorCriticPolicy``  critics or value network); ``features_extractor_kwargs``
+(``rehabbot.rl.features``)          become its own kwargs
+``policy``: any other PyTorch       SBX's ``MlpPolicy`` (the SBX network reads the
+policy class (``rehabbot.rl.``,     observation as it is)
+SB3's)
 ``policy_kwargs``:
   ``features_extractor_class/_kwargs`` dropped (SBX's MLP policies have no extractor)
   ``activation_fn`` (``nn.ReLU``, …) the Flax function of the same name (``flax.linen.relu``)
@@ -94,7 +94,7 @@ def _dotted(raw: Any) -> str:
 
 def jax_counterpart(raw: Any, algo: str) -> type | None:
     """SBX's policy with the same network as the PyTorch ``policy`` ``raw`` (the tracking-error
-    policies of :mod:`rehabbot.rl.features` for SAC and TD3), or None."""
+    policies of :mod:`rehabbot.rl.features` for SAC, TD3 and PPO), or None."""
     from rehabbot.rl.features_jax import SBX_TRACKING_ERROR_POLICIES
 
     found = SBX_TRACKING_ERROR_POLICIES.get(_dotted(raw))
@@ -105,7 +105,8 @@ def counterpart_change(raw: Any, used: type) -> dict[str, Any]:
     """The change record for a PyTorch ``policy`` replaced by its JAX counterpart."""
     return change("policy", raw, _dotted(used),
                   "the same network on JAX: SBX's MlpPolicy with TrackingErrorFeatures computed "
-                  "inside the actor and the critics (rehabbot.rl.features_jax)")
+                  "inside the actor and the critics or value network "
+                  "(rehabbot.rl.features_jax)")
 
 
 def dropped_key_reason(key: str, algo: str) -> str | None:

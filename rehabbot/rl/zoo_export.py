@@ -80,6 +80,23 @@ def _f32(value: Any) -> np.ndarray:
     return np.asarray(value, dtype=np.float32)
 
 
+# The SBX actor each tracking-error actor of rehabbot.rl.features_jax extends.
+SBX_FEATURE_ACTOR_KINDS = {
+    "TrackingErrorActor": "sbx.common.policies.SquashedGaussianActor",
+    "TrackingErrorTD3Actor": "sbx.td3.policies.Actor",
+    "TrackingErrorPPOActor": "sbx.ppo.policies.Actor",
+    "TrackingErrorNormalizedPPOActor": "sbx.ppo.policies.Actor",
+}
+
+
+def _bound_units_ops(policy: Any, action_space: gym.spaces.Box) -> list[Op]:
+    """``center + half * u`` for a policy whose network acts in units of the action bound
+    (``ACTIONS_IN_BOUND_UNITS``: ``TrackingErrorNormalizedActionPolicy`` and its JAX twin)."""
+    if not getattr(policy, "ACTIONS_IN_BOUND_UNITS", False):
+        return []
+    return [("unscale", {"low": _f32(action_space.low), "high": _f32(action_space.high)})]
+
+
 def _output_ops(action_space: gym.spaces.Box, squashed: bool) -> list[Op]:
     low, high = _f32(action_space.low), _f32(action_space.high)
     if squashed:
@@ -181,18 +198,39 @@ def sb3_actor_ops(model: Any) -> list[Op]:
         ops.extend(_torch_module_ops(part))
     if tanh:
         ops.append(("tanh", {}))
-    return ops + _output_ops(model.action_space, bool(policy.squash_output))
+    return ops + _bound_units_ops(policy, model.action_space) + \
+        _output_ops(model.action_space, bool(policy.squash_output))
 
 
 # --------------------------------------------------------------------------- SBX (JAX)
 
 
 def _jax_activation(function: Any) -> Op:
-    name = getattr(function, "__name__", type(function).__name__)
+    name = getattr(function, "__name__", None)
+    if name is None:
+        # A jitted activation (flax.linen.tanh is jax.numpy.tanh) restored from a saved model
+        # has no name: recognise it by its values.
+        probe = np.linspace(-4.0, 4.0, 33, dtype=np.float32)
+        values = np.asarray(function(probe), dtype=np.float64)
+        for op in JAX_ACTIVATIONS.values():
+            if np.allclose(values, _ACTIVATION_VALUES[op[0]](probe), atol=1e-5):
+                return op
+        name = type(function).__name__
     if name not in JAX_ACTIVATIONS:
         raise ExportError(f"the zoo cannot export the activation {name!r} (supported: "
                           f"{', '.join(JAX_ACTIVATIONS)})")
     return JAX_ACTIVATIONS[name]
+
+
+# The activations of JAX_ACTIVATIONS in NumPy, to recognise a nameless one by its values.
+_ACTIVATION_VALUES = {
+    "relu": lambda x: np.maximum(x, 0.0),
+    "tanh": np.tanh,
+    "silu": lambda x: x / (1.0 + np.exp(-x)),
+    "sigmoid": lambda x: 1.0 / (1.0 + np.exp(-x)),
+    "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
+    "leaky_relu": lambda x: np.where(x >= 0, x, 0.01 * x),
+}
 
 
 def _dense(params: Any, k: int) -> Op:
@@ -215,9 +253,7 @@ def sbx_actor_ops(model: Any) -> list[Op]:
         ops.append(("tracking_error", {"center": _f32(actor.center),
                                        "half_range": _f32(actor.half_range),
                                        "fine_scale_rad": np.nan if fine is None else fine}))
-        kind = {"TrackingErrorActor": "sbx.common.policies.SquashedGaussianActor",
-                "TrackingErrorTD3Actor": "sbx.td3.policies.Actor"}.get(type(actor).__name__,
-                                                                         kind)
+        kind = SBX_FEATURE_ACTOR_KINDS.get(type(actor).__name__, kind)
     if kind in ("sbx.common.policies.SquashedGaussianActor",  # SAC, TQC: tanh(mean)
                 "sbx.td3.policies.Actor"):  # TD3: tanh of the output layer
         for k in range(n_hidden):
@@ -249,7 +285,8 @@ def sbx_actor_ops(model: Any) -> list[Op]:
         ops += [_dense(params, n_hidden), ("tanh", {})]
     else:
         raise ExportError(f"the zoo cannot export the SBX actor {kind}")
-    return ops + _output_ops(model.action_space, bool(policy.squash_output))
+    return ops + _bound_units_ops(policy, model.action_space) + \
+        _output_ops(model.action_space, bool(policy.squash_output))
 
 
 # --------------------------------------------------------------------------- sources
