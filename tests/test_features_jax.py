@@ -15,6 +15,7 @@ from rehabbot.rl.hyperparams import load_hyperparameters
 
 pytest.importorskip("sbx")
 from rehabbot.rl.features_jax import (
+    TrackingErrorSBXNormalizedPPOPolicy,
     TrackingErrorSBXPPOPolicy,
     TrackingErrorSBXSACPolicy,
     TrackingErrorSBXTD3Policy,
@@ -69,7 +70,8 @@ SHIPPED = {"sac": (TrackingErrorSBXSACPolicy, {"fine_scale_rad": 0.05, "net_arch
                    FEATURES),
            "td3": (TrackingErrorSBXTD3Policy, {"fine_scale_rad": 0.05, "net_arch": [64, 64]},
                    FEATURES),
-           "ppo": (TrackingErrorSBXPPOPolicy, {}, FEATURES - 6)}  # ppo.yml: no fine errors
+           "ppo": (TrackingErrorSBXNormalizedPPOPolicy,
+                   {"log_std_init": -1.0, "fine_scale_rad": 0.05}, FEATURES)}
 
 
 def _small_model(algo: str, policy, env, policy_kwargs):
@@ -141,7 +143,8 @@ def test_non_rehabbot_observation_and_bad_scale_are_refused() -> None:
 def test_zoo_exports_the_feature_actor(algo, env, observations, tmp_path) -> None:
     from rehabbot.rl.zoo import export_policy, load_file
 
-    policy = SHIPPED[algo][0]
+    # PPO: the plain Gaussian (the normalized one: tests/test_normalized_actions.py).
+    policy = TrackingErrorSBXPPOPolicy if algo == "ppo" else SHIPPED[algo][0]
     model = _small_model(algo, policy, env, {"fine_scale_rad": 0.05, "net_arch": [32, 32]})
     model.learn(130)
     export_policy(model, "rehab-reach-v1", algo, tmp_path / f"{algo}.npz", episodes=0)

@@ -206,9 +206,9 @@ def test_detect_model_knows_every_sbx_algorithm(sbx, tmp_path: Path) -> None:
     from rehabbot.rl.features_jax import SBX_TRACKING_ERROR_POLICIES
 
     for policy in SBX_TRACKING_ERROR_POLICIES.values():
+        extra = {} if policy.ALGO == "ppo" else {"buffer_size": 10}
         model = algo_class(policy.ALGO, "sbx")(policy, gym.make("rehabbot/rehab-reach-v1"),
-                                               policy_kwargs={"net_arch": [8, 8]},
-                                               buffer_size=10)
+                                               policy_kwargs={"net_arch": [8, 8]}, **extra)
         model.save(tmp_path / f"features-{policy.ALGO}")
         assert detect_model(tmp_path / f"features-{policy.ALGO}.zip") == (policy.ALGO, "sbx")
 

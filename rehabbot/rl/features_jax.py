@@ -233,10 +233,14 @@ class TrackingErrorSBXPPOPolicy(PPOPolicy):
                  *args: Any, scale_to_bounds: bool = True,
                  fine_scale_rad: float | None = None, **kwargs: Any) -> None:
         fields = _feature_fields(observation_space, scale_to_bounds, fine_scale_rad)
-        kwargs.setdefault("actor_class", functools.partial(TrackingErrorPPOActor, **fields))
+        kwargs.setdefault("actor_class", self._actor_class(fields, action_space))
         kwargs.setdefault("critic_class", functools.partial(TrackingErrorPPOCritic, **fields))
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
         self.feature_fields = fields
+
+    @classmethod
+    def _actor_class(cls, fields: dict[str, Any], action_space: Any) -> Any:
+        return functools.partial(TrackingErrorPPOActor, **fields)
 
 
 class TrackingErrorSBXNormalizedPPOPolicy(TrackingErrorSBXPPOPolicy):
@@ -245,18 +249,12 @@ class TrackingErrorSBXNormalizedPPOPolicy(TrackingErrorSBXPPOPolicy):
 
     ACTIONS_IN_BOUND_UNITS = True
 
-    def __init__(self, observation_space: Any, action_space: Any, lr_schedule: Any,
-                 *args: Any, scale_to_bounds: bool = True,
-                 fine_scale_rad: float | None = None, **kwargs: Any) -> None:
-        fields = _feature_fields(observation_space, scale_to_bounds, fine_scale_rad)
+    @classmethod
+    def _actor_class(cls, fields: dict[str, Any], action_space: Any) -> Any:
         center, half = action_bound_units(action_space)
-        kwargs.setdefault("actor_class", functools.partial(
-            TrackingErrorNormalizedPPOActor, **fields,
-            action_center=tuple(float(v) for v in center),
-            action_half=tuple(float(v) for v in half)))
-        super().__init__(observation_space, action_space, lr_schedule, *args,
-                         scale_to_bounds=scale_to_bounds, fine_scale_rad=fine_scale_rad,
-                         **kwargs)
+        return functools.partial(TrackingErrorNormalizedPPOActor, **fields,
+                                 action_center=tuple(float(v) for v in center),
+                                 action_half=tuple(float(v) for v in half))
 
 
 # The SBX counterpart of each PyTorch policy of rehabbot.rl.features that the shipped

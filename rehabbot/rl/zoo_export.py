@@ -210,27 +210,18 @@ def _jax_activation(function: Any) -> Op:
     if name is None:
         # A jitted activation (flax.linen.tanh is jax.numpy.tanh) restored from a saved model
         # has no name: recognise it by its values.
+        from rehabbot.rl.zoo import op_function  # the NumPy step the exported file will run
+
         probe = np.linspace(-4.0, 4.0, 33, dtype=np.float32)
-        values = np.asarray(function(probe), dtype=np.float64)
-        for op in JAX_ACTIVATIONS.values():
-            if np.allclose(values, _ACTIVATION_VALUES[op[0]](probe), atol=1e-5):
-                return op
+        values = np.asarray(function(probe))
+        for op_name, params in JAX_ACTIVATIONS.values():
+            if np.allclose(values, op_function(op_name, params)(probe), atol=1e-5):
+                return op_name, params
         name = type(function).__name__
     if name not in JAX_ACTIVATIONS:
         raise ExportError(f"the zoo cannot export the activation {name!r} (supported: "
                           f"{', '.join(JAX_ACTIVATIONS)})")
     return JAX_ACTIVATIONS[name]
-
-
-# The activations of JAX_ACTIVATIONS in NumPy, to recognise a nameless one by its values.
-_ACTIVATION_VALUES = {
-    "relu": lambda x: np.maximum(x, 0.0),
-    "tanh": np.tanh,
-    "silu": lambda x: x / (1.0 + np.exp(-x)),
-    "sigmoid": lambda x: 1.0 / (1.0 + np.exp(-x)),
-    "elu": lambda x: np.where(x > 0, x, np.expm1(np.minimum(x, 0.0))),
-    "leaky_relu": lambda x: np.where(x >= 0, x, 0.01 * x),
-}
 
 
 def _dense(params: Any, k: int) -> Op:
