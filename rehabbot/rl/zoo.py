@@ -102,7 +102,7 @@ class ZooError(DataError):
 # --------------------------------------------------------------------------- the program
 
 
-def op_function(name: str, p: Mapping[str, np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+def _op(name: str, p: Mapping[str, np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
     """The function of one step of the actor's program."""
     f32 = np.float32
     if name == "dense":
@@ -222,7 +222,7 @@ class ZooPolicy:
             for k, name in enumerate(names):
                 params = {key: np.asarray(arrays[f"op{k}.{key}"])
                           for key in OP_PARAMS[name]}
-                self._ops.append(op_function(name, params))
+                self._ops.append(_op(name, params))
         except KeyError as err:
             raise ZooError(f"{where} is not a valid zoo file: it lacks {err}") from err
         except ValueError as err:
