@@ -17,7 +17,8 @@ The layers, each importing only those below it (``docs/architecture.md``):
 ============== =====================================================================
 
 The names most users need are here too, imported on first use: ``RehabEnv``,
-``RehabEnvConfig``, ``PatientProfile``, ``Exercise``, ``ScriptedExpert``.
+``RehabEnvConfig``, ``PatientProfile``, ``PatientCondition``, ``Exercise``, ``ScriptedExpert``,
+``AssistAsNeeded``.
 """
 
 from __future__ import annotations
@@ -36,8 +37,10 @@ _LAZY = {
     "RehabEnv": "rehabbot.envs.rehab_env",
     "RehabEnvConfig": "rehabbot.envs.config",
     "PatientProfile": "rehabbot.sim.patient",
+    "PatientCondition": "rehabbot.sim.conditions",
     "Exercise": "rehabbot.tasks.exercises",
     "ScriptedExpert": "rehabbot.rl.experts",
+    "AssistAsNeeded": "rehabbot.rl.assist_as_needed",
 }
 
 

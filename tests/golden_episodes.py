@@ -32,7 +32,12 @@ import numpy as np
 GOLDEN_PATH = Path(__file__).with_name("golden") / "episodes.npz"
 IDS = ("rehabbot/rehab-reach-v0", "rehabbot/rehab-reach-l-v0", "rehabbot/rehab-hip-v0",
        "rehabbot/rehab-knee-v0", "rehabbot/rehab-reach-v1", "rehabbot/rehab-reach-l-v1",
-       "rehabbot/rehab-hip-v1", "rehabbot/rehab-knee-v1")
+       "rehabbot/rehab-hip-v1", "rehabbot/rehab-knee-v1",
+       # patients with conditions (rehabbot.envs.registration.CONDITION_VARIANTS)
+       "rehabbot/rehab-reach-spastic-v1", "rehabbot/rehab-reach-tremor-v1",
+       "rehabbot/rehab-reach-active-v1", "rehabbot/rehab-hip-spastic-v1",
+       "rehabbot/rehab-knee-weak-v1", "rehabbot/rehab-knee-stiff-v1",
+       "rehabbot/rehab-knee-resistive-v1")
 MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 EXERCISES = (0, 1)
 WEIGHT_LEVELS = (0, 1, 2, 3, 4)

@@ -36,7 +36,7 @@ def test_every_registered_id_has_golden_episodes(golden):
 
 def _first_difference(actual: np.ndarray, expected: np.ndarray) -> str:
     if actual.dtype.kind == "f" or expected.dtype.kind == "f":
-        bad = ~np.isclose(actual, expected, rtol=RTOL, atol=ATOL)
+        bad = ~np.isclose(actual, expected, rtol=RTOL, atol=ATOL, equal_nan=True)
     else:
         bad = actual != expected
     row = int(np.argwhere(bad.reshape(len(bad), -1).any(axis=1))[0, 0])
@@ -61,7 +61,7 @@ def test_golden_episodes_are_reproduced(golden, env_id, mode):
                     assert name in actual, f"{key}: info lost the entry {name!r}"
                     got = actual[name]
                     if want.dtype.kind == "f":
-                        ok = np.allclose(got, want, rtol=RTOL, atol=ATOL)
+                        ok = np.allclose(got, want, rtol=RTOL, atol=ATOL, equal_nan=True)
                     else:
                         ok = np.array_equal(got, want)
                     assert ok, f"{key}: {name} differs at {_first_difference(got, want)}"

@@ -7,7 +7,10 @@ rule that ended it, the peak cuff force, and the kinematic quality of the robot'
 :func:`rehabbot.analysis.metrics.kinematic_summary`: peak joint speed, RMS and peak joint
 acceleration, peak joint jerk (finite differences at the env's ``dt``), SPARC, log
 dimensionless jerk and normalised jerk of the tool's (the patient's hand's or foot's) speed
-profile, and the peak actuator torque of each joint.
+profile, and the peak actuator torque of each joint. From the patient's side
+(:mod:`rehabbot.sim.patient_drive`): the robot's and the patient's work on the limb, the
+assistance ratio (the robot's share of the positive work), the peak muscle torque, and the range
+of motion achieved versus prescribed (:func:`range_of_motion_deg`).
 
 Outputs, for each policy, in ``OUT/<label>/``:
 
@@ -62,7 +65,13 @@ SUMMARY_METRICS = (
     ("ldlj", "LDLJ (tool speed)", ""),
     ("normalized_jerk", "normalised jerk (tool)", ""),
     ("peak_torque_nm", "peak robot torque", "N·m"),
+    ("robot_work_j", "robot work on the limb", "J"),
+    ("patient_work_j", "patient work on the limb", "J"),
+    ("assistance_ratio", "assistance ratio", ""),
+    ("peak_patient_torque_nm", "peak patient torque", "N·m"),
+    ("rom_achieved_fraction", "ROM achieved / prescribed", ""),
 )
+PRESCRIBED_MIN_DEG = 1.0  # joints the exercise moves less than this are left out of the ROM
 DEFAULT_EPISODES = 10
 
 
@@ -82,10 +91,35 @@ def episode_figures(episode: Episode) -> dict[str, Any]:
         "truncated": episode.truncated,
         "peak_cuff_force_n": float(np.max(episode.interaction_force_n)),
     }
+    achieved, prescribed = range_of_motion_deg(episode.patient_qpos_rad,
+                                               episode.target_patient_deg)
+    moved = prescribed >= PRESCRIBED_MIN_DEG
+    figures.update({
+        "robot_work_j": episode.robot_work_j,
+        "patient_work_j": episode.patient_work_j,
+        "assistance_ratio": (episode.assistance_ratio if math.isfinite(episode.assistance_ratio)
+                             else None),
+        "peak_patient_torque_nm": float(np.max(np.abs(episode.patient_torque_nm))),
+        "rom_achieved_deg": achieved.tolist(),
+        "rom_prescribed_deg": prescribed.tolist(),
+        "rom_achieved_fraction": (float(achieved[moved].sum() / prescribed[moved].sum())
+                                  if moved.any() else None),
+    })
     figures.update(kinematic_summary(episode.robot_qpos_rad, episode.dt_s,
                                      tool_m=episode.tool_pos_m,
                                      torque_nm=episode.robot_torque_nm))
     return figures
+
+
+def range_of_motion_deg(patient_rad: np.ndarray,
+                        targets_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per exercised joint: the excursion achieved in an episode (max - min of the joint's
+    angle, ``patient_rad`` (T + 1, 3) from the reset on) and the excursion prescribed (from the
+    start pose through every target of ``targets_deg`` (N, 3)), both in degrees."""
+    angles = np.degrees(np.asarray(patient_rad, dtype=float))
+    achieved = angles.max(axis=0) - angles.min(axis=0)
+    path = np.vstack([angles[:1], np.asarray(targets_deg, dtype=float)])
+    return achieved, path.max(axis=0) - path.min(axis=0)
 
 
 def _mean_std(values: Sequence[float | None]) -> tuple[float | None, float | None]:

@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
+from rehabbot.envs import condition_setup
 from rehabbot.envs.config import RehabEnvConfig
 from rehabbot.envs.control import SETPOINT_SPACE_MARGIN_RAD, Controller, make_controller
 from rehabbot.sim.handles import RobotHandle
@@ -59,6 +60,9 @@ class EnvParts:
     reward: PaperReward | ProgressReward
     unusable_levels: dict[int, str]
     remaining_paths: tuple[tuple[float, ...], ...]  # per exercise: rest[i] (rad) after target i
+    exercise_table: tuple  # the exercises as done (key poses scaled by the condition's rom_scale)
+    compliant_ranges_rad: np.ndarray  # (n_compliant, 2) the compliant joints' ranges
+    goals_rad: tuple  # per exercise, per target: the compliant joints' angles [rad]
 
 
 def limit_robot_joints(scene: Scene, handle: RobotHandle, low_rad: np.ndarray,
@@ -102,12 +106,15 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
     joint_low = setpoint_low - JOINT_LIMIT_MARGIN_RAD
     joint_high = setpoint_high + JOINT_LIMIT_MARGIN_RAD
     limit_robot_joints(scene, handle, joint_low, joint_high)
+    condition = config.condition
+    condition_setup.scale_passive(scene, condition)
+    exercises = condition_setup.scaled_exercises(scene, config.exercise_table, condition)
 
     targets = tuple(
         build_targets(scene, exercise, config.task_type, segment_s=config.segment_s,
                       waypoint_dt_s=config.waypoint_dt_s,
                       min_spacing_rad=config.min_waypoint_spacing_rad)
-        for exercise in config.exercise_table)
+        for exercise in exercises)
     controller = make_controller(config.control_mode, handle, setpoint_low, setpoint_high,
                                  config.dt_s, config.max_speed_rad_s)
     controller.configure(model)
@@ -126,6 +133,10 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
         raise ValueError(f"profile {config.profile}: this scene needs robot angles beyond the "
                          "robot's joint ranges (README, Failure modes)")
 
+    # The condition's reduced ranges (after the observation bounds, which every patient of
+    # an id shares): joint limits and the range-of-motion rule follow them.
+    ranges = condition_setup.reduced_ranges_rad(scene, condition)
+    condition_setup.apply_ranges(scene, ranges)
     safety = SafetyMonitor(scene, config.safety_thresholds())
     # Worst reward one step can pay: the largest distance in the patient's box plus the
     # extra terms' maxima.
@@ -164,6 +175,9 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
     for level in config.weight_levels:
         if level in unusable:
             feasibility.refuse(unusable, WEIGHT_LEVELS, level)
+    if not condition.is_healthy:
+        condition_setup.check_condition_forces(scene, targets, condition, safety.force_limit_n,
+                                               config.weight_levels)
     scene.set_weight_level(config.weight_level or 0)
     return EnvParts(scene=scene, handle=handle, setpoint_low_rad=setpoint_low,
                     setpoint_high_rad=setpoint_high, joint_low_rad=joint_low,
@@ -171,4 +185,6 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
                     layout=layout, observation_space=observation_space,
                     healthy_low=healthy_low.astype(np.float32),
                     healthy_high=healthy_high.astype(np.float32), safety=safety,
-                    reward=reward, unusable_levels=unusable, remaining_paths=remaining)
+                    reward=reward, unusable_levels=unusable, remaining_paths=remaining,
+                    exercise_table=exercises, compliant_ranges_rad=ranges,
+                    goals_rad=condition_setup.goals_rad(scene, targets))

@@ -2,8 +2,9 @@
 validated once, frozen.
 
 ``RehabEnvConfig(**kwargs)`` raises ``ValueError`` naming the bad value and its valid choices
-or range (and ``TypeError`` for an unknown keyword) before anything is built. Profiles and
-exercises given as dicts become :class:`PatientProfile` and :class:`Exercise` objects.
+or range (and ``TypeError`` for an unknown keyword) before anything is built. Profiles,
+conditions and exercises given as dicts become :class:`PatientProfile`,
+:class:`PatientCondition` and :class:`Exercise` objects.
 The table of the arguments is in the docstring of :mod:`rehabbot.envs.rehab_env`.
 """
 
@@ -15,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rehabbot.common.checks import check_choice, check_number
+from rehabbot.sim.conditions import PatientCondition, as_condition
 from rehabbot.sim.patient import PatientProfile
 from rehabbot.sim.robots.ur5e import MAX_JOINT_SPEED_RAD_S
 from rehabbot.sim.scene import CAMERA_NAMES, SIDES, WEIGHT_LEVELS, SceneOptions, check_weight_level
@@ -63,6 +65,7 @@ class RehabEnvConfig:
     task_type: str = "reaching"
     control_mode: str = "joint_delta"
     profile: PatientProfile | None = None
+    condition: PatientCondition | None = None
     weight_level: int | None = None
     exercise: int | None = None
     exercises: tuple[Exercise, ...] | None = None
@@ -105,6 +108,7 @@ class RehabEnvConfig:
         if self.render_mode is not None:
             check_choice("render_mode", self.render_mode, RENDER_MODES)
         set_(self, "profile", _as_profile(self.profile))
+        set_(self, "condition", as_condition(self.condition))
         if self.weight_level is not None:
             set_(self, "weight_level", check_weight_level(self.weight_level))
         table = exercise_table(self.limb, self.exercises)
@@ -166,6 +170,7 @@ class RehabEnvConfig:
         """The arguments as plain data (profile and exercises as dicts): JSON-able."""
         kwargs = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
         kwargs["profile"] = dataclasses.asdict(self.profile)
+        kwargs["condition"] = self.condition.to_dict()
         if self.exercises is not None:
             kwargs["exercises"] = [exercise.to_dict() for exercise in self.exercises]
         return kwargs

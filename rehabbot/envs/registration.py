@@ -46,6 +46,34 @@ for _v0_id, (_kwargs, _description) in list(ENV_SPECS.items()):
     ENV_SPECS[_v0_id.replace("-v0", "-v1")] = (
         {**_kwargs, **V1_KWARGS}, f"{_description}; learnable progress reward")
 
+# Patients with clinical conditions (rehabbot.sim.conditions; docs/conditions.md): the -v1
+# task of the base id with a PatientCondition. Same spaces and reward as the base id.
+CONDITION_VARIANTS: dict[str, tuple[str, dict, str]] = {
+    "rehabbot/rehab-reach-spastic-v1": (
+        "rehabbot/rehab-reach-v1", {"spasticity_mas": "2"},
+        "spastic arm (Modified Ashworth 2): the stretch reflex resists fast motion"),
+    "rehabbot/rehab-reach-tremor-v1": (
+        "rehabbot/rehab-reach-v1", {"tremor_hz": 5.0, "tremor_amplitude_nm": 1.0},
+        "5 Hz rest tremor (parkinsonian band), 1 N·m on each exercised joint"),
+    "rehabbot/rehab-reach-active-v1": (
+        "rehabbot/rehab-reach-v1", {"effort": "active_assisted", "strength_fraction": 0.3},
+        "hemiparetic arm at 30 % strength that tries to follow the exercise"),
+    "rehabbot/rehab-hip-spastic-v1": (
+        "rehabbot/rehab-hip-v1", {"spasticity_mas": "2"},
+        "spastic leg (Modified Ashworth 2) in the supine straight-leg raise"),
+    "rehabbot/rehab-knee-weak-v1": (
+        "rehabbot/rehab-knee-v1", {"effort": "active_assisted", "strength_fraction": 0.1},
+        "weak knee (10 % strength) that tries to follow the exercise"),
+    "rehabbot/rehab-knee-stiff-v1": (
+        "rehabbot/rehab-knee-v1", {"stiffness_scale": 3.0, "rom_scale": 0.7},
+        "contracted knee: passive stiffness x3, 70 % of the range of motion"),
+    "rehabbot/rehab-knee-resistive-v1": (
+        "rehabbot/rehab-knee-v1", {"effort": "resistive", "effort_fraction": 0.1},
+        "resistive exercise: the patient pushes against the motion with 10 % of its strength"),
+}
+for _id, (_base_id, _condition, _description) in CONDITION_VARIANTS.items():
+    ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], "condition": dict(_condition)}, _description)
+
 
 def register_envs() -> None:
     """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""

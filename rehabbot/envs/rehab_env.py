@@ -51,28 +51,31 @@ weight level of an id (``r``: each robot joint's hardware range, 2 pi or pi for 
 | 22 | l: weight level (0..4) | - | [0, 4] |
 
 ## Rewards
-Named terms, each reported as ``info["reward_<name>"]``; the reward is their sum.
+Named terms, each reported as ``info["reward_<name>"]``; the reward is their sum
+(``docs/envs.md``, Reward). ``reward="paper"`` (the -v0 ids): eq. (5),
+:mod:`rehabbot.tasks.reward`: ``reward_distance = -||theta - theta*_i||_2``, ``reward_bonus``
+(``intermediate_bonus`` / ``final_bonus`` when ``||theta - theta*_i||_inf <
+target_tolerance_rad``), optional ``reward_smoothness`` and ``reward_effort``, ``reward_safety``
+on a stop (a stop never pays); stalling can be worth more than reaching a target
+(``benchmarks/reward_trap.py``). ``reward="progress"`` (the -v1 ids),
+:mod:`rehabbot.tasks.progress_reward`: ``reward_progress`` (``progress_weight`` x the decrease
+of the joint-space path still to travel), ``reward_bonus``, ``reward_time = -time_cost``, the
+optional terms and ``reward_safety``; reaching each target beats stalling for every gamma in
+[0.95, 0.999]. ``info["cost"]`` is 1.0 in a step where a safety rule fired, else 0.0
+(Safety-Gymnasium's convention).
 
-* ``reward="paper"`` (the -v0 ids): eq. (5) of the paper, :mod:`rehabbot.tasks.reward`:
-  ``reward_distance = -||theta - theta*_i||_2``, ``reward_bonus`` (``intermediate_bonus`` /
-  ``final_bonus`` when ``||theta - theta*_i||_inf < target_tolerance_rad``), optional
-  ``reward_smoothness`` and ``reward_effort`` (0 by default), and ``reward_safety`` on a safety
-  stop: the episode then earns less than holding still from any state it passed through.
-  Stalling short of a target can be worth more than reaching it (``benchmarks/reward_trap.py``).
-* ``reward="progress"`` (the -v1 ids), :mod:`rehabbot.tasks.progress_reward`:
-  ``reward_progress = progress_weight x`` the decrease of the joint-space path still to travel,
-  ``reward_bonus`` as above, ``reward_time = -time_cost``, the optional terms, and
-  ``reward_safety`` on a stop (the step's progress back, the time cost to the limit). Reaching each
-  target is worth more than stalling for every gamma in [0.95, 0.999], and a stop pays less
-  than holding still from the state before it.
+A profile or condition that cannot do the exercises in its scene (the robot cannot reach the
+cuff, a target outside the setpoint bounds, a home state that already breaks a safety rule, a
+condition whose steady load exceeds the cuff's force limit) is refused with a ``ValueError``
+when the env is built (:mod:`rehabbot.tasks.feasibility`, :mod:`rehabbot.envs.condition_setup`).
 
-``info["cost"]`` is 1.0 in a step where a safety rule fired (also with
-``terminate_on_safety=False``), else 0.0: Safety-Gymnasium's convention, for constrained RL.
-
-A profile that cannot do the exercises in its scene (the robot cannot reach the cuff, a target
-outside the setpoint bounds, or a home state that already breaks a safety rule at a weight
-level the env may use) is refused with a ``ValueError`` when the env is built
-(:mod:`rehabbot.tasks.feasibility`).
+## The patient
+``condition`` (:class:`rehabbot.sim.conditions.PatientCondition`, ``docs/conditions.md``) adds
+spasticity, contracture, weakness, tremor and effort; the default is a healthy, passive limb.
+Every id reports ``info["patient_torque_nm"]`` (the patient's muscle torques on the exercised
+joints), ``info["patient_work_j"]`` and ``info["robot_work_j"]`` (work on the limb since reset,
+counted every physics step) and ``info["assistance_ratio"]`` (the robot's share of the positive
+work; 1.0 until the patient does positive work).
 
 ## Starting state
 The home posture of the scene (cuff satisfied, static equilibrium), no noise. The exercise and
@@ -104,6 +107,7 @@ takes a config instead.
 | ``task_type`` | ``"reaching"`` | ``"reaching"`` (the key poses) or ``"trajectory"`` (dense min-jerk waypoints) |
 | ``control_mode`` | ``"joint_delta"`` | see Action space |
 | ``profile`` | ``None`` | :class:`PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
+| ``condition`` | ``None`` | :class:`PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive |
 | ``weight_level`` | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
 | ``exercise`` | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
 | ``exercises`` | ``None`` | the exercise table: :class:`Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
@@ -149,13 +153,15 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.arrays import as_index
+from rehabbot.envs.actions import checked_action
 from rehabbot.envs.build import build_parts
 from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig, kwarg_names
 from rehabbot.envs.env_rendering import EnvRendering
+from rehabbot.sim.patient_drive import LimbPhysics
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
 from rehabbot.tasks import feasibility
 from rehabbot.tasks.exercises import Exercise
-from rehabbot.tasks.reward import StepOutcome, total
+from rehabbot.tasks.reward import StepOutcome, joint_distance, total
 from rehabbot.tasks.targets import TargetSequence
 
 RESET_OPTIONS = ("exercise", "weight_level")
@@ -191,7 +197,7 @@ class RehabEnv(gym.Env):
             parts.setpoint_high_rad
         self.joint_low_rad, self.joint_high_rad = parts.joint_low_rad, parts.joint_high_rad
         self.targets: tuple[TargetSequence, ...] = parts.targets
-        self.exercises: tuple[Exercise, ...] = config.exercise_table
+        self.exercises: tuple[Exercise, ...] = parts.exercise_table
         self.controller = parts.controller
         self.safety = parts.safety
         self.reward_function = parts.reward
@@ -210,6 +216,12 @@ class RehabEnv(gym.Env):
         self._hold_distance = 0.0  # ||theta - theta*|| of the current state, active target
         self._path_left = 0.0  # the path still to travel from the current state [rad]
         self._uses_hold_gap = getattr(self.reward_function, "uses_hold_gap", False)
+        # The physics with the patient's condition and the work on the limb.
+        self._physics = LimbPhysics(self.scene, config.condition, self.safety.cuff_rows[0],
+                                    parts.compliant_ranges_rad, self.frame_skip)
+        self.compliant_ranges_rad = parts.compliant_ranges_rad  # (reduced by rom_scale)
+        self._goals = parts.goals_rad
+        self._goal = self._goals[0][0]
         self._hold_gap = 0.0  # G of StepOutcome.hold_gap
 
         # -- ids, slices and buffers (resolved once) -----------------------------------------
@@ -222,7 +234,6 @@ class RehabEnv(gym.Env):
         self._clip_high = self.controller.clip_high.astype(float)
         self._clip_bounds = tuple(zip(self.controller.clip_low.tolist(),
                                       self.controller.clip_high.tolist(), strict=True))
-        self._action_shape = self.action_space.shape
         base = self.handle.base_body_id
         mujoco.mj_kinematics(self.model, self.data)
         self._base_pos = self.data.xpos[base].copy()
@@ -254,7 +265,6 @@ class RehabEnv(gym.Env):
         self._keep_previous_action = self.reward_function.uses_previous_action
         self._outcome = StepOutcome(previous_action=self._prev_action)
         self._num_targets = 0
-        self._float32 = np.dtype(np.float32)
         self._tolerance = self.reward_function.target_tolerance_rad
         self._terminate_on_safety = config.terminate_on_safety
         self._steps = 0
@@ -304,6 +314,7 @@ class RehabEnv(gym.Env):
         self.scene.reset_data(data)
         self.controller.reset(data, self.scene.home_setpoints[0])
         self.safety.reset(data)
+        self._physics.reset(data, self.np_random)
         self._prev_action[:] = 0.0
         self._rendering.clear_trace()
         self._record_trace()
@@ -314,7 +325,7 @@ class RehabEnv(gym.Env):
         self._write_target()
         self._theta = self._observe() or self._qpos[self._qpos_adr].tolist()
         self._rest = self._remaining_paths[self._exercise]
-        self._hold_distance = _distance(self._theta, self._target)
+        self._hold_distance = joint_distance(self._theta, self._target)
         self._path_left = self._hold_distance + self._rest[0]
         if self._uses_hold_gap:
             self._hold_gap = self.max_episode_steps * self.reward_function.hold_step_cost(
@@ -333,9 +344,10 @@ class RehabEnv(gym.Env):
         if self.controller.apply_fast(action):  # a float32 array inside the box: checked
             clipped = 0
         else:
-            action, clipped = self._check_action(action)
+            action, clipped = checked_action(action, self.action_space, self._clip_low,
+                                             self._clip_high, self._clip_bounds)
             self.controller.apply(action, data)
-        mujoco.mj_step(self.model, data, nstep=self.frame_skip)
+        self._physics.step(self.model, data, self._goal, self.np_random)
         self._steps += 1
 
         violation, force_n = self.safety.check_step(data)
@@ -371,7 +383,7 @@ class RehabEnv(gym.Env):
         # After a switch, holding still costs the distance to the next target.
         switching = reached and not last
         hold = self._hold_distance = (
-            _distance(self._theta, self._sequence.robot_rad[self._target_index + 1].tolist())
+            joint_distance(self._theta, self._sequence.robot_rad[self._target_index + 1].tolist())
             if switching else distance)
         if self._uses_path:
             outcome.path_left_before_rad = self._path_left
@@ -464,6 +476,11 @@ class RehabEnv(gym.Env):
         return getattr(self.reward_function, "worst_step_reward", None)
 
     @property
+    def episode_steps(self) -> int:
+        """Steps taken since the last ``reset()``."""
+        return self._steps
+
+    @property
     def target_index(self) -> int:
         """Index of the active target in the episode's sequence."""
         return self._target_index
@@ -496,35 +513,6 @@ class RehabEnv(gym.Env):
         raise gym.error.ResetNeeded("step() called after the episode terminated; call "
                                     "env.reset() to start the next one")
 
-    def _check_action(self, action) -> tuple[np.ndarray, int]:
-        if type(action) is np.ndarray and action.dtype is self._float32 \
-                and action.shape == self._action_shape:
-            for value, (low, high) in zip(action.tolist(), self._clip_bounds, strict=True):
-                if not low <= value <= high:  # also for NaN
-                    break
-            else:
-                return action, 0  # the common case: float32, inside the box
-        try:
-            a = np.asarray(action)
-        except (TypeError, ValueError) as err:
-            raise ValueError(f"action {action!r} cannot be read as {self.action_space.shape} "
-                             f"floats: {err}") from None
-        if a.dtype.kind not in "iuf":  # no silent casts of bool, complex, str or objects
-            raise ValueError(f"action {action!r} has dtype {a.dtype}; expected "
-                             f"{self.action_space.shape} real numbers (float32 preferred)")
-        a = a.astype(float)
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"action has shape {a.shape}; expected {self.action_space.shape}")
-        bad = ~np.isfinite(a)
-        if bad.any():
-            raise ValueError(f"action has non-finite values at indices "
-                             f"{np.flatnonzero(bad).tolist()}: {a.tolist()}")
-        clipped_mask = (a < self._clip_low) | (a > self._clip_high)
-        clipped = int(np.count_nonzero(clipped_mask))
-        if clipped:
-            a = np.clip(a, self._clip_low, self._clip_high)
-        return a, clipped
-
     def _write_target(self) -> None:
         """The active target's fields of the observation (theta*, p*)."""
         obs, i = self._obs, self._target_index
@@ -532,6 +520,7 @@ class RehabEnv(gym.Env):
         obs[self._theta_star] = target
         obs[self._p_star] = self._sequence.tool_pos_base_m[i]
         self._target = target.tolist()
+        self._goal = self._goals[self._exercise][i]
         self._static_inside = self._static_fields_inside()
 
     def _static_fields_inside(self) -> bool:
@@ -579,6 +568,7 @@ class RehabEnv(gym.Env):
             **terms,  # reward_distance, reward_bonus, ...
             "interaction_force_n": force_n,
             "robot_torque_nm": self._qfrc_actuator[self._dof_adr].copy(),
+            **self._physics.info(),  # patient_torque_nm, patient/robot_work_j, assistance
             "patient_qpos": self._qpos[self._patient_qpos_adr].copy(),
             "exercise": self._exercise,
             "weight_level": self.scene.weight_level,
@@ -601,16 +591,10 @@ class RehabEnv(gym.Env):
         self._qfrc_actuator = data.qfrc_actuator
         self.controller.bind(data)
         self.safety.bind(data)
+        self._physics.bind(data)
         self._outcome.torque_nm = self._qfrc_actuator[self._dof_adr]  # a view
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._bind_views()
 
-
-def _distance(theta: list[float], target: list[float]) -> float:
-    """``||theta - target||_2`` of two short lists (plain Python: no allocation)."""
-    squared = 0.0
-    for angle, goal in zip(theta, target, strict=True):
-        squared += (angle - goal) * (angle - goal)
-    return math.sqrt(squared)

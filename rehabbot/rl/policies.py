@@ -3,7 +3,8 @@ Stable-Baselines3, sb3-contrib or SBX (``rehabbot train``), the scripted expert,
 random actions.
 
 =============================== =========================================================
-``load_policy(spec, env)``      ``spec`` is ``"expert"``, ``"random"`` or the path of an SB3
+``load_policy(spec, env)``      ``spec`` is ``"expert"``, ``"aan"`` (assist-as-needed),
+                                ``"random"`` or the path of an SB3
                                 ``.zip`` (the ``.zip`` suffix may be left out, as SB3 allows)
 ``env_for(specs, env_id, ...)`` the env to run the policies in: ``env_id``, or the id and
                                 kwargs of the models' training runs; every spec is checked
@@ -46,7 +47,7 @@ from rehabbot.rl.algorithms import (
 )
 from rehabbot.rl.backends import saved_backend
 
-POLICY_KEYWORDS = ("expert", "random")
+POLICY_KEYWORDS = ("expert", "aan", "random")
 
 __all__ = ["POLICY_KEYWORDS", "LoadedPolicy", "PolicyError", "RandomPolicy", "check_spaces",
            "detect_algo", "env_for", "load_model", "load_policy", "load_zoo_policy",
@@ -74,7 +75,7 @@ class LoadedPolicy:
 
     policy: Any  # has SB3's predict(obs, state, episode_start, deterministic)
     label: str  # "expert", "random", or "<algo>" / "<algo>-seed<k>" for a model
-    kind: str  # "expert", "random", "model" or "zoo"
+    kind: str  # "expert" (a scripted controller: expert, aan), "random", "model" or "zoo"
     algo: str | None = None
     backend: str | None = None  # "sb3" or "sbx" for a model
     model_path: Path | None = None
@@ -179,7 +180,9 @@ def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
 
 
 def load_policy(spec: str | Path, env: gym.Env, seed: int | None = None) -> LoadedPolicy:
-    """``"expert"``, ``"random"`` (seeded with ``seed``) or a model file, for ``env``."""
+    """``"expert"``, ``"aan"`` (the assist-as-needed controller,
+    :mod:`rehabbot.rl.assist_as_needed`), ``"random"`` (seeded with ``seed``) or a model file,
+    for ``env``."""
     if str(spec) == "expert":
         from rehabbot.rl.experts import ScriptedExpert
 
@@ -188,6 +191,14 @@ def load_policy(spec: str | Path, env: gym.Env, seed: int | None = None) -> Load
         except ValueError as err:
             raise PolicyError(str(err)) from err
         return LoadedPolicy(policy=expert, label="expert", kind="expert")
+    if str(spec) == "aan":
+        from rehabbot.rl.assist_as_needed import AssistAsNeeded
+
+        try:
+            controller = AssistAsNeeded(env)
+        except ValueError as err:
+            raise PolicyError(str(err)) from err
+        return LoadedPolicy(policy=controller, label="aan", kind="expert")
     if str(spec) == "random":
         return LoadedPolicy(policy=RandomPolicy(env.action_space, seed), label="random",
                             kind="random")

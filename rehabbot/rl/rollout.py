@@ -24,11 +24,13 @@ class Episode:
     torque_limit_nm: np.ndarray  # (n_joints,)
     target_tool_pos_m: np.ndarray  # (N, 3) p* of every target, robot base frame
     target_robot_rad: np.ndarray  # (N, n_joints) theta* of every target
+    target_patient_deg: np.ndarray  # (N, 3) the exercised joints at every target [deg]
     robot_qpos_rad: np.ndarray  # (T + 1, n_joints)
     tool_pos_m: np.ndarray  # (T + 1, 3) robot base frame
     patient_qpos_rad: np.ndarray  # (T + 1, 3) the exercised joints
     robot_torque_nm: np.ndarray  # (T + 1, n_joints)
     interaction_force_n: np.ndarray  # (T + 1,)
+    patient_torque_nm: np.ndarray  # (T + 1, 3) the patient's muscle torques, exercised joints
     target_index: np.ndarray  # (T + 1,)
     total_return: float
     success: bool
@@ -38,6 +40,9 @@ class Episode:
     weight_level: int
     targets_reached: int
     num_targets: int
+    robot_work_j: float = 0.0  # work on the limb over the episode: the robot's (cuff)
+    patient_work_j: float = 0.0  # ... and the patient's (muscles)
+    assistance_ratio: float = float("nan")  # robot's share of the positive work on the limb
 
     @property
     def length(self) -> int:
@@ -53,7 +58,7 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
     theta, p, phi = layout.slice("theta"), layout.slice("p"), layout.slice("phi")
     obs, info = env.reset(seed=seed)
     sequence = base.target_sequence
-    qpos, tool, patient, torque, force, index = [], [], [], [], [], []
+    qpos, tool, patient, torque, force, index, muscle = [], [], [], [], [], [], []
 
     def record(observation: np.ndarray, step_info: dict) -> None:
         qpos.append(np.array(observation[theta], dtype=float))
@@ -62,6 +67,7 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
         torque.append(np.array(step_info["robot_torque_nm"], dtype=float))
         force.append(float(step_info["interaction_force_n"]))
         index.append(int(step_info["target_index"]))
+        muscle.append(np.array(step_info["patient_torque_nm"], dtype=float))
 
     record(obs, info)
     total, truncated = 0.0, False
@@ -80,11 +86,15 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
         torque_limit_nm=base.robot.torque_limits(),
         target_tool_pos_m=np.array(sequence.tool_pos_base_m, dtype=float),
         target_robot_rad=np.array(sequence.robot_rad, dtype=float),
+        target_patient_deg=np.array(sequence.patient_deg, dtype=float),
         robot_qpos_rad=np.array(qpos), tool_pos_m=np.array(tool),
         patient_qpos_rad=np.array(patient), robot_torque_nm=np.array(torque),
         interaction_force_n=np.array(force), target_index=np.array(index),
+        patient_torque_nm=np.array(muscle),
         total_return=total, success=success, safety_violation=info["safety_violation"],
         truncated=bool(truncated), exercise=int(info["exercise"]),
         weight_level=int(info["weight_level"]),
         targets_reached=int(info["target_index"]) + int(success),
-        num_targets=int(info["num_targets"]))
+        num_targets=int(info["num_targets"]),
+        robot_work_j=float(info["robot_work_j"]), patient_work_j=float(info["patient_work_j"]),
+        assistance_ratio=float(info["assistance_ratio"]))

@@ -30,6 +30,7 @@ term                value
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -138,6 +139,14 @@ class PaperReward:
 def info_keys(names: tuple[str, ...]) -> tuple[str, ...]:
     """The ``info`` keys of reward terms: ``"reward_<name>"``."""
     return tuple(f"reward_{name}" for name in names)
+
+
+def joint_distance(theta: list[float], target: list[float]) -> float:
+    """``||theta - target||_2`` of two short lists (plain Python: no allocation)."""
+    squared = 0.0
+    for angle, goal in zip(theta, target, strict=True):
+        squared += (angle - goal) * (angle - goal)
+    return math.sqrt(squared)
 
 
 def total(terms: dict[str, float]) -> float:

@@ -144,6 +144,11 @@ class SafetyMonitor:
         self._speed = np.zeros(model.nv)
 
     @property
+    def cuff_rows(self) -> tuple[int, ...]:
+        """The first constraint row of each cuff's force (``data.efc_force[row:row + 3]``)."""
+        return self._cuff_rows
+
+    @property
     def force_limit_n(self) -> float:
         """The lowest cuff force limit [N] (the only one, with one robot)."""
         return float(self.force_limits_n.min())

@@ -1,0 +1,273 @@
+"""What the patient's muscles do, every physics step: the torques of a
+:class:`~rehabbot.sim.conditions.PatientCondition` and the work done on the limb.
+
+:class:`PatientDrive` steps the physics one step at a time and, before each step, writes the
+patient's torques on the compliant exercised joints into ``data.qfrc_applied``:
+
+* the **stretch reflex** of spasticity (:func:`rehabbot.sim.conditions.reflex_torque_nm`), fed
+  by the joint velocity of ``REFLEX_LATENCY_S`` ago;
+* **tremor**: ``A (1 + 0.25 m(t)) sin(phase_j(t))`` with the phase advancing at
+  ``tremor_hz + df(t)``; ``df`` (0.2 Hz standard deviation) and ``m`` (clipped to +-1) are
+  Ornstein-Uhlenbeck processes with a 2 s time constant, drawn from the env's ``np_random``
+  at each control step; each joint starts at a random phase;
+* **voluntary effort**: ``"active_assisted"``: the patient carries the limb's own weight and
+  pulls towards the target it noticed ``reaction_delay_s`` ago (a PD law), ``"resistive"``: it
+  pushes against the motion, ``-S tanh(v / 0.1 rad/s)``; both saturated at the available
+  strength ``S = effort_fraction x strength_fraction x`` the healthy strength of the profile.
+
+:class:`WorkMeter` integrates the mechanical work on the limb: the patient's (torque x joint
+displacement over each physics step) and the robot's (cuff force on the limb x displacement of
+the patient's cuff site), each also as positive work only, and their ratio.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from rehabbot.sim.conditions import (
+    REFLEX_GAIN_NMS_PER_RAD,
+    REFLEX_LATENCY_S,
+    PatientCondition,
+    healthy_strength_nm,
+    reflex_torque_nm,
+)
+from rehabbot.sim.scene import Scene
+
+TREMOR_DRIFT_HZ = 0.2  # standard deviation of the tremor frequency's drift
+TREMOR_MODULATION = 0.25  # amplitude modulation depth
+TREMOR_CORRELATION_S = 2.0  # time constant of the drift and modulation
+RESIST_VELOCITY_RAD_S = 0.1  # the resistive patient reaches full push at this speed
+ACTIVE_SATURATION_RAD = 0.35  # the active patient pulls with full strength beyond this error
+ACTIVE_DAMPING_S = 0.3  # Kd = this x Kp
+
+
+class WorkMeter:
+    """Mechanical work on the limb since :meth:`reset`: the robot's through the cuff and the
+    patient's through its muscles [J]; positive work counted separately for the ratio."""
+
+    def __init__(self, scene: Scene, cuff_row: int) -> None:
+        handle = scene.robots[0]
+        self._site = handle.patient_cuff_site_id
+        self._row = cuff_row
+        self._site_pos = np.zeros(3)
+        self.reset_counts()
+
+    def reset_counts(self) -> None:
+        self.robot_j = 0.0
+        self.robot_positive_j = 0.0
+        self.patient_j = 0.0
+        self.patient_positive_j = 0.0
+        self._force: list[float] | None = None
+        self._pos: tuple[float, ...] = (0.0, 0.0, 0.0)
+
+    def bind(self, data: mujoco.MjData) -> None:
+        """Cache a view of the patient's cuff site position (again after a pickle round trip)."""
+        self._site_pos = data.site_xpos[self._site]
+
+    def reset(self, data: mujoco.MjData) -> None:
+        """Start counting from the state in ``data`` (after ``mj_forward``)."""
+        self.reset_counts()
+        self.bind(data)
+        self._pos = tuple(self._site_pos.tolist())
+
+    def after_step(self, data: mujoco.MjData) -> None:
+        """Account for the robot's work up to the state ``data`` held at the start of the last
+        physics step (``mj_step`` leaves its positions and constraint forces there): the force
+        of the step before times the displacement since."""
+        x, y, z = self._site_pos.tolist()
+        force = self._force
+        if force is not None:
+            px, py, pz = self._pos
+            fx, fy, fz = force
+            work = fx * (px - x) + fy * (py - y) + fz * (pz - z)  # the force on the limb is -f
+            self.robot_j += work
+            if work > 0.0:
+                self.robot_positive_j += work
+        self._pos = (x, y, z)
+        row = self._row
+        efc = data.efc_force
+        self._force = efc[row:row + 3].tolist() if len(efc) >= row + 3 else None
+
+    def add_patient(self, work_j: float) -> None:
+        self.patient_j += work_j
+        if work_j > 0.0:
+            self.patient_positive_j += work_j
+
+    @property
+    def assistance_ratio(self) -> float:
+        """Robot's positive work / all positive work on the limb; 1.0 until the patient has
+        done positive work (the robot carries the limb)."""
+        total = self.robot_positive_j + self.patient_positive_j
+        return self.robot_positive_j / total if self.patient_positive_j > 0.0 else 1.0
+
+
+class PatientDrive:
+    """The condition's torques on the compliant exercised joints of ``scene`` (see the module
+    docstring). ``ranges_rad`` are the (possibly reduced) ranges of those joints."""
+
+    def __init__(self, scene: Scene, condition: PatientCondition, meter: WorkMeter,
+                 ranges_rad: np.ndarray, frame_skip: int) -> None:
+        model = scene.model
+        self.condition = condition
+        self.meter = meter
+        self.frame_skip = frame_skip
+        self.dt_s = float(model.opt.timestep)
+        dofs = [int(d) for d in scene.compliant_dof_adr]
+        self._dofs = dofs
+        self._qadr = [int(model.jnt_qposadr[model.dof_jntid[d]]) for d in dofs]
+        names = [model.joint(int(model.dof_jntid[d])).name for d in dofs]
+        bases = [n.rsplit("_", 1)[0] for n in names]
+        exercised = list(scene.exercised_joints)
+        self.exercised_index = [exercised.index(n) for n in names]
+        self._low = [float(r[0]) for r in ranges_rad]
+        self._high = [float(r[1]) for r in ranges_rad]
+        profile = scene.profile
+        self._reflex = condition.reflex
+        self._gain = [REFLEX_GAIN_NMS_PER_RAD[b] for b in bases]
+        share = condition.strength_fraction * condition.effort_fraction
+        strength = [healthy_strength_nm(b, profile.mass_kg, profile.sex) for b in bases]
+        self.available_nm = [(share * pos, share * neg) for pos, neg in strength]
+        self._mode = condition.effort if share > 0 else "passive"
+        self._kp = [max(pos, neg) / ACTIVE_SATURATION_RAD for pos, neg in self.available_nm]
+        self._lag = max(1, round(REFLEX_LATENCY_S / self.dt_s))
+        self._velocity_history = [[0.0] * len(dofs) for _ in range(self._lag)]
+        self._goal_lag = round(condition.reaction_delay_s / (frame_skip * self.dt_s))
+        self._goals: list[list[float]] = []
+        self._tremor = condition.has_tremor
+        self._phase = [0.0] * len(dofs)
+        self._drift_hz = 0.0
+        self._modulation = 0.0
+        self._step_index = 0
+        self.torque_nm = np.zeros(len(exercised))  # the last physics step's, exercised joints
+        self._torque = [0.0] * len(dofs)
+
+    def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        """Start an episode: clear the delays, draw the tremor's phases from ``rng``."""
+        for row in self._velocity_history:
+            row[:] = [0.0] * len(row)
+        self._goals.clear()
+        self._step_index = 0
+        if self._tremor:
+            self._phase = rng.uniform(0.0, 2.0 * math.pi, len(self._dofs)).tolist()
+            self._drift_hz = float(rng.normal(0.0, TREMOR_DRIFT_HZ))
+            self._modulation = float(np.clip(rng.normal(0.0, 1.0), -1.0, 1.0))
+        self.torque_nm[:] = 0.0
+        self._torque = [0.0] * len(self._dofs)
+        data.qfrc_applied[self._dofs] = 0.0
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float],
+             rng: np.random.Generator) -> None:
+        """One control step: ``frame_skip`` physics steps with the patient's torques.
+        ``goal_rad``: the compliant joints' angles at the active target."""
+        self._goals.append(goal_rad)
+        if len(self._goals) > self._goal_lag + 1:
+            del self._goals[0]
+        goal = self._goals[0]
+        if self._tremor:
+            self._advance_tremor_processes(rng)
+        qpos, qvel, applied, bias = data.qpos, data.qvel, data.qfrc_applied, data.qfrc_bias
+        meter, dofs, qadr = self.meter, self._dofs, self._qadr
+        for _ in range(self.frame_skip):
+            q = [qpos[a] for a in qadr]
+            v = [qvel[d] for d in dofs]
+            torque = self._torques(q, v, goal, [bias[d] for d in dofs])
+            for d, t in zip(dofs, torque, strict=True):
+                applied[d] = t
+            mujoco.mj_step(model, data)
+            work = 0.0
+            for a, t, before in zip(qadr, torque, q, strict=True):
+                work += t * (qpos[a] - before)
+            meter.add_patient(work)
+            meter.after_step(data)
+        self._torque = torque
+        for i, t in zip(self.exercised_index, torque, strict=True):
+            self.torque_nm[i] = t
+
+    # -- the torque laws -------------------------------------------------------------------
+    def _torques(self, q: list[float], v: list[float], goal: list[float],
+                 bias: list[float]) -> list[float]:
+        history = self._velocity_history
+        slot = self._step_index % self._lag
+        delayed = history[slot]  # the velocity of `lag` physics steps ago
+        history[slot] = v
+        self._step_index += 1
+        torque = [0.0] * len(q)
+        reflex, mode = self._reflex, self._mode
+        for j in range(len(q)):
+            t = 0.0
+            if reflex is not None:
+                t += reflex_torque_nm(reflex, self._gain[j], delayed[j], q[j], self._low[j],
+                                      self._high[j])
+            if mode == "active_assisted":
+                kp = self._kp[j]
+                pull = bias[j] + kp * (goal[j] - q[j]) - ACTIVE_DAMPING_S * kp * v[j]
+                pos, neg = self.available_nm[j]
+                t += min(max(pull, -neg), pos)
+            elif mode == "resistive":
+                pos, neg = self.available_nm[j]
+                push = math.tanh(v[j] / RESIST_VELOCITY_RAD_S)
+                t -= push * (neg if push > 0 else pos)
+            torque[j] = t
+        if self._tremor:
+            condition = self.condition
+            amplitude = condition.tremor_amplitude_nm * (1.0 + TREMOR_MODULATION
+                                                         * self._modulation)
+            step = 2.0 * math.pi * (condition.tremor_hz + self._drift_hz) * self.dt_s
+            phase = self._phase
+            for j in range(len(q)):
+                torque[j] += amplitude * math.sin(phase[j])
+                phase[j] += step
+        return torque
+
+    def _advance_tremor_processes(self, rng: np.random.Generator) -> None:
+        """One control step of the drift and modulation (exact Ornstein-Uhlenbeck update)."""
+        dt = self.frame_skip * self.dt_s
+        decay = math.exp(-dt / TREMOR_CORRELATION_S)
+        noise = math.sqrt(1.0 - decay * decay)
+        z_drift, z_mod = rng.normal(0.0, 1.0, 2).tolist()
+        self._drift_hz = decay * self._drift_hz + noise * TREMOR_DRIFT_HZ * z_drift
+        self._modulation = min(max(decay * self._modulation + noise * z_mod, -1.0), 1.0)
+
+
+class LimbPhysics:
+    """One control step of the physics with the patient: ``frame_skip`` physics steps, the
+    condition's torques when it applies any (:class:`PatientDrive`), and the work on the limb
+    counted after every physics step (:class:`WorkMeter`)."""
+
+    def __init__(self, scene: Scene, condition: PatientCondition, cuff_row: int,
+                 ranges_rad: np.ndarray, frame_skip: int) -> None:
+        self.meter = WorkMeter(scene, cuff_row)
+        self.frame_skip = frame_skip
+        self.drive = PatientDrive(scene, condition, self.meter, ranges_rad, frame_skip) \
+            if condition.acts else None
+        self.torque_nm = self.drive.torque_nm if self.drive is not None else \
+            np.zeros(len(scene.exercised_joints))
+
+    def bind(self, data: mujoco.MjData) -> None:
+        self.meter.bind(data)
+
+    def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        """Start an episode from the state in ``data`` (after ``mj_forward``)."""
+        self.meter.reset(data)
+        if self.drive is not None:
+            self.drive.reset(data, rng)
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float],
+             rng: np.random.Generator) -> None:
+        """Advance one control step (``goal_rad``: what an active patient aims for)."""
+        if self.drive is not None:
+            self.drive.step(model, data, goal_rad, rng)
+            return
+        after_step = self.meter.after_step
+        for _ in range(self.frame_skip):
+            mujoco.mj_step(model, data)
+            after_step(data)
+
+    def info(self) -> dict:
+        """The patient's entries of the env's ``info``."""
+        meter = self.meter
+        return {"patient_torque_nm": self.torque_nm.copy(), "patient_work_j": meter.patient_j,
+                "robot_work_j": meter.robot_j, "assistance_ratio": meter.assistance_ratio}
