@@ -17,8 +17,8 @@ The layers, each importing only those below it (``docs/architecture.md``):
 ============== =====================================================================
 
 The names most users need are here too, imported on first use: ``RehabEnv``,
-``RehabEnvConfig``, ``PatientProfile``, ``PatientCondition``, ``Exercise``, ``ScriptedExpert``,
-``AssistAsNeeded``.
+``RehabEnvConfig``, ``PatientProfile``, ``PatientCondition``, ``PatientPopulation``,
+``PopulationEnv``, ``Exercise``, ``ScriptedExpert``, ``AssistAsNeeded``.
 """
 
 from __future__ import annotations
@@ -38,6 +38,8 @@ _LAZY = {
     "RehabEnvConfig": "rehabbot.envs.config",
     "PatientProfile": "rehabbot.sim.patient",
     "PatientCondition": "rehabbot.sim.conditions",
+    "PatientPopulation": "rehabbot.sim.populations",
+    "PopulationEnv": "rehabbot.envs.population",
     "Exercise": "rehabbot.tasks.exercises",
     "ScriptedExpert": "rehabbot.rl.experts",
     "AssistAsNeeded": "rehabbot.rl.assist_as_needed",

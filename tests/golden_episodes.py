@@ -37,7 +37,9 @@ IDS = ("rehabbot/rehab-reach-v0", "rehabbot/rehab-reach-l-v0", "rehabbot/rehab-h
        "rehabbot/rehab-reach-spastic-v1", "rehabbot/rehab-reach-tremor-v1",
        "rehabbot/rehab-reach-active-v1", "rehabbot/rehab-hip-spastic-v1",
        "rehabbot/rehab-knee-weak-v1", "rehabbot/rehab-knee-stiff-v1",
-       "rehabbot/rehab-knee-resistive-v1")
+       "rehabbot/rehab-knee-resistive-v1",
+       # a patient of the "train" population each episode (POPULATION_VARIANTS)
+       "rehabbot/rehab-reach-population-v1", "rehabbot/rehab-knee-population-v1")
 MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 EXERCISES = (0, 1)
 WEIGHT_LEVELS = (0, 1, 2, 3, 4)

@@ -338,3 +338,31 @@ def test_conditions_work_for_other_profiles():
     info, _ = expert_episode({"effort": "active_assisted", "strength_fraction": 0.3},
                              profile=PatientProfile(1.6, 55.0, "female"))
     assert info["is_success"] and 0.0 < info["assistance_ratio"] < 1.0
+
+
+# ------------------------------------------------------------------------------- evaluate
+def test_range_of_motion_counts_the_excursion_achieved_and_prescribed():
+    from rehabbot.analysis.evaluation import range_of_motion_deg
+
+    patient = np.radians([[30, 12, 70], [50, 12, 70], [80, 13, 70], [60, 12, 70]])
+    targets = np.array([[45, 12, 70], [90, 12, 70], [40, 12, 70]])
+    achieved, prescribed = range_of_motion_deg(patient, targets)
+    assert np.allclose(achieved, [50, 1, 0])
+    assert np.allclose(prescribed, [60, 0, 0])  # from the start (30) through 90 and back
+
+
+def test_evaluate_reports_the_patients_side():
+    from rehabbot.analysis.evaluation import evaluate_policies, format_table
+
+    reports = [r for r, _ in evaluate_policies(["expert", "aan"], "rehabbot/rehab-knee-weak-v1",
+                                               episodes=1, seed=0)]
+    for report in reports:
+        summary, episode = report["summary"], report["per_episode"][0]
+        assert episode["success"]
+        assert 0.0 < summary["assistance_ratio"]["mean"] < 1.0  # the active patient helps
+        assert summary["patient_work_j"]["mean"] > 0.0
+        assert 0.9 < summary["rom_achieved_fraction"]["mean"] < 1.1
+        assert episode["rom_prescribed_deg"][2] > 30.0  # the knee moves, the hip is held
+        assert episode["rom_prescribed_deg"][0] < 0.1  # (IK residuals only)
+    table = format_table(reports)
+    assert "assistance ratio" in table and "ROM achieved / prescribed" in table

@@ -1,4 +1,4 @@
-"""``rehabbot evaluate MODEL|expert|random ...``: every policy on the same episodes of one env,
+"""``rehabbot evaluate MODEL|expert|aan|random ...``: every policy on the same episodes of one env,
 a table of clinical figures, and per policy ``evaluation.json`` and ``trace.npz``
 (:mod:`rehabbot.analysis.evaluation`). Every argument is checked, every model loaded and the
 output folder probed before the first episode runs."""
@@ -27,7 +27,8 @@ def _json_object(text: str) -> dict:
 def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
     """Add ``evaluate`` to the ``rehabbot`` subcommands."""
     parser = commands.add_parser(
-        "evaluate", help="evaluate trained models, the scripted expert or random actions",
+        "evaluate", help="evaluate trained models, the scripted expert, the assist-as-needed "
+             "controller or random actions",
         description="Clinical evaluation of policies on the same episodes of one env. Prints "
                     "a table and writes JSON.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -35,6 +36,10 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip\n"
                "  rehabbot evaluate expert random --env rehab-reach-v0 --episodes 20\n"
                "  rehabbot evaluate zoo:rehab-reach-v1/ppo expert\n"
+               "  rehabbot evaluate zoo:rehab-reach-v1/sac aan expert --env "
+               "rehab-reach-spastic-v1\n"
+               "  rehabbot evaluate expert --env rehab-reach-population-v1 --env-kwargs "
+               "'{\"patients\": \"test\"}'\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random "
                "--episodes 20\n"
                "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip --env-kwargs "
@@ -44,14 +49,14 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
                "manifest.json, or the zoo agent's file). Each policy's files go to "
                "OUT/<label>/evaluation.json and OUT/<label>/trace.npz; with several "
                "policies, OUT/comparison.md.")
-    parser.add_argument("policies", nargs="+", metavar="MODEL|zoo:ENV/ALGO|expert|random",
+    parser.add_argument("policies", nargs="+", metavar="MODEL|zoo:ENV/ALGO|expert|aan|random",
                         help="a model .zip saved by `rehabbot train` (or any SB3 PPO/SAC/TD3 "
                              "zip), an agent shipped in the zoo (zoo:rehab-reach-v1/ppo; "
-                             "python -m rehabbot.rl.zoo list), 'expert' (scripted expert) or "
-                             "'random'")
+                             "python -m rehabbot.rl.zoo list), 'expert' (scripted expert), 'aan' "
+                             "(assist-as-needed controller) or 'random'")
     parser.add_argument("--env", metavar="ENV",
                         help="env id, with or without 'rehabbot/' (default: the env the "
-                             "models were trained on; required for expert and random alone)")
+                             "models were trained on; required for expert, aan and random alone)")
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
                         help=f"episodes per policy (default: {DEFAULT_EPISODES})")
     parser.add_argument("--seed", type=int, default=0, metavar="S",

@@ -74,13 +74,26 @@ CONDITION_VARIANTS: dict[str, tuple[str, dict, str]] = {
 for _id, (_base_id, _condition, _description) in CONDITION_VARIANTS.items():
     ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], "condition": dict(_condition)}, _description)
 
+# A new patient every episode (rehabbot.envs.population, rehabbot.sim.populations): the base
+# -v1 task with patients drawn from the "train" population; patients="test" gives the
+# held-out one.
+POPULATION_ENTRY_POINT = "rehabbot.envs.population:PopulationEnv"
+POPULATION_VARIANTS: dict[str, str] = {
+    "rehabbot/rehab-reach-population-v1": "rehabbot/rehab-reach-v1",
+    "rehabbot/rehab-knee-population-v1": "rehabbot/rehab-knee-v1",
+}
+for _id, _base_id in POPULATION_VARIANTS.items():
+    ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], "patients": "train"},
+                      f"{ENV_SPECS[_base_id][1]}; a patient of a population each episode")
+
 
 def register_envs() -> None:
     """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""
     for env_id, (kwargs, _description) in ENV_SPECS.items():
         if env_id in gym.registry:
             continue
-        gym.register(id=env_id, entry_point=ENTRY_POINT, kwargs=dict(kwargs),
+        entry_point = POPULATION_ENTRY_POINT if "patients" in kwargs else ENTRY_POINT
+        gym.register(id=env_id, entry_point=entry_point, kwargs=dict(kwargs),
                      max_episode_steps=MAX_EPISODE_STEPS, order_enforce=False,
                      disable_env_checker=True)
 

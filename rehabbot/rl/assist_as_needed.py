@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rehabbot.envs.rehab_env import RehabEnv
+from rehabbot.envs.config import RehabEnvConfig
 
 FORGETTING = 0.98  # f per decision (time constant 50 decisions = 1 s at 50 Hz)
 ERROR_GAIN = 0.05  # g per decision
@@ -53,9 +53,9 @@ class AssistAsNeeded:
         if not (0.0 < speed_fraction <= 1.0):
             raise ValueError(f"speed_fraction={speed_fraction!r} must be in (0, 1]")
         base = getattr(env, "unwrapped", None)
-        if not isinstance(base, RehabEnv):
-            raise ValueError("AssistAsNeeded needs a single RehabEnv (or a wrapper of one): it "
-                             "reads the env's current setpoints")
+        if not isinstance(getattr(base, "config", None), RehabEnvConfig):
+            raise ValueError("AssistAsNeeded needs a single RehabEnv or PopulationEnv (or a "
+                             "wrapper of one): it reads the env's current setpoints")
         if base.control_mode != "joint_delta":
             raise ValueError(f"AssistAsNeeded supports control_mode='joint_delta', not "
                              f"{base.control_mode!r}")

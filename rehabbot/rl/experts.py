@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rehabbot.envs.config import RehabEnvConfig
 from rehabbot.envs.control import PAPER_DELTA_RAD
 from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.tasks.observation import paper_layout
@@ -98,8 +99,10 @@ def _first_dt(env) -> float:
 
 
 def _rehab_env(env) -> RehabEnv | None:
+    """The RehabEnv under ``env``'s wrappers (or a PopulationEnv, which passes every attribute
+    on to its episode's RehabEnv), or None for a vector env."""
     unwrapped = getattr(env, "unwrapped", None)
-    return unwrapped if isinstance(unwrapped, RehabEnv) else None
+    return unwrapped if isinstance(getattr(unwrapped, "config", None), RehabEnvConfig) else None
 
 
 def _mode_of(env) -> str:

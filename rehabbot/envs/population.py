@@ -1,0 +1,140 @@
+"""``PopulationEnv``: a new patient every episode, drawn from a :class:`PatientPopulation`.
+
+## Description
+The env holds one :class:`~rehabbot.envs.rehab_env.RehabEnv` per patient of the population
+(every pair of its profiles and conditions), each built the first time it is drawn, and
+passes every ``reset``, ``step`` and ``render`` to the patient of the episode. The spaces are
+the same for every patient of an id (checked as each is built), so one policy serves them all.
+
+## Arguments
+``patients`` (default ``"train"``): a :class:`~rehabbot.sim.populations.PatientPopulation`, a
+dict of its fields, or the name of a shipped one (``"train"``, ``"test"``;
+:data:`rehabbot.sim.populations.POPULATIONS`). Every other keyword is a
+:class:`~rehabbot.envs.config.RehabEnvConfig` field (not ``profile`` or ``condition``, which
+the population sets), validated when the env is built.
+
+## Episodes
+``reset(seed=s)`` seeds the env's ``np_random``; each reset draws the patient uniformly from it,
+then resets that patient's env with a seed drawn from it too, so a seed fixes the whole
+sequence of patients, exercises and weight levels. ``reset(options={"patient": k})`` picks
+patient ``k`` (an index into :attr:`PatientPopulation.patients`); ``"exercise"`` and
+``"weight_level"`` pass through. ``info["patient"]`` is the episode's patient index.
+
+A patient who cannot do the exercises (``ValueError`` when its env is built) is reported with
+its profile and condition the first time it is drawn; :meth:`PopulationEnv.build_all` builds
+every patient at once to check a population up front.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+
+from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig
+from rehabbot.envs.rehab_env import RESET_OPTIONS, RehabEnv
+from rehabbot.sim.populations import PatientPopulation, as_population
+
+POPULATION_RESET_OPTIONS = (*RESET_OPTIONS, "patient")
+
+
+class PopulationEnv(gym.Env):
+    """A patient drawn from ``patients`` every episode (see the module docstring)."""
+
+    metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
+
+    def __init__(self, patients: PatientPopulation | dict | str = "train",
+                 **kwargs: Any) -> None:
+        for name in ("profile", "condition"):
+            if name in kwargs:
+                raise ValueError(f"PopulationEnv sets {name!r} from its population; pass "
+                                 f"patients= instead of {name}=")
+        self.population = as_population(patients)
+        self.config = RehabEnvConfig(**kwargs)  # ValueError naming a bad kwarg, now
+        self._kwargs = dict(kwargs)
+        self._envs: dict[int, RehabEnv] = {}
+        self._patient = 0
+        first = self._env_of(0)
+        self.observation_space = first.observation_space
+        self.action_space = first.action_space
+        self.render_mode = first.render_mode
+        self.metadata = dict(first.metadata)
+
+    # -- Gymnasium API -------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - set(POPULATION_RESET_OPTIONS)
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; valid: "
+                             f"{list(POPULATION_RESET_OPTIONS)}")
+        patients = self.population.patients
+        drawn = int(self.np_random.integers(len(patients)))
+        patient = options.pop("patient", None)
+        if patient is None:
+            patient = drawn
+        elif isinstance(patient, bool) or patient not in range(len(patients)):
+            raise ValueError(f"patient={patient!r} is not one of {list(range(len(patients)))} "
+                             f"(population {self.population.name!r})")
+        env = self._env_of(int(patient))
+        self._patient = int(patient)
+        obs, info = env.reset(seed=int(self.np_random.integers(2**31 - 1)), options=options)
+        info["patient"] = self._patient
+        return obs, info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.current_env.step(action)
+        info["patient"] = self._patient
+        return obs, reward, terminated, truncated, info
+
+    def render(self):
+        return self.current_env.render()
+
+    def close(self) -> None:
+        for env in self._envs.values():
+            env.close()
+
+    # -- patients ------------------------------------------------------------------------
+    @property
+    def current_env(self) -> RehabEnv:
+        """The env of the episode's patient."""
+        return self._envs[self._patient]
+
+    @property
+    def current_patient(self) -> int:
+        """The episode's patient: an index into ``population.patients``."""
+        return self._patient
+
+    def build_all(self) -> None:
+        """Build every patient's env now (``ValueError`` for one who cannot do the
+        exercises)."""
+        for k in range(len(self.population.patients)):
+            self._env_of(k)
+
+    def _env_of(self, k: int) -> RehabEnv:
+        env = self._envs.get(k)
+        if env is not None:
+            return env
+        profile, condition = self.population.patients[k]
+        try:
+            env = RehabEnv(profile=profile, condition=condition, **self._kwargs)
+        except ValueError as err:
+            raise ValueError(f"patient {k} of population {self.population.name!r} ({profile}, "
+                             f"{condition.describe()}) cannot do these exercises: {err}") from err
+        if self._envs:
+            first = next(iter(self._envs.values()))
+            if env.observation_space != first.observation_space \
+                    or env.action_space != first.action_space:
+                raise ValueError(f"patient {k} of population {self.population.name!r} has other "
+                                 "spaces than the first patient's")
+        self._envs[k] = env
+        return env
+
+    def __getattr__(self, name: str) -> Any:
+        # Everything else (layout, target_sequence, robot, controller, dt, ...) is the
+        # episode's patient's env's.
+        envs = self.__dict__.get("_envs")
+        if not envs:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return getattr(envs[self.__dict__["_patient"]], name)
+
