@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -34,3 +35,30 @@ def check_number(name: str, value: Any, low: float = -math.inf, high: float = ma
         kind = "an integer" if integer else "a finite number"
         raise ValueError(f"{name}={value!r} must be {kind} in [{low}, {high}]")
     return int(value) if integer else float(value)
+
+
+def as_dataclass(cls: type, value: Any, name: str) -> Any:
+    """``value`` as a ``cls`` (a dataclass): itself, one built from a dict of its fields, or
+    ``cls()`` for None; ``ValueError`` naming ``name`` and the valid fields otherwise."""
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    fields = [f.name for f in dataclasses.fields(cls)]
+    if isinstance(value, Mapping):
+        unknown = sorted(set(value) - set(fields))
+        if unknown:
+            raise ValueError(f"{name} has unknown field(s) {unknown}; valid: {fields}")
+        return cls(**value)
+    raise ValueError(f"{name}={value!r} must be a {cls.__name__}, a dict of its fields "
+                     f"({', '.join(fields)}) or None")
+
+
+def check_options(options: Mapping | None, valid: Iterable[str]) -> dict:
+    """``options`` (e.g. of ``reset``) as a new dict; ``ValueError`` naming unknown keys."""
+    options = dict(options or {})
+    valid = list(valid)
+    unknown = set(options) - set(valid)
+    if unknown:
+        raise ValueError(f"unknown reset options {sorted(unknown)}; valid: {valid}")
+    return options

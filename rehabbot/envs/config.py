@@ -11,11 +11,10 @@ The table of the arguments is in the docstring of :mod:`rehabbot.envs.rehab_env`
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from rehabbot.common.checks import check_choice, check_number
+from rehabbot.common.checks import as_dataclass, check_choice, check_number
 from rehabbot.sim.conditions import PatientCondition, as_condition
 from rehabbot.sim.patient import PatientProfile
 from rehabbot.sim.robots.ur5e import MAX_JOINT_SPEED_RAD_S
@@ -182,15 +181,4 @@ def kwarg_names() -> tuple[str, ...]:
 
 
 def _as_profile(profile: Any) -> PatientProfile:
-    if profile is None:
-        return PatientProfile()
-    if isinstance(profile, PatientProfile):
-        return profile
-    if isinstance(profile, Mapping):
-        fields = [f.name for f in dataclasses.fields(PatientProfile)]
-        unknown = sorted(set(profile) - set(fields))
-        if unknown:
-            raise ValueError(f"profile has unknown field(s) {unknown}; valid: {fields}")
-        return PatientProfile(**profile)
-    raise ValueError(f"profile={profile!r} must be a PatientProfile, a dict of its fields "
-                     "(height_m, mass_kg, sex) or None")
+    return as_dataclass(PatientProfile, profile, "profile")

@@ -31,6 +31,7 @@ from typing import Any, ClassVar
 
 import gymnasium as gym
 
+from rehabbot.common.checks import check_options
 from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig
 from rehabbot.envs.rehab_env import RESET_OPTIONS, RehabEnv
 from rehabbot.sim.populations import PatientPopulation, as_population
@@ -63,11 +64,7 @@ class PopulationEnv(gym.Env):
     # -- Gymnasium API -------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - set(POPULATION_RESET_OPTIONS)
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; valid: "
-                             f"{list(POPULATION_RESET_OPTIONS)}")
+        options = check_options(options, POPULATION_RESET_OPTIONS)
         patients = self.population.patients
         drawn = int(self.np_random.integers(len(patients)))
         patient = options.pop("patient", None)

@@ -153,6 +153,7 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.arrays import as_index
+from rehabbot.common.checks import check_options
 from rehabbot.envs.actions import checked_action
 from rehabbot.envs.build import build_parts
 from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig, kwarg_names
@@ -286,11 +287,7 @@ class RehabEnv(gym.Env):
     # ------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - set(RESET_OPTIONS)
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; valid: "
-                             f"{list(RESET_OPTIONS)}")
+        options = check_options(options, RESET_OPTIONS)
         drawn_exercise = int(self.np_random.integers(len(self.targets)))
         drawn_level = int(self.np_random.integers(len(WEIGHT_LEVELS)))
         exercise = options.get("exercise", self.config.exercise)

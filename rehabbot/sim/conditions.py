@@ -14,11 +14,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from rehabbot.common.checks import check_choice, check_number, is_real
+from rehabbot.common.checks import as_dataclass, check_choice, check_number, is_real
 
 # Modified Ashworth Scale grades (Bohannon & Smith 1987).
 MAS_GRADES: tuple[str, ...] = ("0", "1", "1+", "2", "3", "4")
@@ -194,18 +193,7 @@ class PatientCondition:
 
 def as_condition(value: Any) -> PatientCondition:
     """A :class:`PatientCondition` from itself, a dict of its fields or None (the default)."""
-    if value is None:
-        return PatientCondition()
-    if isinstance(value, PatientCondition):
-        return value
-    if isinstance(value, Mapping):
-        fields = [f.name for f in dataclasses.fields(PatientCondition)]
-        unknown = sorted(set(value) - set(fields))
-        if unknown:
-            raise ValueError(f"condition has unknown field(s) {unknown}; valid: {fields}")
-        return PatientCondition(**value)
-    raise ValueError(f"condition={value!r} must be a PatientCondition, a dict of its fields or "
-                     "None")
+    return as_dataclass(PatientCondition, value, "condition")
 
 
 def catch_position(reflex: SpasticReflex, speed_rad_s: float) -> float:

@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from rehabbot.common.checks import as_dataclass
 from rehabbot.sim.conditions import PatientCondition, as_condition
 from rehabbot.sim.patient import PatientProfile
 
@@ -62,12 +63,7 @@ class PatientPopulation:
 
 
 def _as_profile(value: Any) -> PatientProfile:
-    if isinstance(value, PatientProfile):
-        return value
-    if isinstance(value, Mapping):
-        return PatientProfile(**value)
-    raise ValueError(f"a profile must be a PatientProfile or a dict of its fields, got "
-                     f"{value!r}")
+    return as_dataclass(PatientProfile, value, "profile")
 
 
 POPULATIONS: dict[str, PatientPopulation] = {
