@@ -5,7 +5,9 @@ population of each population id (``POPULATION_VARIANTS``), the same seeded epis
 
 * ``expert``: the scripted expert;
 * ``aan``: the assist-as-needed controller (:mod:`rehabbot.rl.assist_as_needed`);
-* ``sac-healthy``: the zoo's SAC agent of the base ``-v1`` id, trained on a healthy patient;
+* ``sac-healthy``: SAC trained on a healthy patient: seed 0 of the base ``-v1`` id's run in
+  ``--healthy-runs`` (e.g. ``runs/results-v1-sac``: the same settings, budget and seed as the
+  runs on impaired patients), else the zoo's agent of the base id (the best of 3 seeds);
 * ``sac-condition`` / ``sac-population``: SAC trained on that variant (from ``RUNS``, e.g.
   ``runs/results-conditions-sac``) or on the ``"train"`` population (``--population-runs``),
   when the run exists.
@@ -15,8 +17,9 @@ limb and the assistance ratio (means over episodes).
 
 Usage::
 
-    python benchmarks/condition_results.py [RUNS] [--population-runs DIR] [--episodes 20]
-                                           [--seed 1000] [--ids ID ...] [--json FILE]
+    python benchmarks/condition_results.py [RUNS] [--population-runs DIR] [--healthy-runs DIR]
+                                           [--episodes 20] [--seed 1000] [--ids ID ...]
+                                           [--json FILE]
 """
 
 from __future__ import annotations
@@ -39,8 +42,9 @@ def _model(runs: Path | None, env_id: str) -> str | None:
 
 
 def evaluate_case(env_id: str, env_kwargs: dict, base_id: str, trained: str | None,
-                  trained_label: str, episodes: int, seed: int) -> list[dict]:
-    specs = ["expert", "aan", f"zoo:{env_short_name(base_id)}/sac"]
+                  trained_label: str, episodes: int, seed: int,
+                  healthy: str | None = None) -> list[dict]:
+    specs = ["expert", "aan", healthy or f"zoo:{env_short_name(base_id)}/sac"]
     labels = ["expert", "aan", "sac-healthy"]
     if trained is not None:
         specs.append(trained)
@@ -69,6 +73,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="folder of the SAC runs on the condition variants")
     parser.add_argument("--population-runs", type=Path, default=None,
                         help="folder of the SAC runs on the population ids")
+    parser.add_argument("--healthy-runs", type=Path, default=None,
+                        help="folder of the SAC runs on the healthy -v1 ids (default: the zoo)")
     parser.add_argument("--episodes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=1000)
     parser.add_argument("--ids", nargs="+", default=None, help="only these ids")
@@ -88,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
           "assistance ratio | ROM achieved |")
     print("|---|---|---|---|---|---|---|---|---|")
     for env_id, kwargs, base, trained, label in cases:
-        for row in evaluate_case(env_id, kwargs, base, trained, label, args.episodes, args.seed):
+        for row in evaluate_case(env_id, kwargs, base, trained, label, args.episodes, args.seed,
+                                 _model(args.healthy_runs, base)):
             rows.append(row)
             name = env_short_name(env_id) + (" (test patients)" if kwargs else "")
             stops = ", ".join(f"{n} {rule}" for rule, n in row["stops"].items()) or "-"
