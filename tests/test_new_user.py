@@ -17,7 +17,7 @@ import pytest
 
 import rehabbot
 from rehabbot.cli import main
-from rehabbot.envs.registration import ENV_SPECS
+from rehabbot.envs.registration import CONDITION_VARIANTS, ENV_SPECS, POPULATION_VARIANTS
 
 ENV = "rehab-reach-v0"
 FULL_ID = "rehabbot/rehab-reach-v0"
@@ -66,7 +66,11 @@ def test_a_bad_policy_fails_before_anything_is_written(trained_run, tmp_path, ca
 # -- one id, one pair of spaces -------------------------------------------------------------
 @pytest.mark.parametrize("env_id", [env_id if env_id.endswith("reach-v0") else
                                     pytest.param(env_id, marks=pytest.mark.slow)
-                                    for env_id in ENV_SPECS])
+                                    for env_id in ENV_SPECS
+                                    # (the variants share their base id's spaces: tested in
+                                    # test_conditions.py and test_population.py)
+                                    if env_id not in CONDITION_VARIANTS
+                                    and env_id not in POPULATION_VARIANTS])
 def test_spaces_do_not_depend_on_the_patient_or_the_weight_level(env_id: str) -> None:
     for mode in ("joint_delta", "joint_position"):
         spaces = set()

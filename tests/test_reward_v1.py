@@ -8,12 +8,17 @@ import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.analysis.reward_audit import stall_cases, stop_cases
-from rehabbot.envs.registration import ENV_SPECS
+from rehabbot.envs.registration import CONDITION_VARIANTS, ENV_SPECS, POPULATION_VARIANTS
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.tasks.progress_reward import remaining_path_rad
 
-V1_IDS = tuple(i for i in ENV_SPECS if i.endswith("-v1"))
-ALL_IDS = tuple(ENV_SPECS)
+# The base -v1 ids (the condition and population variants pay the same reward; their own
+# tests are in test_conditions.py and test_population.py).
+V1_IDS = tuple(i for i in ENV_SPECS if i.endswith("-v1") and i not in CONDITION_VARIANTS
+               and i not in POPULATION_VARIANTS)
+# A population env draws another patient at every reset, so the stop audit (which replays a
+# state after a reset) runs on its patients' own ids instead.
+ALL_IDS = tuple(i for i in ENV_SPECS if i not in POPULATION_VARIANTS)
 GAMMAS = (0.95, 0.99, 0.999)
 V1_TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety",
             "reward_smoothness", "reward_effort")

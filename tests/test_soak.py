@@ -20,8 +20,8 @@ from benchmarks.soak import END_REASONS, SoakReport, main, run_soak
 from rehabbot.envs.control import CONTROL_MODES
 from rehabbot.envs.registration import ENV_SPECS
 
-N_CELLS = len(ENV_SPECS) * len(CONTROL_MODES)  # 8 ids x 4 modes
-SHORT_STEPS = 20_000  # 625 per cell over the 32 cells
+N_CELLS = len(ENV_SPECS) * len(CONTROL_MODES)  # every id x 4 modes
+SHORT_STEPS = N_CELLS * 300  # 300 steps per cell
 FAULT_EVERY = 100  # the faulty envs misbehave on every 100th step call
 
 
