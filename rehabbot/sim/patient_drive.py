@@ -142,7 +142,6 @@ class PatientDrive:
         self._modulation = 0.0
         self._step_index = 0
         self.torque_nm = np.zeros(len(exercised))  # the last physics step's, exercised joints
-        self._torque = [0.0] * len(dofs)
 
     def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
         """Start an episode: clear the delays, draw the tremor's phases from ``rng``."""
@@ -155,7 +154,6 @@ class PatientDrive:
             self._drift_hz = float(rng.normal(0.0, TREMOR_DRIFT_HZ))
             self._modulation = float(np.clip(rng.normal(0.0, 1.0), -1.0, 1.0))
         self.torque_nm[:] = 0.0
-        self._torque = [0.0] * len(self._dofs)
         data.qfrc_applied[self._dofs] = 0.0
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float],
@@ -182,7 +180,6 @@ class PatientDrive:
                 work += t * (qpos[a] - before)
             meter.add_patient(work)
             meter.after_step(data)
-        self._torque = torque
         for i, t in zip(self.exercised_index, torque, strict=True):
             self.torque_nm[i] = t
 
