@@ -6,11 +6,14 @@ setpoints, warmed up, and then ``mujoco.mj_step`` is timed with ``time.perf_coun
 The baseline is the bare UR5e (``rehabbot.sim.robots.ur5e.build_ur5e_spec``) holding the same
 joint angles, so the ``x baseline`` column shows what the patient, the straps and the
 contacts cost relative to the robot alone, measured in the same run on the same machine.
+``--robots ur5e fr3`` measures every preset with each robot (rows ``<preset>/<robot>`` for
+robots other than the UR5e), against the same UR5e baseline.
 
 Usage::
 
     python benchmarks/physics_throughput.py [--steps 5000] [--warmup 500] [--repeats 3]
-                                            [--presets NAME ...] [--json FILE]
+                                            [--presets NAME ...] [--robots NAME ...]
+                                            [--json FILE]
 """
 
 from __future__ import annotations
@@ -117,19 +120,22 @@ def robot_only_model(home_angles_rad: dict[str, float]) -> tuple[mujoco.MjModel,
 
 
 def run_benchmark(
-    presets: Sequence[str], steps: int, warmup: int, repeats: int
+    presets: Sequence[str], steps: int, warmup: int, repeats: int,
+    robots: Sequence[str] = ("ur5e",),
 ) -> list[ThroughputRow]:
-    """Benchmark the presets and the robot-only baseline; baseline row first."""
+    """Benchmark the presets (with each robot) and the robot-only baseline; baseline first."""
     from rehabbot.sim import build_scene
 
     scene_rows = []
     home_angles_rad: dict[str, float] = {}
-    for preset in presets:
-        scene = build_scene(preset)
-        data = scene.make_data()
-        if not home_angles_rad:
-            home_angles_rad = joint_angles_by_name(scene.model, data)
-        scene_rows.append(make_row(preset, scene.model, data, steps, warmup, repeats))
+    for robot in robots:
+        for preset in presets:
+            scene = build_scene(preset, robot=robot)
+            data = scene.make_data()
+            if not home_angles_rad and robot == "ur5e":
+                home_angles_rad = joint_angles_by_name(scene.model, data)
+            name = preset if robot == "ur5e" else f"{preset}/{robot}"
+            scene_rows.append(make_row(name, scene.model, data, steps, warmup, repeats))
     model, data = robot_only_model(home_angles_rad)
     baseline = make_row(BASELINE_NAME, model, data, steps, warmup, repeats)
     rows = [baseline, *scene_rows]
@@ -141,13 +147,13 @@ def run_benchmark(
 def format_table(rows: Sequence[ThroughputRow]) -> str:
     """Fixed-width text table of the rows."""
     header = (
-        f"{'preset':<16} {'nq':>4} {'nv':>4} {'ncon@rest':>9} {'nefc@rest':>9} {'dt [ms]':>7} "
+        f"{'preset':<21} {'nq':>4} {'nv':>4} {'ncon@rest':>9} {'nefc@rest':>9} {'dt [ms]':>7} "
         f"{'steps/s':>10} {'x realtime':>10} {'x baseline':>10}"
     )
     lines = [header, "-" * len(header)]
     for row in rows:
         lines.append(
-            f"{row.name:<16} {row.nq:>4} {row.nv:>4} {row.ncon_at_rest:>9} {row.nefc_at_rest:>9} "
+            f"{row.name:<21} {row.nq:>4} {row.nv:>4} {row.ncon_at_rest:>9} {row.nefc_at_rest:>9} "
             f"{row.timestep_s * 1e3:>7.2f} {row.steps_per_s:>10.0f} "
             f"{row.realtime_factor:>10.1f} {row.ratio_to_baseline:>10.2f}"
         )
@@ -161,6 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warmup", type=int, default=500, help="untimed steps first")
     parser.add_argument("--repeats", type=int, default=3, help="timed repeats; best is kept")
     parser.add_argument("--presets", nargs="+", metavar="NAME", help="default: all presets")
+    parser.add_argument("--robots", nargs="+", metavar="NAME", default=["ur5e"],
+                        help="robots to put in each preset (default: ur5e)")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write results as JSON")
     return parser
 
@@ -179,7 +187,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"unknown preset(s) {', '.join(unknown)}; valid: {', '.join(PRESETS)}",
               file=sys.stderr)
         return 2
-    rows = run_benchmark(presets, args.steps, args.warmup, args.repeats)
+    from rehabbot.sim.robots import ROBOT_NAMES
+
+    unknown = [name for name in args.robots if name not in ROBOT_NAMES]
+    if unknown:
+        print(f"unknown robot(s) {', '.join(unknown)}; valid: {', '.join(ROBOT_NAMES)}",
+              file=sys.stderr)
+        return 2
+    rows = run_benchmark(presets, args.steps, args.warmup, args.repeats, args.robots)
     print(
         f"mujoco {mujoco.__version__}, python {platform.python_version()}, "
         f"{platform.machine()}; {args.steps} steps x best of {args.repeats} "
@@ -195,6 +210,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "steps": args.steps,
             "warmup": args.warmup,
             "repeats": args.repeats,
+            "robots": list(args.robots),
             "rows": [asdict(row) for row in rows],
         }
         args.json.write_text(json.dumps(payload, indent=2) + "\n")

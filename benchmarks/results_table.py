@@ -57,9 +57,10 @@ def _fmt(values: list[float], digits: int = 0) -> str:
 
 
 def _evaluate(spec: str, env_id: str | None, episodes: int, seed: int,
-              profiles: Sequence[str]) -> dict:
+              profiles: Sequence[str], env_kwargs: dict | None = None) -> dict:
     """One policy on ``episodes`` episodes split over ``profiles``: a report whose
-    ``per_episode`` list holds every episode (with its profile)."""
+    ``per_episode`` list holds every episode (with its profile). ``env_kwargs`` (a run's,
+    such as ``robot``) apply to every profile."""
     per_episode = []
     share = [episodes // len(profiles) + (k < episodes % len(profiles))
              for k in range(len(profiles))]
@@ -68,7 +69,9 @@ def _evaluate(spec: str, env_id: str | None, episodes: int, seed: int,
         if count == 0:
             continue
         profile = HELD_OUT_PROFILES[name]
-        kwargs = None if profile is None else {"profile": profile}
+        kwargs = dict(env_kwargs or {})
+        if profile is not None:
+            kwargs["profile"] = profile
         report, _trace = evaluate(spec, env_id, count, first, env_kwargs=kwargs)
         per_episode += [{**e, "profile": name} for e in report["per_episode"]]
         first += count
@@ -77,27 +80,41 @@ def _evaluate(spec: str, env_id: str | None, episodes: int, seed: int,
 
 def table_rows(roots: Sequence[Path], episodes: int, seed: int,
                profiles: Sequence[str] = tuple(HELD_OUT_PROFILES)) -> list[dict]:
-    groups: dict[tuple[str, str, str], list[dict]] = defaultdict(list)
-    env_ids = set()
+    """Rows of runs grouped by env (its id and the runs' env kwargs, such as
+    ``robot="fr3"``), algorithm and settings, then the expert and random actions in each env."""
+    groups: dict[tuple[str, str, str, str], list[dict]] = defaultdict(list)
+    envs: dict[tuple[str, str], dict] = {}
     for run in find_runs(roots):
         manifest = json.loads((run / "manifest.json").read_text())
         report = _evaluate(str(run / "model.zip"), None, episodes, seed, profiles)
-        key = (manifest["env_id"], manifest["algo"], str(manifest["hyperparameters"]
-                                                          .get("source", "sb3 defaults")))
-        env_ids.add(manifest["env_id"])
+        env_kwargs = dict(manifest.get("env_kwargs") or {})
+        env = (manifest["env_id"], json.dumps(env_kwargs, sort_keys=True))
+        envs[env] = env_kwargs
+        key = (*env, manifest["algo"], str(manifest["hyperparameters"]
+                                           .get("source", "sb3 defaults")))
         groups[key].append({"manifest": manifest, "report": report})
     rows = []
-    for (env_id, algo, source), runs in sorted(groups.items()):
+    for (env_id, kwargs_key, algo, source), runs in sorted(groups.items()):
         backend = "/".join(sorted({r["manifest"].get("backend", "sb3") for r in runs}))
-        rows.append(_row(env_id, f"{algo.upper()} ({backend})", source, runs))
-    for env_id in sorted(env_ids):
+        rows.append(_row(env_id, f"{algo.upper()} ({backend})", source, runs,
+                         envs[(env_id, kwargs_key)]))
+    for (env_id, _), env_kwargs in sorted(envs.items()):
         for policy in ("expert", "random"):
-            report = _evaluate(policy, env_id, episodes, seed, profiles)
-            rows.append(_row(env_id, policy, "-", [{"manifest": {}, "report": report}]))
+            report = _evaluate(policy, env_id, episodes, seed, profiles, env_kwargs)
+            rows.append(_row(env_id, policy, "-", [{"manifest": {}, "report": report}],
+                             env_kwargs))
     return rows
 
 
-def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
+def env_label(env_id: str, env_kwargs: dict | None) -> str:
+    """The env column: the short id, and the env kwargs the runs were trained with."""
+    extra = ", ".join(f"{k}={v!r}" if isinstance(v, str) else f"{k}={v}"
+                      for k, v in sorted((env_kwargs or {}).items()))
+    return f"{env_short_name(env_id)} ({extra})" if extra else env_short_name(env_id)
+
+
+def _row(env_id: str, name: str, source: str, runs: list[dict],
+         env_kwargs: dict | None = None) -> dict:
     episodes = [e for r in runs for e in r["report"]["per_episode"]]
     seeds = [r["manifest"].get("seed") for r in runs]
     success = iqm_interval([np.mean([e["success"] for e in r["report"]["per_episode"]])
@@ -106,7 +123,7 @@ def _row(env_id: str, name: str, source: str, runs: list[dict]) -> dict:
                             for r in runs])
     held_out = [e for e in episodes if e["profile"] != "default"]
     return {
-        "env": env_short_name(env_id),
+        "env": env_label(env_id, env_kwargs),
         "policy": name,
         "settings": source,
         "steps": sorted({r["manifest"].get("timesteps_done") for r in runs} - {None}),

@@ -39,14 +39,18 @@ IDS = ("rehabbot/rehab-reach-v0", "rehabbot/rehab-reach-l-v0", "rehabbot/rehab-h
        "rehabbot/rehab-knee-weak-v1", "rehabbot/rehab-knee-stiff-v1",
        "rehabbot/rehab-knee-resistive-v1",
        # a patient of the "train" population each episode (POPULATION_VARIANTS)
-       "rehabbot/rehab-reach-population-v1", "rehabbot/rehab-knee-population-v1")
+       "rehabbot/rehab-reach-population-v1", "rehabbot/rehab-knee-population-v1",
+       # both arms, a robot on each hand (rehabbot.envs.bilateral_env)
+       "rehabbot/rehab-bilateral-v1")
 MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 EXERCISES = (0, 1)
+# The bilateral id's table is (exercise, pattern): 0 is shoulder flexion done symmetrically,
+# 2 the same done alternating.
+EXERCISES_OF = {"rehabbot/rehab-bilateral-v1": (0, 2)}
 WEIGHT_LEVELS = (0, 1, 2, 3, 4)
 STEPS = 100
 DT_S = 0.02  # the paper's decision period (50 Hz)
 DELTA_RAD = math.pi / 400  # the paper's action bound
-THETA_STAR, THETA = slice(0, 6), slice(9, 15)  # the paper's observation order
 NOISE_FRACTION = 0.6
 TORQUE_AMPLITUDE = 0.05
 JUMP_PROBABILITY, JUMP_RAD = 0.05, 0.8
@@ -62,6 +66,20 @@ RTOL = 1e-6
 ATOL = 1e-6
 
 
+def exercises_of(env_id: str) -> tuple[int, ...]:
+    """The exercises recorded for ``env_id``."""
+    return EXERCISES_OF.get(env_id, EXERCISES)
+
+
+def _joint_slices(size: int) -> tuple[slice, slice]:
+    """theta* and theta in an observation of ``size`` values (the paper's order; both robots'
+    joints side by side in the bilateral layout)."""
+    from rehabbot.tasks.observation import tracking_slices
+
+    theta_star, _, theta, _ = tracking_slices(size)
+    return theta_star, theta
+
+
 def rollout_seed(env_id: str, mode: str, exercise: int, level: int) -> int:
     """The reset and noise seed of one rollout (stable across processes and platforms)."""
     return zlib.crc32(f"{env_id}|{mode}|{exercise}|{level}".encode()) % (2**31)
@@ -70,19 +88,21 @@ def rollout_seed(env_id: str, mode: str, exercise: int, level: int) -> int:
 def policy_action(mode: str, obs: np.ndarray, high: np.ndarray,
                   rng: np.random.Generator) -> np.ndarray:
     """The fixed policy of the golden rollouts (float32 action)."""
+    n = len(high)
     if mode == "torque":
-        return rng.uniform(-TORQUE_AMPLITUDE, TORQUE_AMPLITUDE, 6).astype(np.float32)
-    error = obs[THETA_STAR].astype(float) - obs[THETA].astype(float)
+        return rng.uniform(-TORQUE_AMPLITUDE, TORQUE_AMPLITUDE, n).astype(np.float32)
+    theta_star, theta = _joint_slices(len(obs))
+    error = obs[theta_star].astype(float) - obs[theta].astype(float)
     step = np.clip(0.5 * error, -DELTA_RAD, DELTA_RAD)
-    noise = rng.uniform(-NOISE_FRACTION, NOISE_FRACTION, 6)
+    noise = rng.uniform(-NOISE_FRACTION, NOISE_FRACTION, n)
     if mode == "joint_delta":
         action = step + noise * high
     elif mode == "joint_velocity":
         action = step / DT_S + noise * high
     else:  # joint_position: a setpoint near the current angles, now and then a jump
-        action = obs[THETA].astype(float) + step + noise * DELTA_RAD
+        action = obs[theta].astype(float) + step + noise * DELTA_RAD
         if rng.random() < JUMP_PROBABILITY:
-            action[rng.integers(6)] += rng.choice((-JUMP_RAD, JUMP_RAD))
+            action[rng.integers(n)] += rng.choice((-JUMP_RAD, JUMP_RAD))
     return action.astype(np.float32)
 
 
@@ -143,7 +163,7 @@ def record_all(ids=IDS, modes=MODES) -> dict[str, dict[str, np.ndarray]]:
         for mode in modes:
             env = gym.make(env_id, control_mode=mode)
             try:
-                for exercise in EXERCISES:
+                for exercise in exercises_of(env_id):
                     for level in WEIGHT_LEVELS:
                         rollouts[rollout_key(env_id, mode, exercise, level)] = record_rollout(
                             env, env_id, mode, exercise, level)
@@ -162,12 +182,24 @@ def flatten(rollouts: dict[str, dict[str, np.ndarray]]) -> dict[str, np.ndarray]
     names = list(dict.fromkeys(name for k in keys for name in rollouts[k]))
     for name in names:
         # A field that an id does not report (the -v0 and -v1 reward terms differ) is stored
-        # as NaN in its rows (missing_fields tells it apart from a NaN value).
-        values = np.concatenate([rollouts[k][name] if name in rollouts[k] else
-                                 np.full(len(rollouts[k]["kind"]), np.nan) for k in keys])
-        if values.dtype == np.float64 and not name.startswith("reward"):
-            values = values.astype(np.float32)
-        flat[name] = values
+        # as NaN in its rows (missing_fields tells it apart from a NaN value). A field whose
+        # width differs between ids (the bilateral id's two robots) is stored once per width:
+        # the first width under the field's name, the others as "<name>@<width>".
+        shapes = list(dict.fromkeys(rollouts[k][name].shape[1:] for k in keys
+                                    if name in rollouts[k]))
+        for shape in shapes:
+            stored = name if shape == shapes[0] else f"{name}@{'x'.join(map(str, shape))}"
+            parts = []
+            for k in keys:
+                rows = len(rollouts[k]["kind"])
+                if name in rollouts[k] and rollouts[k][name].shape[1:] == shape:
+                    parts.append(rollouts[k][name])
+                else:
+                    parts.append(np.full((rows, *shape), np.nan))
+            values = np.concatenate(parts)
+            if values.dtype == np.float64 and not name.startswith("reward"):
+                values = values.astype(np.float32)
+            flat[stored] = values
     return flat
 
 
@@ -179,7 +211,7 @@ def load_golden(path: Path = GOLDEN_PATH) -> dict[str, dict[str, np.ndarray]]:
         starts = ends - data["rollout_rows"]
         fields = {name: data[name] for name in data.files
                   if name not in ("rollout_keys", "rollout_rows")}
-    return {key: {name: values[a:b] for name, values in fields.items()
+    return {key: {name.split("@", 1)[0]: values[a:b] for name, values in fields.items()
                   if not (values.dtype.kind == "f" and np.isnan(values[a:b]).all())}
             for key, a, b in zip(keys, starts, ends, strict=True)}
 

@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 
 import rehabbot
-from rehabbot.envs.registration import CONDITION_VARIANTS, ENV_SPECS, POPULATION_VARIANTS
+from rehabbot.envs.registration import (
+    BILATERAL_IDS,
+    CONDITION_VARIANTS,
+    ENV_SPECS,
+    POPULATION_VARIANTS,
+)
 from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.tasks import exercises as ex
@@ -21,7 +26,7 @@ from rehabbot.tasks.observation import P_STAR, PHI, THETA, THETA_STAR, P
 
 PAPER_IDS = tuple(i for i in ENV_SPECS if i.endswith("-v0"))
 V1_IDS = tuple(i for i in ENV_SPECS if i.endswith("-v1") and i not in CONDITION_VARIANTS
-               and i not in POPULATION_VARIANTS)
+               and i not in POPULATION_VARIANTS and i not in BILATERAL_IDS)
 INFO_KEYS = {"is_success", "target_index", "safety_violation", "reward_distance",
              "reward_bonus", "reward_safety", "reward_smoothness", "reward_effort",
              "interaction_force_n", "robot_torque_nm", "patient_qpos", "exercise",

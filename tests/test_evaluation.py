@@ -226,7 +226,7 @@ def test_render_rejects_bad_suffix(tmp_path: Path, capsys) -> None:
 
 
 def test_list_shows_every_id_with_its_spaces(capsys) -> None:
-    from rehabbot.envs.registration import ENV_SPECS
+    from rehabbot.envs.registration import BILATERAL_IDS, ENV_SPECS
 
     assert main(["list"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
@@ -234,7 +234,8 @@ def test_list_shows_every_id_with_its_spaces(capsys) -> None:
     for env_id, (kwargs, description) in ENV_SPECS.items():
         line = next(line for line in lines if line.startswith(env_id))
         assert kwargs["limb"] in line and kwargs["task_type"] in line
-        assert "(23,)" in line and "(6,)" in line and description in line
+        obs, act = ("(44,)", "(12,)") if env_id in BILATERAL_IDS else ("(23,)", "(6,)")
+        assert obs in line and act in line and description in line
         assert "0.00785" in line  # pi/400
 
 

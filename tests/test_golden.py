@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from golden_episodes import (
     ATOL,
-    EXERCISES,
     GOLDEN_PATH,
     IDS,
     MODES,
     RTOL,
     WEIGHT_LEVELS,
+    exercises_of,
     load_golden,
     record_rollout,
     rollout_key,
@@ -29,7 +29,7 @@ def golden():
 def test_every_registered_id_has_golden_episodes(golden):
     registered = sorted(env_id for env_id in gym.registry if env_id.startswith("rehabbot/"))
     assert registered == sorted(IDS), "record golden episodes of new ids: tests/golden_episodes.py"
-    expected = {rollout_key(i, m, e, lv) for i in IDS for m in MODES for e in EXERCISES
+    expected = {rollout_key(i, m, e, lv) for i in IDS for m in MODES for e in exercises_of(i)
                 for lv in WEIGHT_LEVELS}
     assert set(golden) == expected
 
@@ -49,7 +49,7 @@ def _first_difference(actual: np.ndarray, expected: np.ndarray) -> str:
 def test_golden_episodes_are_reproduced(golden, env_id, mode):
     env = gym.make(env_id, control_mode=mode)
     try:
-        for exercise in EXERCISES:
+        for exercise in exercises_of(env_id):
             for level in WEIGHT_LEVELS:
                 key = rollout_key(env_id, mode, exercise, level)
                 actual = record_rollout(env, env_id, mode, exercise, level)

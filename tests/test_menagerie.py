@@ -20,6 +20,7 @@ import pytest
 
 from rehabbot.sim import build_scene
 from rehabbot.sim.robots import menagerie as mg
+from rehabbot.sim.robots import parts
 from rehabbot.sim.robots import ur5e as ur
 
 MENAGERIE_BODIES = [men for _, men in mg.BODY_MAP]
@@ -303,7 +304,7 @@ def test_own_geoms_still_collide_but_are_hidden(scene):
             assert model.geom_group[gid] < 3
         else:
             assert model.geom_group[gid] == mg.HIDDEN_GROUP, name
-            assert model.geom_contype[gid] == ur.CONTYPE_ROBOT, name
+            assert model.geom_contype[gid] == parts.CONTYPE_ROBOT, name
 
 
 def test_cuff_is_satisfied_at_reset(scene):

@@ -8,14 +8,21 @@ import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.analysis.reward_audit import stall_cases, stop_cases
-from rehabbot.envs.registration import CONDITION_VARIANTS, ENV_SPECS, POPULATION_VARIANTS
+from rehabbot.envs.registration import (
+    BILATERAL_IDS,
+    CONDITION_VARIANTS,
+    ENV_SPECS,
+    POPULATION_VARIANTS,
+)
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.tasks.progress_reward import remaining_path_rad
 
 # The base -v1 ids (the condition and population variants pay the same reward; their own
 # tests are in test_conditions.py and test_population.py).
+# (The bilateral id pays the same terms summed over two arms: tests/test_bilateral.py checks
+# its telescoping; the stall and stop audits below run on it too.)
 V1_IDS = tuple(i for i in ENV_SPECS if i.endswith("-v1") and i not in CONDITION_VARIANTS
-               and i not in POPULATION_VARIANTS)
+               and i not in POPULATION_VARIANTS and i not in BILATERAL_IDS)
 # A population env draws another patient at every reset, so the stop audit (which replays a
 # state after a reset) runs on its patients' own ids instead.
 ALL_IDS = tuple(i for i in ENV_SPECS if i not in POPULATION_VARIANTS)
@@ -87,7 +94,7 @@ def test_the_paper_reward_traps_a_gamma_099_agent_and_v1_does_not():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("env_id", V1_IDS)
+@pytest.mark.parametrize("env_id", (*V1_IDS, *BILATERAL_IDS))
 @pytest.mark.parametrize("exercise", [0, 1])
 def test_reaching_each_target_beats_stalling_for_every_gamma(env_id, exercise):
     n = len(gym.make(env_id).unwrapped.targets[exercise])

@@ -16,8 +16,13 @@ import gymnasium as gym
 import numpy as np
 
 from rehabbot.rl.experts import ScriptedExpert
+from rehabbot.tasks.observation import tracking_slices
 
-THETA_STAR, THETA = slice(0, 6), slice(9, 15)  # the paper's observation order
+
+def _joint_slices(env: gym.Env) -> tuple[slice, slice]:
+    """Where theta* and theta sit in ``env``'s observations (any robot, one or two arms)."""
+    theta_star, _, theta, _ = tracking_slices(env.observation_space.shape[0])
+    return theta_star, theta
 
 
 @dataclass(frozen=True)
@@ -42,11 +47,12 @@ class StallCase:
 def _expert_episode(env: gym.Env, seed: int, options: dict) -> tuple[list, list, list]:
     """Actions, rewards and per-step (target index, inf-norm error before the step)."""
     expert = ScriptedExpert(env)
+    theta_star, theta = _joint_slices(env)
     obs, _ = env.reset(seed=seed, options=options)
     actions, rewards, states = [], [], []
     base = env.unwrapped
     while True:
-        error = float(np.max(np.abs(obs[THETA].astype(float) - obs[THETA_STAR].astype(float))))
+        error = float(np.max(np.abs(obs[theta].astype(float) - obs[theta_star].astype(float))))
         states.append((base.target_index, error))
         action, _ = expert.predict(obs, deterministic=True)
         actions.append(action)
@@ -64,17 +70,18 @@ def _hold_rewards(env: gym.Env, seed: int, options: dict, actions: Sequence,
     (``servo``, joint_delta mode) moving the setpoints so that the robot stays at the joint
     angles it had when the replay ended (its setpoints may lead them). A safety stop while
     holding is appended to ``stops``."""
+    _, theta = _joint_slices(env)
     obs, _ = env.reset(seed=seed, options=options)
     for action in actions:
         obs, *_ = env.step(action)
     space = env.action_space
     zero = np.zeros(space.shape, space.dtype)
-    hold_at = obs[THETA].astype(float)
+    hold_at = obs[theta].astype(float)
     rewards = []
     while True:
         action = zero
         if servo:
-            action = np.clip(0.5 * (hold_at - obs[THETA].astype(float)), space.low,
+            action = np.clip(0.5 * (hold_at - obs[theta].astype(float)), space.low,
                              space.high).astype(space.dtype)
         obs, reward, terminated, truncated, info = env.step(action)
         rewards.append(reward)

@@ -19,7 +19,8 @@ def cmd_list(args: argparse.Namespace) -> int:
         env = gym.make(env_id)
         act, obs = env.action_space, env.observation_space
         env.close()
-        rows.append((env_id, kwargs["limb"], kwargs["side"], kwargs["task_type"],
+        # The bilateral id moves both sides.
+        rows.append((env_id, kwargs["limb"], kwargs.get("side", "both"), kwargs["task_type"],
                      f"Box({float(act.low[0]):.5f}, {float(act.high[0]):.5f}, {act.shape})",
                      f"Box({obs.shape})", description))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]) - 1)]

@@ -67,11 +67,12 @@ class EnvParts:
 
 def limit_robot_joints(scene: Scene, handle: RobotHandle, low_rad: np.ndarray,
                        high_rad: np.ndarray) -> None:
-    """Set the robot's joint limits in the model (a safety-configured range, stiff)."""
+    """Set the robot's joint limits in the model (a safety-configured range, stiff), never
+    beyond the joints' hardware ranges."""
     model = scene.model
     jnt = model.dof_jntid[handle.dof_adr]
-    model.jnt_range[jnt, 0] = low_rad
-    model.jnt_range[jnt, 1] = high_rad
+    model.jnt_range[jnt, 0] = np.maximum(low_rad, handle.robot.joint_low_rad())
+    model.jnt_range[jnt, 1] = np.minimum(high_rad, handle.robot.joint_high_rad())
     model.jnt_solref[jnt] = ROBOT_LIMIT_SOLREF
 
 
@@ -79,18 +80,20 @@ def observation_bounds(config: RehabEnvConfig, layout: ObservationLayout, scene:
                        handle: RobotHandle) -> tuple[np.ndarray, np.ndarray]:
     """The observation space's bounds: the same for every patient of an id."""
     model = scene.model
-    joint_range = np.array(handle.robot.joint_range_rad)
-    target = joint_range + SETPOINT_SPACE_MARGIN_RAD
-    theta = target + JOINT_LIMIT_MARGIN_RAD + THETA_OBS_MARGIN_RAD
+    robot = handle.robot
+    target_low = robot.joint_low_rad() - SETPOINT_SPACE_MARGIN_RAD
+    target_high = robot.joint_high_rad() + SETPOINT_SPACE_MARGIN_RAD
+    theta_low = target_low - JOINT_LIMIT_MARGIN_RAD - THETA_OBS_MARGIN_RAD
+    theta_high = target_high + JOINT_LIMIT_MARGIN_RAD + THETA_OBS_MARGIN_RAD
     ex_jnt = [model.joint(n).id for n in scene.exercised_joints]
     phi_low = model.jnt_range[ex_jnt, 0] - PHI_OBS_MARGIN_RAD
     phi_high = model.jnt_range[ex_jnt, 1] + PHI_OBS_MARGIN_RAD
     n_exercises = len(config.exercise_table)
-    low = layout.assemble({"theta_star": -target, "p_star": -POSITION_BOUND_M,
-                           "theta": -theta, "p": -POSITION_BOUND_M, "phi": phi_low,
+    low = layout.assemble({"theta_star": target_low, "p_star": -POSITION_BOUND_M,
+                           "theta": theta_low, "p": -POSITION_BOUND_M, "phi": phi_low,
                            "e": 0, "l": 0})
-    high = layout.assemble({"theta_star": target, "p_star": POSITION_BOUND_M,
-                            "theta": theta, "p": POSITION_BOUND_M, "phi": phi_high,
+    high = layout.assemble({"theta_star": target_high, "p_star": POSITION_BOUND_M,
+                            "theta": theta_high, "p": POSITION_BOUND_M, "phi": phi_high,
                             "e": n_exercises - 1, "l": max(WEIGHT_LEVELS)})
     return low, high
 
@@ -103,8 +106,9 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
     handle = scene.robots[0]
     model = scene.model
     setpoint_low, setpoint_high = setpoint_bounds(scene, config.limb)
-    joint_low = setpoint_low - JOINT_LIMIT_MARGIN_RAD
-    joint_high = setpoint_high + JOINT_LIMIT_MARGIN_RAD
+    joint_low = np.maximum(setpoint_low - JOINT_LIMIT_MARGIN_RAD, handle.robot.joint_low_rad())
+    joint_high = np.minimum(setpoint_high + JOINT_LIMIT_MARGIN_RAD,
+                            handle.robot.joint_high_rad())
     limit_robot_joints(scene, handle, joint_low, joint_high)
     condition = config.condition
     condition_setup.scale_passive(scene, condition)

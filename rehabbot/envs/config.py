@@ -17,7 +17,7 @@ from typing import Any
 from rehabbot.common.checks import as_dataclass, check_choice, check_number
 from rehabbot.sim.conditions import PatientCondition, as_condition
 from rehabbot.sim.patient import PatientProfile
-from rehabbot.sim.robots.ur5e import MAX_JOINT_SPEED_RAD_S
+from rehabbot.sim.robots import ROBOT_NAMES, get_robot
 from rehabbot.sim.scene import CAMERA_NAMES, SIDES, WEIGHT_LEVELS, SceneOptions, check_weight_level
 from rehabbot.tasks.exercises import LIMBS, TASK_TYPES, Exercise, exercise_table
 from rehabbot.tasks.progress_reward import PROGRESS_WEIGHT_PER_RAD, TIME_COST_PER_STEP
@@ -49,7 +49,6 @@ NUMBER_RANGES: dict[str, tuple[float, float, bool]] = {
     "time_cost": (0.0, 1e6, False),
     "segment_s": (0.1, 60.0, False),
     "min_waypoint_spacing_rad": (0.0, 1.0, False),
-    "max_speed_rad_s": (1e-3, MAX_JOINT_SPEED_RAD_S, False),
     "width": (1, 8192, True),
     "height": (1, 8192, True),
 }
@@ -68,6 +67,7 @@ class RehabEnvConfig:
     weight_level: int | None = None
     exercise: int | None = None
     exercises: tuple[Exercise, ...] | None = None
+    robot: str = "ur5e"
     cuff: str = "connect"
     base_reorientation_deg: float = 0.0
     frame_skip: int = 10
@@ -119,6 +119,10 @@ class RehabEnvConfig:
             set_(self, "exercise", int(self.exercise))
         for name, (low, high, integer) in NUMBER_RANGES.items():
             set_(self, name, check_number(name, getattr(self, name), low, high, integer))
+        check_choice("robot", self.robot, ROBOT_NAMES)
+        # The joint_velocity bound: at most what the robot's slowest joint is rated for.
+        set_(self, "max_speed_rad_s", check_number("max_speed_rad_s", self.max_speed_rad_s,
+                                                   1e-3, get_robot(self.robot).max_speed_rad_s))
         set_(self, "waypoint_dt_s", check_number("waypoint_dt_s", self.waypoint_dt_s, 0.01,
                                                  min(1.0, self.segment_s)))
         if not isinstance(self.terminate_on_safety, bool):
@@ -155,7 +159,8 @@ class RehabEnvConfig:
 
     def scene_options(self) -> dict[str, Any]:
         """Keyword arguments of :func:`rehabbot.sim.scene_build.build_scene`."""
-        return {"cuff": self.cuff, "side": None if self.limb == "arm" else self.side,
+        return {"robot": self.robot, "cuff": self.cuff,
+                "side": None if self.limb == "arm" else self.side,
                 "base_reorientation_deg": self.base_reorientation_deg,
                 "timestep_s": self.timestep_s}
 

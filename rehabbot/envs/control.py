@@ -164,9 +164,10 @@ class JointPositionController(Controller):
         self.clip_high = self.high_rad.astype(np.float32)
 
     def _make_space(self) -> spaces.Box:
-        bound = np.array(self.robot.joint_range_rad) + SETPOINT_SPACE_MARGIN_RAD
-        return spaces.Box(-bound.astype(np.float32), bound.astype(np.float32),
-                          (self.n_joints,), np.float32)
+        low = self.robot.joint_low_rad() - SETPOINT_SPACE_MARGIN_RAD
+        high = self.robot.joint_high_rad() + SETPOINT_SPACE_MARGIN_RAD
+        return spaces.Box(low.astype(np.float32), high.astype(np.float32), (self.n_joints,),
+                          np.float32)
 
     def apply(self, action, data):
         self._set(np.asarray(action, dtype=float), data)

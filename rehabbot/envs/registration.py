@@ -86,14 +86,30 @@ for _id, _base_id in POPULATION_VARIANTS.items():
     ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], "patients": "train"},
                       f"{ENV_SPECS[_base_id][1]}; a patient of a population each episode")
 
+# Both arms, one robot per hand (rehabbot.envs.bilateral_env): the -v1 reward summed over the
+# arms with a synchronisation term; symmetric and alternating patterns.
+BILATERAL_ENTRY_POINT = "rehabbot.envs.bilateral_env:BilateralEnv"
+BILATERAL_IDS: tuple[str, ...] = ("rehabbot/rehab-bilateral-v1",)
+ENV_SPECS["rehabbot/rehab-bilateral-v1"] = (
+    {"limb": "arm", "task_type": "reaching"},
+    "both arms, seated, a robot on each hand: reach shoulder or elbow key poses with both arms "
+    "together (symmetric) or in turns (alternating); learnable progress reward with a "
+    "synchronisation term")
+
+
+def entry_point_of(env_id: str) -> str:
+    """The class an id builds: RehabEnv, PopulationEnv or BilateralEnv."""
+    if env_id in BILATERAL_IDS:
+        return BILATERAL_ENTRY_POINT
+    return POPULATION_ENTRY_POINT if "patients" in ENV_SPECS[env_id][0] else ENTRY_POINT
+
 
 def register_envs() -> None:
     """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""
     for env_id, (kwargs, _description) in ENV_SPECS.items():
         if env_id in gym.registry:
             continue
-        entry_point = POPULATION_ENTRY_POINT if "patients" in kwargs else ENTRY_POINT
-        gym.register(id=env_id, entry_point=entry_point, kwargs=dict(kwargs),
+        gym.register(id=env_id, entry_point=entry_point_of(env_id), kwargs=dict(kwargs),
                      max_episode_steps=MAX_EPISODE_STEPS, order_enforce=False,
                      disable_env_checker=True)
 

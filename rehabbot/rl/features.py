@@ -40,9 +40,7 @@ from rehabbot.rl.features_numpy import (
     TOOL_ERROR_SCALE_M,
     action_bound_units,
 )
-from rehabbot.tasks.observation import OBS_SIZE, P_STAR, THETA, THETA_STAR, P
-
-ERROR_FEATURES = (THETA_STAR.stop - THETA_STAR.start) + (P_STAR.stop - P_STAR.start)
+from rehabbot.tasks.observation import tracking_slices
 
 
 class TrackingErrorFeatures(BaseFeaturesExtractor):
@@ -53,13 +51,21 @@ class TrackingErrorFeatures(BaseFeaturesExtractor):
 
     def __init__(self, observation_space: gym.spaces.Box, scale_to_bounds: bool = True,
                  fine_scale_rad: float | None = None) -> None:
-        if observation_space.shape != (OBS_SIZE,):
-            raise ValueError(f"TrackingErrorFeatures needs the RehabBot observation of shape "
-                             f"({OBS_SIZE},), got {observation_space.shape}")
+        shape = observation_space.shape
+        try:
+            slices = tracking_slices(shape[0]) if len(shape) == 1 else None
+        except ValueError:
+            slices = None
+        if slices is None:
+            raise ValueError(f"TrackingErrorFeatures needs a RehabBot observation (2 n + 11 "
+                             f"values for a robot of n joints, 4 n + 20 for two), got {shape}")
         if fine_scale_rad is not None and not fine_scale_rad > 0:
             raise ValueError(f"fine_scale_rad={fine_scale_rad!r} must be > 0 or None")
-        fine = 0 if fine_scale_rad is None else THETA.stop - THETA.start
-        super().__init__(observation_space, features_dim=OBS_SIZE + ERROR_FEATURES + fine)
+        self._theta_star, self._p_star, self._theta, self._p = slices
+        joints = self._theta.stop - self._theta.start
+        errors = joints + self._p.stop - self._p.start
+        fine = 0 if fine_scale_rad is None else joints
+        super().__init__(observation_space, features_dim=shape[0] + errors + fine)
         self.fine_scale_rad = fine_scale_rad
         low = torch.as_tensor(observation_space.low, dtype=torch.float32)
         high = torch.as_tensor(observation_space.high, dtype=torch.float32)
@@ -69,9 +75,10 @@ class TrackingErrorFeatures(BaseFeaturesExtractor):
         self.register_buffer("_half_range", (high - low) / 2)
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        joint_error = (observations[:, THETA_STAR] - observations[:, THETA]) \
+        joint_error = (observations[:, self._theta_star] - observations[:, self._theta]) \
             / JOINT_ERROR_SCALE_RAD
-        tool_error = (observations[:, P_STAR] - observations[:, P]) / TOOL_ERROR_SCALE_M
+        tool_error = (observations[:, self._p_star] - observations[:, self._p]) \
+            / TOOL_ERROR_SCALE_M
         scaled = (observations - self._center) / self._half_range
         if self.fine_scale_rad is None:
             return torch.cat((scaled, joint_error, tool_error), dim=1)

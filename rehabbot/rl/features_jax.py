@@ -56,7 +56,7 @@ from rehabbot.rl.features_numpy import (
     action_bound_units,
     bounds_scaling,
 )
-from rehabbot.tasks.observation import OBS_SIZE, P_STAR, THETA, THETA_STAR, P
+from rehabbot.tasks.observation import tracking_slices
 
 
 def tracking_error_features_jax(obs: jnp.ndarray, center: tuple[float, ...],
@@ -64,8 +64,9 @@ def tracking_error_features_jax(obs: jnp.ndarray, center: tuple[float, ...],
                                 fine_scale_rad: float | None) -> jnp.ndarray:
     """The features of a batch ``obs`` of shape ``(n, 23)`` (module docstring)."""
     obs = obs.reshape((obs.shape[0], -1)).astype(jnp.float32)
-    joint_error = (obs[:, THETA_STAR] - obs[:, THETA]) / np.float32(JOINT_ERROR_SCALE_RAD)
-    tool_error = (obs[:, P_STAR] - obs[:, P]) / np.float32(TOOL_ERROR_SCALE_M)
+    theta_star, p_star, theta, p = tracking_slices(obs.shape[1])
+    joint_error = (obs[:, theta_star] - obs[:, theta]) / np.float32(JOINT_ERROR_SCALE_RAD)
+    tool_error = (obs[:, p_star] - obs[:, p]) / np.float32(TOOL_ERROR_SCALE_M)
     scaled = (obs - jnp.asarray(center, jnp.float32)) / jnp.asarray(half_range, jnp.float32)
     parts = [scaled, joint_error, tool_error]
     if fine_scale_rad is not None:
@@ -161,9 +162,15 @@ class TrackingErrorNormalizedPPOActor(TrackingErrorPPOActor):
 
 def _feature_fields(observation_space: Any, scale_to_bounds: bool,
                     fine_scale_rad: float | None) -> dict[str, Any]:
-    if observation_space.shape != (OBS_SIZE,):
-        raise ValueError(f"tracking-error features need the RehabBot observation of shape "
-                         f"({OBS_SIZE},), got {observation_space.shape}")
+    shape = observation_space.shape
+    try:
+        tracking_slices(shape[0]) if len(shape) == 1 else None
+    except ValueError:
+        shape = None
+    if shape is None or len(shape) != 1:
+        raise ValueError(f"tracking-error features need a RehabBot observation (2 n + 11 "
+                         f"values for a robot of n joints, 4 n + 20 for two), got "
+                         f"{observation_space.shape}")
     if fine_scale_rad is not None and not fine_scale_rad > 0:
         raise ValueError(f"fine_scale_rad={fine_scale_rad!r} must be > 0 or None")
     center, half_range = bounds_scaling(observation_space.low, observation_space.high,

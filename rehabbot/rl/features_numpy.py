@@ -2,11 +2,12 @@
 PyTorch: what an exported agent (:mod:`rehabbot.rl.zoo`) computes before its first layer.
 
 ``tracking_error_features(obs, center, half_range, fine_scale_rad)`` is, for a batch of
-observations of the RehabBot layout (23 values for the UR5e)::
+observations of the RehabBot layout (23 values for the UR5e, 25 for the FR3, 44 for the
+bilateral env: :func:`rehabbot.tasks.observation.layout_for_size`)::
 
     [(obs - center) / half_range,            23: the observation scaled to [-1, 1]
-     (theta* - theta) / 0.5 rad,              6: joint tracking errors
-     (p* - p) / 0.1 m,                        3: tool tracking errors
+     (theta* - theta) / 0.5 rad,              6: joint tracking errors (every robot joint)
+     (p* - p) / 0.1 m,                        3: tool tracking errors (3 per robot)
      tanh((theta* - theta) / fine_scale_rad)] 6: only when fine_scale_rad is given
 
 in float32 and in the same order of operations as the PyTorch module, so both give the same
@@ -20,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
+from rehabbot.tasks.observation import tracking_slices
 
 JOINT_ERROR_SCALE_RAD = 0.5  # errors of a few key-pose spacings map to O(1) features
 TOOL_ERROR_SCALE_M = 0.1
@@ -48,8 +49,9 @@ def tracking_error_features(obs: np.ndarray, center: np.ndarray, half_range: np.
     if obs.ndim != 2:
         raise ValueError(f"tracking_error_features needs a batch of shape (n, size), got "
                          f"{obs.shape}")
-    joint_error = (obs[:, THETA_STAR] - obs[:, THETA]) / JOINT_ERROR_SCALE_RAD
-    tool_error = (obs[:, P_STAR] - obs[:, P]) / TOOL_ERROR_SCALE_M
+    theta_star, p_star, theta, p = tracking_slices(obs.shape[1])
+    joint_error = (obs[:, theta_star] - obs[:, theta]) / JOINT_ERROR_SCALE_RAD
+    tool_error = (obs[:, p_star] - obs[:, p]) / TOOL_ERROR_SCALE_M
     scaled = (obs - center) / half_range
     parts = [scaled, joint_error, tool_error]
     if fine_scale_rad is not None:

@@ -82,8 +82,10 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
     return Episode(
         env_id=env.spec.id if env.spec else type(base).__name__,
         policy=policy.label, seed=seed, dt_s=float(base.dt),
-        joint_names=tuple(base.robot.joint_names),
-        torque_limit_nm=base.robot.torque_limits(),
+        # A two-robot env names both robots' joints (prefixed) and their limits.
+        joint_names=tuple(getattr(base, "joint_names", None) or base.robot.joint_names),
+        torque_limit_nm=(base.torque_limits_nm if hasattr(base, "torque_limits_nm")
+                         else base.robot.torque_limits()),
         target_tool_pos_m=np.array(sequence.tool_pos_base_m, dtype=float),
         target_robot_rad=np.array(sequence.robot_rad, dtype=float),
         target_patient_deg=np.array(sequence.patient_deg, dtype=float),

@@ -15,15 +15,28 @@ def quat_from_mat(mat9: np.ndarray) -> np.ndarray:
     return quat
 
 
+# The task of a cuff: 3 position and 3 orientation constraints.
+TASK_DIMENSION = 6
+
+
 class RobotIK:
     """Damped least-squares inverse kinematics of one robot's cuff site (position + orientation).
 
     Works on a kinematics-only ``MjData``; joint limits are respected by clipping each step.
+
+    A robot with more joints than the cuff's six constraints (the FR3's seven) has a null space:
+    a self-motion that leaves the cuff where it is. Left free, it drifts with each solve, so
+    neighbouring patient poses get far-apart arm postures and the joints wander into their
+    limits. For such a robot every step also moves, inside the null space, towards the seed
+    (``posture_gain`` of the way per iteration), so the solution is the pose nearest the seed:
+    a neighbour's solution when a path or a workspace is swept, the robot's own seed posture at
+    home. A robot with six joints has no null space and takes the plain damped step.
     """
 
     def __init__(self, model: mujoco.MjModel, damping: float = 1e-3, max_iters: int = 300,
-                 tol_m: float = 1e-7) -> None:
+                 tol_m: float = 1e-7, posture_gain: float = 0.5) -> None:
         self.model = model
+        self.posture_gain = posture_gain
         self.damping = damping
         self.max_iters = max_iters
         self.tol_m = tol_m
@@ -45,7 +58,9 @@ class RobotIK:
         qadr, dadr, site = handle.qpos_adr, handle.dof_adr, handle.cuff_site_id
         low = model.jnt_range[model.dof_jntid[dadr], 0]
         high = model.jnt_range[model.dof_jntid[dadr], 1]
+        seed = np.array(seed, dtype=float)
         data.qpos[qadr] = seed
+        redundant = len(dadr) > TASK_DIMENSION
         err = np.inf
         for _ in range(self.max_iters):
             mujoco.mj_kinematics(model, data)
@@ -63,6 +78,11 @@ class RobotIK:
             e = np.concatenate([pos_err, orientation_weight_m * self._rot_err])
             # jac has 6 rows (3 position, 3 rotation) whatever the number of joints.
             step = jac.T @ np.linalg.solve(jac @ jac.T + self.damping**2 * np.eye(6), e)
+            if redundant:
+                # The exact projector onto the null space: a damped one would leak the posture
+                # pull into the cuff's pose and stall the solve short of its tolerance.
+                null = np.eye(len(dadr)) - np.linalg.pinv(jac) @ jac
+                step += null @ (self.posture_gain * (seed - data.qpos[qadr]))
             scale = min(1.0, 0.3 / max(np.abs(step).max(), 1e-12))
             data.qpos[qadr] = np.clip(data.qpos[qadr] + scale * step, low, high)
         return data.qpos[qadr].copy(), err

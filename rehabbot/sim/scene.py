@@ -120,6 +120,9 @@ class SceneOptions:
         check_number("furniture_gap_m", self.furniture_gap_m, 0.0, 0.05)
         _check_pose(dict(self.initial_pose_deg), "initial_pose_deg")
         if self.menagerie_dir is not None:
+            if self.robot != "ur5e":
+                raise ValueError(f"menagerie_dir={self.menagerie_dir!r}: the Menagerie meshes "
+                                 f"draw the UR5e only, not robot={self.robot!r}")
             _check_menagerie_dir(self.menagerie_dir)
 
 
@@ -265,14 +268,14 @@ def solve_robot_home(model: mujoco.MjModel, data: mujoco.MjData,
                       warm_start: bool) -> float:
     """Write into ``qpos`` the robot angles that meet the patient's cuffs at the patient pose
     held in ``qpos``; return the worst IK pose error. Warm starts from the robot angles already
-    in ``qpos`` and falls back to an elbow-up seed."""
+    in ``qpos`` and falls back to the robot's own seed(s), tried in order."""
     robot_ik = RobotIK(model)
     data.qpos[:] = qpos
     worst = 0.0
     for handle in robots:
         target_pos, target_quat = _cuff_target(model, data, handle)
         seeds = [qpos[handle.qpos_adr].copy()] if warm_start else []
-        seeds.append(_ik_seed(model, data, handle))
+        seeds.extend(np.atleast_2d(_ik_seed(model, data, handle)))
         for seed in seeds:
             q, err = robot_ik.solve(data, handle, target_pos, target_quat, seed)
             if err <= IK_TOLERANCE_M:
@@ -291,8 +294,8 @@ def _cuff_target(model, data, handle) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _ik_seed(model, data, handle) -> np.ndarray:
-    """The robot's own IK seed for the cuff's position in its base frame (``data`` holds the
-    current kinematics of the base and the patient's cuff)."""
+    """The robot's own IK seed, or seeds (one per row), for the cuff's position in its base
+    frame (``data`` holds the current kinematics of the base and the patient's cuff)."""
     base = data.xpos[handle.base_body_id]
     rot = data.xmat[handle.base_body_id].reshape(3, 3)
     return handle.robot.ik_seed(rot.T @ (data.site_xpos[handle.patient_cuff_site_id] - base))

@@ -205,6 +205,10 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
         prefix = _robot_prefix(limbs, k)
         base_pos, base_yaw = _robot_base_pose(limb, posture, profile, seg, geometry, torso_pos,
                                               torso_quat)
+        # The robot's own correction of the default placement (mirrored for the left side),
+        # never closer to the floor than its stand's plate allows.
+        base_pos = base_pos + _outward_to_world(limb, robot.base_offset(_placement(limb, posture)))
+        base_pos[2] = max(base_pos[2], MIN_BASE_HEIGHT_M)
         yaw = base_yaw + math.radians(opts.base_reorientation_deg)
         stand = spec.worldbody.add_body(name=f"{prefix}stand", pos=[base_pos[0], base_pos[1], 0])
         _add_cylinder(stand, f"{prefix}stand_column", (0, 0, 0.02), (0, 0, base_pos[2] - 0.01),
@@ -219,7 +223,7 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
 
             add_menagerie_visuals(spec, prefix, opts.menagerie_dir)
         cuffed = pt.LIMB_BODIES[limb][1:]  # forearm+hand, or shank+foot
-        for link in robot.link_names[-3:]:  # the wrist, around the cuff
+        for link in robot.link_names[-robot.cuffed_links:]:  # the wrist, around the cuff
             for body in cuffed:
                 spec.add_exclude(bodyname1=f"{prefix}{link}", bodyname2=body)
         eq_type = mujoco.mjtEq.mjEQ_CONNECT if opts.cuff == "connect" else mujoco.mjtEq.mjEQ_WELD
@@ -252,6 +256,10 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
     _add_cameras(spec, focus, side)
     model = spec.compile()
     return _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
+
+
+# The lowest a robot's base may sit above the floor: the stand's foot and plate [m].
+MIN_BASE_HEIGHT_M = 0.05
 
 
 def _robot_prefix(limbs: tuple[str, ...], k: int) -> str:
@@ -320,6 +328,18 @@ def _robot_base_pose(limb, posture, profile, seg, geometry, torso_pos, torso_qua
     leg = seg["thigh"].length_m + seg["shank"].length_m
     pos = np.array([hip[0] + 0.45 * leg, hip[1] + side * 0.50 * h_scale, hip[2] + 0.15])
     return pos, math.pi / 2 * (1 if side < 0 else -1)
+
+
+def _placement(limb: str, posture: str) -> str:
+    """The placement a robot's ``base_offset_m`` is keyed by: arm, seated or supine leg."""
+    return "arm" if limb.startswith("arm") else f"leg_{posture}"
+
+
+def _outward_to_world(limb: str, offset_m: np.ndarray) -> np.ndarray:
+    """An offset (along x, outwards from the midline, up) on ``limb``'s side, in world axes
+    (the patient's right is world -y)."""
+    side = -1.0 if limb.endswith("_r") else 1.0
+    return np.array([offset_m[0], side * offset_m[1], offset_m[2]])
 
 
 def _add_cameras(spec: mujoco.MjSpec, target: np.ndarray, side: float) -> None:

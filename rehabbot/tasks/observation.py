@@ -98,21 +98,49 @@ class ObservationLayout:
         return ObservationLayout((*self.fields, *extra))
 
 
-def paper_layout(n_joints: int = 6) -> ObservationLayout:
-    """The paper's observation for a robot with ``n_joints`` joints (23 values for 6)."""
+def paper_layout(n_joints: int = 6, n_arms: int = 1) -> ObservationLayout:
+    """The paper's observation for a robot with ``n_joints`` joints (23 values for 6).
+
+    With ``n_arms=2`` (the bilateral env, one robot per arm) every per-arm field holds both
+    arms, right first: ``theta_star`` is the right robot's ``n_joints`` targets then the left
+    robot's, ``p_star`` the right then the left tool target, and so on (``2 n_joints + 9
+    n_arms + 2`` values: 44 for two UR5e)."""
+    if n_arms not in (1, 2):
+        raise ValueError(f"n_arms={n_arms!r} must be 1 or 2")
+    joints, xyz = n_joints * n_arms, 3 * n_arms
+    arms = "" if n_arms == 1 else " (right arm, then left arm)"
     return ObservationLayout((
-        ObservationField("theta_star", n_joints, "rad", "joint",
-                         "target robot joint angles theta* of the active target"),
-        ObservationField("p_star", 3, "m", "robot base",
-                         "target tool (flange) position p* of the active target"),
-        ObservationField("theta", n_joints, "rad", "joint", "robot joint angles theta"),
-        ObservationField("p", 3, "m", "robot base", "tool (flange) position p"),
-        ObservationField("phi", 3, "rad", "joint",
+        ObservationField("theta_star", joints, "rad", "joint",
+                         f"target robot joint angles theta* of the active target{arms}"),
+        ObservationField("p_star", xyz, "m", "robot base",
+                         f"target tool (flange) position p* of the active target{arms}"),
+        ObservationField("theta", joints, "rad", "joint", f"robot joint angles theta{arms}"),
+        ObservationField("p", xyz, "m", "robot base", f"tool (flange) position p{arms}"),
+        ObservationField("phi", xyz, "rad", "joint",
                          "the patient's exercised joints (shoulder flexion, shoulder abduction, "
-                         "elbow flexion; or hip flexion, hip abduction, knee flexion)"),
+                         f"elbow flexion; or hip flexion, hip abduction, knee flexion){arms}"),
         ObservationField("e", 1, "-", "-", "exercise index"),
         ObservationField("l", 1, "-", "-", "weight level"),
     ))
+
+
+def layout_for_size(size: int) -> ObservationLayout:
+    """The paper layout of an observation of ``size`` values: ``2 n + 11`` (odd) is one robot
+    of ``n`` joints, ``4 n + 20`` two robots of ``n`` joints (the bilateral env). A
+    ``ValueError`` names any other size."""
+    if size >= 13 and size % 2 == 1:
+        return paper_layout((size - 11) // 2)
+    if size >= 24 and (size - 20) % 4 == 0:
+        return paper_layout((size - 20) // 4, n_arms=2)
+    raise ValueError(f"an observation of {size} values is not a RehabBot layout (2 n + 11 "
+                     "for one robot of n joints, 4 n + 20 for two)")
+
+
+def tracking_slices(size: int) -> tuple[slice, slice, slice, slice]:
+    """``(theta_star, p_star, theta, p)``: where the targets and the current joint angles and
+    tool positions sit in an observation of ``size`` values (:func:`layout_for_size`)."""
+    layout = layout_for_size(size)
+    return tuple(layout.slice(name) for name in ("theta_star", "p_star", "theta", "p"))
 
 
 PAPER_LAYOUT = paper_layout(6)

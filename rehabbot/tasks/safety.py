@@ -13,8 +13,9 @@ rule (``info`` name)       fires when
 ``"cuff_force"``           the force in a cuff exceeds the ISO/TS 15066 quasi-static limit of
                            the body region it holds (hand 140 N, lower leg 130 N), or
                            ``cuff_force_limit_n`` when given (every cuff is checked)
-``"unintended_contact"``   a robot geom touches the patient's body or the furniture, deeper
-                           than ``contact_tolerance_m``
+``"unintended_contact"``   a robot geom touches the patient's body or the furniture (or,
+                           with ``robots_collide``, another robot), deeper than
+                           ``contact_tolerance_m``
 =========================  ====================================================================
 
 Rules are checked in this order; the first that fires is reported.
@@ -100,7 +101,8 @@ class SafetyMonitor:
     the constraint arrays, in the order of the equalities.
     """
 
-    def __init__(self, scene: Scene, thresholds: SafetyThresholds) -> None:
+    def __init__(self, scene: Scene, thresholds: SafetyThresholds,
+                 robots_collide: bool = False) -> None:
         model = scene.model
         self.scene = scene
         self.thresholds = thresholds
@@ -115,6 +117,11 @@ class SafetyMonitor:
         self._is_other = np.zeros(model.ngeom, dtype=bool)
         self._is_other[scene.patient_geom_ids] = True
         self._is_other[scene.furniture_geom_ids] = True
+        # With robots_collide, a contact between geoms of two different robots counts too.
+        self._robot_of = np.full(model.ngeom, -1)
+        for k, handle in enumerate(scene.robots):
+            self._robot_of[handle.geom_ids] = k
+        self._robots_collide = bool(robots_collide) and len(scene.robots) > 1
         # Constraint row where each cuff's force starts (equalities come first, in id order).
         first_row = np.cumsum([0, *(_equality_rows(model, e) for e in range(model.neq))])
         self._cuff_rows = tuple(int(first_row[h.equality_id]) for h in scene.robots)
@@ -230,6 +237,9 @@ class SafetyMonitor:
             robot = self._is_robot[geom]
             other = self._is_other[geom]
             hit = (robot[:, 0] & other[:, 1]) | (robot[:, 1] & other[:, 0])
+            if self._robots_collide:
+                owner = self._robot_of[geom]
+                hit |= (owner[:, 0] >= 0) & (owner[:, 1] >= 0) & (owner[:, 0] != owner[:, 1])
             if hit.any() and (contact.dist[hit] < -self.thresholds.contact_tolerance_m).any():
                 return "unintended_contact"
         return None

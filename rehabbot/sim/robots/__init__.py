@@ -16,15 +16,16 @@ from a literal. A robot module provides:
 name        module                 robot
 =========== ====================== ===========================================================
 ``"ur5e"``  :mod:`.ur5e`            Universal Robots UR5e (6 joints), the paper's robot
+``"fr3"``   :mod:`.fr3`             Franka Research 3 (7 joints)
 =========== ====================== ===========================================================
 """
 
 from __future__ import annotations
 
-from rehabbot.sim.robots import ur5e
+from rehabbot.sim.robots import fr3, ur5e
 from rehabbot.sim.robots.base import ImpedanceGains, RobotBuildOptions, RobotModel
 
-ROBOTS: dict[str, RobotModel] = {ur5e.UR5E.name: ur5e.UR5E}
+ROBOTS: dict[str, RobotModel] = {ur5e.UR5E.name: ur5e.UR5E, fr3.FR3.name: fr3.FR3}
 ROBOT_NAMES: tuple[str, ...] = tuple(ROBOTS)
 
 

@@ -27,6 +27,13 @@ import mujoco
 import numpy as np
 
 from rehabbot.sim.robots.base import ImpedanceGains, RobotBuildOptions, RobotModel
+from rehabbot.sim.robots.parts import (
+    add_capsule,
+    add_cuff,
+    add_joint_actuators,
+    add_tube,
+    limit_joint_torque,
+)
 
 JOINT_NAMES: tuple[str, ...] = (
     "shoulder_pan",
@@ -77,9 +84,6 @@ MOTOR_ACTUATOR_GROUP = 2
 MAX_JOINT_SPEED_RAD_S = np.pi  # 180 deg/s on all six joints
 ARMATURE_KGM2 = np.array([0.1, 0.1, 0.1, 0.05, 0.05, 0.05])
 
-# Collision classes shared by every model in the scene (see ``scene.py``).
-CONTYPE_ROBOT, CONAFFINITY_ROBOT = 1, 0
-
 _BLUE = (0.36, 0.58, 0.78, 1.0)
 _GREY = (0.78, 0.80, 0.82, 1.0)
 _DARK = (0.20, 0.22, 0.25, 1.0)
@@ -108,19 +112,8 @@ def _dh_child_frame(i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndar
     return trans, quat, axis, anchor
 
 
-def _tube(body: mujoco.MjsBody, name: str, p0, p1, radius: float, rgba, prefix: str,
-          kind: mujoco.mjtGeom = mujoco.mjtGeom.mjGEOM_CYLINDER) -> None:
-    """A cylinder (joint housing) or capsule (link tube) from ``p0`` to ``p1`` in the body frame."""
-    geom = body.add_geom(name=f"{prefix}{name}", type=kind, fromto=[*p0, *p1],
-                         size=[radius, 0.0, 0.0], rgba=rgba)
-    geom.contype, geom.conaffinity = CONTYPE_ROBOT, CONAFFINITY_ROBOT
-
-
-def _capsule(body: mujoco.MjsBody, name: str, p0, p1, radius: float, rgba, prefix: str) -> None:
-    _tube(body, name, p0, p1, radius, rgba, prefix, mujoco.mjtGeom.mjGEOM_CAPSULE)
-
-
-_cylinder = _tube
+_cylinder = add_tube
+_capsule = add_capsule
 
 
 # Link shapes in each DH frame (points in metres). Tubes are grey, joint housings blue.
@@ -143,19 +136,7 @@ def _add_link_geometry(body: mujoco.MjsBody, i: int, prefix: str,
         _cylinder(body, "wrist2_housing", (0, 0, -0.04), (0, 0, 0.065), 0.045, _BLUE, prefix)
     elif i == 5:  # flange, bracket and cuff
         _cylinder(body, "flange", (0, 0, -0.045), (0, 0, 0.0), 0.045, _DARK, prefix)
-        off = opts.cuff_offset_m
-        _capsule(body, "cuff_bracket", (0, 0, 0.0), (0, 0, off - opts.cuff_radius_m), 0.02, _DARK,
-                 prefix)
-        cuff = body.add_geom(
-            name=f"{prefix}cuff",
-            type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-            pos=[0, 0, off],
-            quat=[np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0],
-            size=[opts.cuff_radius_m, 0.03, 0.0],
-            rgba=(0.15, 0.45, 0.30, 0.6),
-        )
-        # The cuff is a soft strap around the limb: drawn, never collided.
-        cuff.contype, cuff.conaffinity = 0, 0
+        add_cuff(body, prefix, opts)
 
 
 def add_ur5e(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: RobotBuildOptions | None = None,
@@ -197,37 +178,16 @@ def add_ur5e(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: RobotBuildOption
             range=[-JOINT_RANGE_RAD[i], JOINT_RANGE_RAD[i]],
             armature=float(ARMATURE_KGM2[i]),
         )
-        joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
-        joint.actgravcomp = True
-        joint.actfrclimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        joint.actfrcrange = [-TORQUE_LIMIT_NM[i], TORQUE_LIMIT_NM[i]]
+        limit_joint_torque(joint, TORQUE_LIMIT_NM[i])
         _add_link_geometry(body, i, p, opts)
 
     body.add_site(name=f"{p}tool", pos=[0, 0, 0], size=[0.012, 0, 0], rgba=(1, 0.5, 0, 1))
     body.add_site(name=f"{p}cuff", pos=[0, 0, opts.cuff_offset_m], size=[0.012, 0, 0],
                   rgba=(0.2, 0.8, 0.4, 1))
 
-    for i, joint_name in enumerate(JOINT_NAMES):
-        kp = float(gains.kp_nm_per_rad[i])
-        kv = float(gains.kv_nms_per_rad[i])
-        servo = spec.add_actuator(name=f"{p}{joint_name}_servo", target=f"{p}{joint_name}",
-                                  trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        servo.group = SERVO_ACTUATOR_GROUP
-        servo.gaintype = mujoco.mjtGain.mjGAIN_FIXED
-        servo.biastype = mujoco.mjtBias.mjBIAS_AFFINE
-        servo.gainprm[0] = kp
-        servo.biasprm[0:3] = [0.0, -kp, -kv]
-        servo.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        servo.ctrlrange = [-JOINT_RANGE_RAD[i], JOINT_RANGE_RAD[i]]
-        servo.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        servo.forcerange = [-TORQUE_LIMIT_NM[i], TORQUE_LIMIT_NM[i]]
-        motor = spec.add_actuator(name=f"{p}{joint_name}_motor", target=f"{p}{joint_name}",
-                                  trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        motor.group = MOTOR_ACTUATOR_GROUP
-        motor.gaintype = mujoco.mjtGain.mjGAIN_FIXED
-        motor.gainprm[0] = 1.0
-        motor.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        motor.ctrlrange = [-TORQUE_LIMIT_NM[i], TORQUE_LIMIT_NM[i]]
+    add_joint_actuators(spec, p, JOINT_NAMES, gains.kp_nm_per_rad, gains.kv_nms_per_rad,
+                        [(-r, r) for r in JOINT_RANGE_RAD], TORQUE_LIMIT_NM,
+                        SERVO_ACTUATOR_GROUP, MOTOR_ACTUATOR_GROUP)
     return base
 
 
@@ -274,7 +234,8 @@ UR5E = RobotModel(
     name="ur5e",
     joint_names=JOINT_NAMES,
     torque_limit_nm=tuple(float(t) for t in TORQUE_LIMIT_NM),
-    joint_range_rad=tuple(float(r) for r in JOINT_RANGE_RAD),
+    joint_range_rad=tuple((-float(r), float(r)) for r in JOINT_RANGE_RAD),
+    max_joint_speed_rad_s=(MAX_JOINT_SPEED_RAD_S,) * len(JOINT_NAMES),
     default_gains=DEFAULT_GAINS,
     build=add_ur5e,
     ik_seed=ik_seed,

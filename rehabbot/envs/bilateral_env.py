@@ -1,0 +1,444 @@
+"""``BilateralEnv``: two robots, one strapped to each hand of the seated patient, move both arms
+through a therapy exercise together or in turns (Gymnasium API). Registered as
+``rehabbot/rehab-bilateral-v1`` (:mod:`rehabbot.envs.registration`).
+
+## Description
+The paper's two-arm scene (its Figs. 2-3): the ``upper_bilateral`` preset, a robot on a stand
+beside each shoulder, each cuff on its hand. Each episode runs one entry of the bilateral
+exercise table: an arm exercise (shoulder or elbow flexion, :data:`rehabbot.tasks.exercises.
+EXERCISES`) done with a pattern (:mod:`rehabbot.tasks.bilateral`): ``"symmetric"`` (both arms
+through the same key poses at the same time) or ``"alternating"`` (the right arm moves to a
+key pose while the left holds, then the left follows). A target is reached when both robots
+are within ``target_tolerance_rad`` of it on every joint.
+
+## Action space
+Both robots' actions side by side, right robot first: ``control_mode="joint_delta"`` gives
+``Box(-pi/400, pi/400, (2 n,), float32)`` (12 values for two UR5e, 14 for two FR3), each half
+meaning what a one-arm env's action means (:mod:`rehabbot.envs.rehab_env`), with each robot's
+own setpoint bounds. The other control modes likewise. Finite actions outside the box are
+clipped (``info["action_clipped"]``); NaN/inf or a wrong shape raise ``ValueError``.
+
+## Observation space
+:func:`rehabbot.tasks.observation.paper_layout` with ``n_arms=2``: the paper's per-arm fields
+for both arms, right first, then ``e`` and ``l`` (44 values for two UR5e):
+
+| field | values | unit |
+|---|---|---|
+| theta* | 2 n: the right robot's target joint angles, then the left's | rad |
+| p* | 6: each robot's target tool position, in its own base frame | m |
+| theta | 2 n: robot joint angles | rad |
+| p | 6: tool positions, each in its own base frame | m |
+| phi | 6: shoulder flexion, abduction, elbow flexion of the right arm, then the left | rad |
+| e | 1: the entry of the bilateral exercise table (:mod:`rehabbot.envs.bilateral_config`) | - |
+| l | 1: weight level 0..4 (both arms' masses x1.0 .. x2.0) | - |
+
+The bounds are each arm's one-arm bounds; they do not depend on the patient.
+
+## Rewards
+:mod:`rehabbot.tasks.bilateral_reward`: the ``-v1`` terms with the path summed over both arms
+(``reward_progress``, ``reward_bonus``, ``reward_time``, ``reward_safety``, optional
+``reward_smoothness``, ``reward_effort``) plus ``reward_sync``, which charges the arms for
+moving out of step when both move (``sync_weight``, ``sync_tolerance``). A stop never pays.
+
+## Episode end
+Success when both arms reach the last target; a safety stop when a rule of
+:mod:`rehabbot.tasks.safety` fires: each cuff against its own ISO/TS 15066 limit (hand, 140 N),
+the range of motion of every patient joint, and unintended contact, which includes contact
+between the two robots; truncation at ``max_episode_steps`` (1000 = 20 s).
+
+## Info
+As :class:`rehabbot.envs.rehab_env.RehabEnv`'s (``interaction_force_n`` is the larger cuff
+force, ``robot_torque_nm`` both robots', ``robot_work_j`` the two cuffs' work on the arms),
+plus ``cuff_forces_n`` (right, left), ``segment_fraction`` (each arm's progress through the
+current segment) and ``sync_gap``.
+
+## Arguments
+Every argument of :class:`rehabbot.envs.rehab_env.RehabEnv` (the table there) except that
+``limb`` must be ``"arm"``, ``side`` is unused, ``reward`` is ``"progress"`` and ``condition``
+must be healthy (conditions on both arms are not supported yet); ``exercise`` indexes the
+bilateral table. Bilateral arguments:
+
+| kwarg | default | meaning |
+|---|---|---|
+| ``patterns`` | ``("symmetric", "alternating")`` | the patterns of the table (pattern-major) |
+| ``sync_weight`` | 0.5 | cost per step of a whole segment's lag between the arms |
+| ``sync_tolerance`` | 0.1 | lag (share of the segment) that costs nothing |
+
+Rendering draws the right robot's tool path and targets.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from rehabbot.common.checks import check_options
+from rehabbot.envs.actions import checked_action
+from rehabbot.envs.bilateral_build import build_bilateral_parts
+from rehabbot.envs.bilateral_config import BilateralEnvConfig, bilateral_kwarg_names
+from rehabbot.envs.config import RENDER_MODES
+from rehabbot.envs.env_rendering import EnvRendering
+from rehabbot.sim.patient_drive import WorkMeter
+from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
+from rehabbot.tasks import feasibility
+from rehabbot.tasks.bilateral import arm_view
+from rehabbot.tasks.bilateral_reward import segment_fraction, sync_gap
+from rehabbot.tasks.reward import StepOutcome, total
+from rehabbot.tasks.targets import TargetSequence
+
+RESET_OPTIONS = ("exercise", "weight_level")
+
+
+class BilateralEnv(gym.Env):
+    """Two robots move both of a patient's arms through an exercise (module docstring)."""
+
+    metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
+
+    def __init__(self, config: BilateralEnvConfig | None = None, **kwargs: Any) -> None:
+        if config is None:
+            unknown = sorted(set(kwargs) - set(bilateral_kwarg_names()))
+            if unknown:
+                raise TypeError(f"BilateralEnv got unknown keyword argument(s) {unknown}; "
+                                f"valid: {list(bilateral_kwarg_names())}")
+            config = BilateralEnvConfig(**kwargs)
+        elif kwargs:
+            raise TypeError("pass either a BilateralEnvConfig or keyword arguments, not both")
+        elif not isinstance(config, BilateralEnvConfig):
+            raise TypeError(f"config must be a BilateralEnvConfig, got {type(config).__name__}")
+        self.config = config
+        parts = build_bilateral_parts(config)
+        scene = self.scene = parts.scene
+        self.model = scene.model
+        self.data = mujoco.MjData(self.model)
+        self.handles = scene.robots
+        self.robot = scene.robots[0].robot
+        self.n_joints_per_robot = n = scene.n_robot_joints
+        self.joint_names = tuple(f"{h.prefix}{j}" for h in scene.robots
+                                 for j in h.robot.joint_names)
+        self.setpoint_low_rad, self.setpoint_high_rad = (parts.setpoint_low_rad,
+                                                         parts.setpoint_high_rad)
+        self.targets: tuple[TargetSequence, ...] = parts.targets
+        self.exercises = config.bilateral_exercises
+        self.controller = parts.controller
+        self.safety = parts.safety
+        self.reward_function = parts.reward
+        self.layout = parts.layout
+        self.action_space = self.controller.action_space
+        self.observation_space = parts.observation_space
+        self.render_mode = config.render_mode
+        self.frame_skip = config.frame_skip
+        self.max_episode_steps = config.max_episode_steps
+        self.dt_s = self.frame_skip * self.model.opt.timestep
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
+        self._unusable_levels = parts.unusable_levels
+        self._segments = parts.segment_lengths_rad
+        self._rests = parts.remaining_paths
+        self._healthy_low, self._healthy_high = parts.healthy_low, parts.healthy_high
+        self._meters = tuple(WorkMeter(arm_view(scene, k), self.safety.cuff_rows[k])
+                             for k in range(2))
+        layout = self.layout
+        self._theta_star, self._p_star = layout.slice("theta_star"), layout.slice("p_star")
+        self._dynamic = slice(layout.slice("theta").start, layout.slice("phi").stop)
+        self._e_obs, self._l_obs = layout.index("e"), layout.index("l")
+        self._qpos_adr = np.concatenate([h.qpos_adr for h in self.handles])
+        self._dof_adr = np.concatenate([h.dof_adr for h in self.handles])
+        self._tool_sites = [h.tool_site_id for h in self.handles]
+        self._phi_adr = scene.exercised_qpos_adr
+        self._patient_qpos_adr = scene.patient_qpos_adr
+        mujoco.mj_kinematics(self.model, self.data)
+        self._base_pos = np.array([self.data.xpos[h.base_body_id] for h in self.handles])
+        self._base_rot = np.array([self.data.xmat[h.base_body_id].reshape(3, 3)
+                                   for h in self.handles])
+        self._obs = np.zeros(layout.size, np.float32)
+        self._dynamic_values = np.zeros(self._dynamic.stop - self._dynamic.start)
+        self._prev_action = np.zeros(2 * n)
+        self._outcome = StepOutcome(previous_action=self._prev_action)
+        self._clip_low = self.controller.clip_low.astype(float)
+        self._clip_high = self.controller.clip_high.astype(float)
+        self._clip_bounds = tuple(zip(self.controller.clip_low.tolist(),
+                                      self.controller.clip_high.tolist(), strict=True))
+        self._tolerance = config.target_tolerance_rad
+        self._steps = self._target_index = self._exercise = 0
+        self._sequence = self.targets[0]
+        self._path_left = 0.0
+        self._fractions = np.ones(2)
+        self._needs_reset = True
+        self._closed = False
+        self._rendering = EnvRendering(self.model, self.render_mode, config.width,
+                                       config.height, config.camera_name,
+                                       self.max_episode_steps, self.dt_s, self._base_pos[0],
+                                       self._base_rot[0])
+        self._record = self.render_mode is not None
+        self._bind_views()
+        scene.reset_data(self.data)
+
+    # ------------------------------------------------------------------------------------------
+    # Gymnasium API
+    # ------------------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = check_options(options, RESET_OPTIONS)
+        drawn_exercise = int(self.np_random.integers(len(self.targets)))
+        drawn_level = int(self.np_random.integers(len(WEIGHT_LEVELS)))
+        exercise = options.get("exercise", self.config.exercise)
+        exercise = drawn_exercise if exercise is None else exercise
+        if isinstance(exercise, bool) or exercise not in range(len(self.targets)):
+            raise ValueError(f"exercise={exercise!r} is not one of "
+                             f"{list(range(len(self.targets)))}")
+        level = options.get("weight_level", self.config.weight_level)
+        level = drawn_level if level is None else check_weight_level(level)
+        if level in self._unusable_levels:
+            feasibility.refuse(self._unusable_levels, WEIGHT_LEVELS, level)
+        if level != self.scene.weight_level:
+            self.scene.set_weight_level(level)
+        self._exercise = int(exercise)
+        self._sequence = self.targets[self._exercise]
+        self._target_index = self._steps = 0
+        data = self.data
+        self.scene.reset_data(data)
+        self.controller.reset(data, self.scene.home_setpoints)
+        self.safety.reset(data)
+        for meter in self._meters:
+            meter.reset(data)
+        self._prev_action[:] = 0.0
+        self._rendering.clear_trace()
+        obs = self._obs
+        obs[self._e_obs] = self._exercise
+        obs[self._l_obs] = self.scene.weight_level
+        self._write_target()
+        self._observe()
+        self._record_trace()
+        distances = self._arm_distances()
+        self._path_left = self._path(distances, self._target_index)
+        self._fractions[:] = self._segment_fractions(distances)
+        info = self._info(None, False, self.reward_function.zero_terms(), 0, 0.0)
+        self._needs_reset = False
+        if self.render_mode == "human":
+            self.render()
+        return obs.copy(), info
+
+    def step(self, action):
+        if self._needs_reset:
+            self._refuse_step()
+        action, clipped = checked_action(action, self.action_space, self._clip_low,
+                                         self._clip_high, self._clip_bounds)
+        data, model = self.data, self.model
+        self.controller.apply(action, data)
+        for _ in range(self.frame_skip):
+            mujoco.mj_step(model, data)
+            for meter in self._meters:
+                meter.after_step(data)
+        self._steps += 1
+        violation, _ = self.safety.check_step(data)
+        if violation != "instability" and not self._observe():
+            violation = "instability"
+        elif violation != "instability":
+            self._record_trace()
+        if violation == "instability":  # keep the last healthy observation
+            self._obs[self._dynamic] = self._dynamic_values
+
+        distances = self._arm_distances()
+        index, last = self._target_index, self._target_index == len(self._sequence) - 1
+        safety_stop = violation is not None and (self.config.terminate_on_safety
+                                                 or violation == "instability")
+        theta = self._dynamic_values[:2 * self.n_joints_per_robot]
+        largest = float(np.max(np.abs(theta - self._sequence.robot_rad[index])))
+        reached = largest < self._tolerance and not safety_stop
+        switching = reached and not last
+        fractions = self._segment_fractions(distances)
+        moving = self._segments[self._exercise][index] > self._tolerance
+        outcome = self._outcome
+        outcome.sync_gap = sync_gap(fractions[0], fractions[1], bool(moving[0]),
+                                    bool(moving[1]), self.reward_function.sync_tolerance)
+        outcome.path_left_before_rad = self._path_left
+        if switching:
+            self._target_index += 1
+            distances = self._arm_distances()
+        self._path_left = outcome.path_left_rad = self._path(distances, self._target_index)
+        outcome.distance_rad = float(np.linalg.norm(theta - self._sequence.robot_rad[index]))
+        outcome.reached, outcome.last_target = reached, last
+        outcome.safety_stop, outcome.steps_done = safety_stop, self._steps
+        outcome.action, outcome.torque_nm = action, data.qfrc_actuator[self._dof_adr]
+        terms = self.reward_function(outcome)
+        reward = total(terms)
+        if self.reward_function.uses_previous_action:
+            self._prev_action[:] = action
+        self._fractions[:] = fractions
+        if switching:
+            self._write_target()
+        terminated = safety_stop or (reached and last)
+        self._needs_reset = terminated
+        info = self._info(violation, reached and last, terms, clipped, outcome.sync_gap)
+        if self.render_mode == "human":
+            self.render()
+        return self._obs.copy(), reward, terminated, False, info
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode="
+                            "'human', 'rgb_array' or 'depth_array' to the constructor")
+            return None
+        if self._closed:
+            raise RuntimeError("render() called after close()")
+        targets = self._sequence.tool_pos_base_m[:, :3]  # the right robot's
+        if self.render_mode == "human":
+            self._rendering.human(self.data, targets, self._target_index)
+            return None
+        return self._rendering.offscreen(self.data, self.render_mode == "depth_array",
+                                         targets, self._target_index)
+
+    def close(self) -> None:
+        self._rendering.close()
+        self._closed = True
+        self._needs_reset = True
+
+    # ------------------------------------------------------------------------------------------
+    # Properties
+    # ------------------------------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Seconds per step (``frame_skip x timestep``)."""
+        return self.dt_s
+
+    @property
+    def healthy_obs_low(self) -> np.ndarray:
+        """Lower corner of the box a healthy observation stays in (instability rule)."""
+        return self._healthy_low
+
+    @property
+    def healthy_obs_high(self) -> np.ndarray:
+        """Upper corner of the healthy box."""
+        return self._healthy_high
+
+    @property
+    def episode_steps(self) -> int:
+        """Steps taken since the last ``reset()``."""
+        return self._steps
+
+    @property
+    def target_index(self) -> int:
+        """Index of the active target in the episode's sequence."""
+        return self._target_index
+
+    @property
+    def exercise(self) -> int:
+        """The episode's entry of the bilateral exercise table."""
+        return self._exercise
+
+    @property
+    def target_sequence(self) -> TargetSequence:
+        """The episode's targets (rows: the right robot's joints, then the left's)."""
+        return self._sequence
+
+    @property
+    def torque_limits_nm(self) -> np.ndarray:
+        """Both robots' joint torque limits [N·m], right first (a new array)."""
+        return np.concatenate([h.robot.torque_limits() for h in self.handles])
+
+    @property
+    def segment_fractions(self) -> np.ndarray:
+        """Each arm's progress through the current segment (a copy)."""
+        return self._fractions.copy()
+
+    def __getattr__(self, name: str) -> Any:
+        config = self.__dict__.get("config")
+        if config is not None and name in bilateral_kwarg_names():
+            return getattr(config, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    # ------------------------------------------------------------------------------------------
+    # Helpers
+    # ------------------------------------------------------------------------------------------
+    def _refuse_step(self) -> None:
+        if self._closed:
+            raise RuntimeError("step() called after close(); make a new env")
+        if self._steps == 0:
+            raise gym.error.ResetNeeded("step() called before reset(); call env.reset() first")
+        raise gym.error.ResetNeeded("step() called after the episode terminated; call "
+                                    "env.reset() to start the next one")
+
+    def _write_target(self) -> None:
+        i = self._target_index
+        self._obs[self._theta_star] = self._sequence.robot_rad[i]
+        self._obs[self._p_star] = self._sequence.tool_pos_base_m[i]
+
+    def _observe(self) -> bool:
+        """Write theta, p and phi of both arms into the observation; False (the observation
+        not written) when they are not finite or leave the healthy box."""
+        qpos = self._qpos
+        tools = [
+            self._base_rot[k].T @ (self._site_xpos[site] - self._base_pos[k])
+            for k, site in enumerate(self._tool_sites)]
+        values = np.concatenate([qpos[self._qpos_adr], *tools, qpos[self._phi_adr]])
+        candidate = values.astype(np.float32)
+        dynamic = self._dynamic
+        inside = (candidate >= self._healthy_low[dynamic]) & \
+            (candidate <= self._healthy_high[dynamic])
+        if not inside.all():
+            return False
+        self._dynamic_values[:] = values
+        self._obs[dynamic] = candidate
+        return True
+
+    def _arm_distances(self) -> np.ndarray:
+        """Each robot's joint-space distance [rad] to the active target."""
+        n = self.n_joints_per_robot
+        theta = self._dynamic_values[:2 * n]
+        error = theta - self._sequence.robot_rad[self._target_index]
+        return np.array([math.sqrt(float(error[:n] @ error[:n])),
+                         math.sqrt(float(error[n:] @ error[n:]))])
+
+    def _path(self, distances: np.ndarray, index: int) -> float:
+        """The path both arms still have to travel [rad] (the reward's D)."""
+        return float(distances.sum() + self._rests[self._exercise][index].sum())
+
+    def _segment_fractions(self, distances: np.ndarray) -> np.ndarray:
+        lengths = self._segments[self._exercise][self._target_index]
+        return np.array([segment_fraction(float(d), float(length))
+                         for d, length in zip(distances, lengths, strict=True)])
+
+    def _info(self, violation, is_success, terms, clipped, gap) -> dict:
+        forces = self.safety.cuff_forces_n(self.data).copy()
+        return {
+            "is_success": bool(is_success),
+            "target_index": self._target_index,
+            "num_targets": len(self._sequence),
+            "safety_violation": violation,
+            **terms,
+            "interaction_force_n": float(forces.max()),
+            "cuff_forces_n": forces,
+            "robot_torque_nm": self._qfrc_actuator[self._dof_adr].copy(),
+            "patient_torque_nm": np.zeros(len(self._phi_adr)),
+            "patient_work_j": 0.0,
+            "robot_work_j": float(sum(m.robot_j for m in self._meters)),
+            "assistance_ratio": 1.0,
+            "patient_qpos": self._qpos[self._patient_qpos_adr].copy(),
+            "exercise": self._exercise,
+            "weight_level": self.scene.weight_level,
+            "action_clipped": clipped,
+            "segment_fraction": self._fractions.copy(),
+            "sync_gap": gap,
+            "cost": 0.0 if violation is None else 1.0,
+        }
+
+    def _record_trace(self) -> None:
+        if self._record:
+            self._rendering.record(self._site_xpos[self._tool_sites[0]])
+
+    def _bind_views(self) -> None:
+        data = self.data
+        self._qpos = data.qpos
+        self._site_xpos = data.site_xpos
+        self._qfrc_actuator = data.qfrc_actuator
+        self.controller.bind(data)
+        self.safety.bind(data)
+        for meter in self._meters:
+            meter.bind(data)
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._bind_views()

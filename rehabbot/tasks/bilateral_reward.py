@@ -1,0 +1,91 @@
+"""The reward of the bilateral env: the ``-v1`` progress reward summed over both arms, plus a
+synchronisation term.
+
+The path still to travel ``D`` (:mod:`rehabbot.tasks.progress_reward`) is the sum of the two
+robots' paths, each in its own joint space: ``D = sum_k ||theta_k - theta*_ik|| + rest_ik``.
+``progress``, ``bonus`` (a target counts as reached when both arms are within
+``target_tolerance_rad`` of it on every joint), ``time`` and ``safety`` are then the ``-v1``
+terms.
+
+**Synchronisation.** In symmetric bilateral training both limbs move together. Each arm's
+progress through the current segment is ``f_k = clip(1 - ||theta_k - theta*_ik|| / L_ik, 0,
+1)``, with ``L_ik`` the length of its segment (from the previous target, or from home); an arm
+whose segment is shorter than ``target_tolerance_rad`` holds still in it and has no progress.
+When both arms move in the segment, the step pays
+
+    reward_sync = -sync_weight x max(|f_right - f_left| - sync_tolerance, 0)
+
+so arms that move in step within ``sync_tolerance`` (10 % of the segment by default) pay
+nothing, and an arm that lags a whole segment costs ``sync_weight x (1 - sync_tolerance)`` a
+step. In the alternating pattern only one arm moves per segment, so the term is 0.
+
+A stop never pays: the safety penalty of the ``-v1`` reward charges, for every step left, the
+most a step of holding still can cost, here ``time_cost + sync_weight`` (plus the optional
+terms' maxima).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from rehabbot.tasks.progress_reward import ProgressReward
+from rehabbot.tasks.reward import StepOutcome
+
+SYNC_WEIGHT = 0.5  # per step, at a whole segment's lag (beyond the tolerance)
+SYNC_TOLERANCE = 0.1  # a lag of this share of the segment is free
+
+
+def sync_gap(fraction_right: float, fraction_left: float, moving_right: bool,
+             moving_left: bool, tolerance: float) -> float:
+    """``max(|f_right - f_left| - tolerance, 0)`` when both arms move in the segment, else 0."""
+    if not (moving_right and moving_left):
+        return 0.0
+    return max(abs(fraction_right - fraction_left) - tolerance, 0.0)
+
+
+def segment_fraction(distance_rad: float, length_rad: float) -> float:
+    """How far through its segment an arm is: ``clip(1 - distance / length, 0, 1)`` (1.0 for an
+    arm that holds still, ``length`` 0)."""
+    if length_rad <= 0.0:
+        return 1.0
+    return min(max(1.0 - distance_rad / length_rad, 0.0), 1.0)
+
+
+@dataclass(frozen=True)
+class BilateralReward:
+    """The ``-v1`` terms of :class:`ProgressReward` plus ``reward_sync`` (module docstring).
+    The env puts the step's synchronisation gap in ``outcome.sync_gap``."""
+
+    progress: ProgressReward
+    sync_weight: float = SYNC_WEIGHT
+    sync_tolerance: float = SYNC_TOLERANCE
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return (*self.progress.names, "sync")
+
+    @property
+    def target_tolerance_rad(self) -> float:
+        return self.progress.target_tolerance_rad
+
+    @property
+    def uses_previous_action(self) -> bool:
+        return self.progress.uses_previous_action
+
+    def __call__(self, outcome: StepOutcome) -> dict[str, float]:
+        """The terms of one step, ``{"reward_progress": ..., "reward_sync": ...}``."""
+        terms = self.progress(outcome)
+        if outcome.safety_stop:
+            steps_left = max(self.progress.max_episode_steps - outcome.steps_done, 0) + 1
+            if self.progress.safety_penalty_steps is not None:
+                steps_left = min(steps_left, self.progress.safety_penalty_steps)
+            terms["reward_safety"] -= steps_left * self.sync_weight
+            terms["reward_sync"] = 0.0
+        else:
+            terms["reward_sync"] = -self.sync_weight * outcome.sync_gap if outcome.sync_gap \
+                else 0.0
+        return terms
+
+    def zero_terms(self) -> dict[str, float]:
+        """Every term at 0 (the ``info`` of ``reset``)."""
+        return {f"reward_{name}": 0.0 for name in self.names}
