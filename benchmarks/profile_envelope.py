@@ -2,7 +2,7 @@
 grid of heights, masses and both sexes (random weight levels, so every level is checked) and
 counts the profiles it refuses (:mod:`rehabbot.feasibility`), by reason.
 
-    python benchmarks/profile_envelope.py [--workers 2] [--out runs/envelope.json]
+    python benchmarks/profile_envelope.py [--robot ur5e] [--workers 2] [--out runs/envelope.json]
 
 Prints a Markdown table: per limb and side, the refused share of the grid, the reasons, and the
 lowest height from which every profile up to a given mass is accepted.
@@ -11,6 +11,7 @@ lowest height from which every profile up to a given mass is accepted.
 from __future__ import annotations
 
 import argparse
+import functools
 import itertools
 import json
 import sys
@@ -26,11 +27,12 @@ COMBOS = tuple(itertools.product(("arm", "hip", "knee"), ("right", "left")))
 MASS_CAPS_KG = (100.0, 140.0, 200.0)
 REASONS = {"cannot reach": "robot cannot reach the cuff", "setpoint bounds":
            "target outside the setpoint bounds", "at rest": "cuff force at rest",
-           "touches": "robot touches the body at home"}
+           "touches": "robot touches the body at home",
+           "torque limit": "robot joint saturated at rest"}
 
 
-def survey(combo: tuple[str, str]) -> list[dict]:
-    """One row per profile of the grid for ``combo`` = (limb, side)."""
+def survey(combo: tuple[str, str], robot: str = "ur5e") -> list[dict]:
+    """One row per profile of the grid for ``combo`` = (limb, side), with ``robot``."""
     from rehabbot.envs.rehab_env import RehabEnv
 
     limb, side = combo
@@ -38,7 +40,8 @@ def survey(combo: tuple[str, str]) -> list[dict]:
     for h, m, sex in itertools.product(HEIGHTS_M, MASSES_KG, SEXES):
         reason = None
         try:
-            RehabEnv(limb=limb, side=side, profile={"height_m": h, "mass_kg": m, "sex": sex})
+            RehabEnv(limb=limb, side=side, robot=robot,
+                     profile={"height_m": h, "mass_kg": m, "sex": sex})
         except ValueError as err:
             reason = next((v for k, v in REASONS.items() if k in str(err)), str(err))
         rows.append({"limb": limb, "side": side, "height_m": h, "mass_kg": m, "sex": sex,
@@ -73,15 +76,17 @@ def table(rows: list[dict]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robot", default="ur5e", help="the robot (default: ur5e)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=None, help="write every row as JSON")
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error(f"--workers {args.workers} must be >= 1")
     with ProcessPoolExecutor(args.workers) as pool:
-        rows = [r for part in pool.map(survey, COMBOS) for r in part]
-    print(f"grid: heights {HEIGHTS_M[0]}-{HEIGHTS_M[-1]} m every 0.05 m, masses "
-          f"{', '.join(f'{m:.0f}' for m in MASSES_KG)} kg, both sexes; every weight level")
+        rows = [r for part in pool.map(functools.partial(survey, robot=args.robot), COMBOS)
+                for r in part]
+    print(f"robot {args.robot}; grid: heights {HEIGHTS_M[0]}-{HEIGHTS_M[-1]} m every 0.05 m, "
+          f"masses {', '.join(f'{m:.0f}' for m in MASSES_KG)} kg, both sexes; every weight level")
     print(table(rows))
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -16,7 +16,10 @@ on, so that safety stops, target switches and resets all appear.
 
 Regenerate (only in a commit that says which defect it fixes and why the episodes change)::
 
-    python tests/golden_episodes.py --write
+    python tests/golden_episodes.py --write [--only rehabbot/rehab-bilateral-v1 ...]
+
+``--only`` re-records the named ids and keeps every other stored rollout byte for byte (a
+recording made on another CPU can differ from the stored one in the last bits).
 """
 
 from __future__ import annotations
@@ -219,8 +222,15 @@ def load_golden(path: Path = GOLDEN_PATH) -> dict[str, dict[str, np.ndarray]]:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--write", action="store_true", help=f"(re)write {GOLDEN_PATH}")
+    parser.add_argument("--only", nargs="+", metavar="ID", choices=IDS,
+                        help="re-record only these ids; keep the other stored rollouts")
     args = parser.parse_args(argv)
-    rollouts = record_all()
+    if args.only:
+        fresh = record_all(ids=tuple(args.only))
+        rollouts = {key: fresh.pop(key, fields) for key, fields in load_golden().items()}
+        rollouts.update(fresh)  # rollouts the file did not hold yet
+    else:
+        rollouts = record_all()
     ends = {"success": 0, "safety": 0, "resets": 0}
     for fields in rollouts.values():
         ends["success"] += int(fields["is_success"].sum())

@@ -163,10 +163,15 @@ def test_sync_helpers_and_a_stop_never_pays():
     assert segment_fraction(2.0, 1.0) == 0.0 and segment_fraction(0.3, 0.0) == 1.0
     reward = BilateralReward(ProgressReward(max_episode_steps=1000), sync_weight=0.5)
     stop = reward(StepOutcome(safety_stop=True, steps_done=10, path_left_before_rad=2.0,
-                              path_left_rad=1.9, sync_gap=0.9))
-    # Holding still instead costs at most time_cost + sync_weight a step to the limit.
-    assert stop["reward_safety"] <= -(991 * (0.05 + 0.5))
+                              path_left_rad=1.9, sync_gap=0.3, sync_gap_before=0.4))
+    # Holding still from the state before the stop costs time_cost + sync_weight x its gap
+    # (0.4) a step to the limit, from the state it stops in time_cost + sync_weight x 0.3: the
+    # stop is charged the larger, and gives the step's progress back.
+    assert stop["reward_safety"] == pytest.approx(-(0.1 * 10.0 + 991 * (0.05 + 0.5 * 0.4)))
     assert stop["reward_sync"] == 0.0 and stop["reward_bonus"] == 0.0
+    in_step = reward(StepOutcome(safety_stop=True, steps_done=10, path_left_before_rad=2.0,
+                                 path_left_rad=1.9))
+    assert in_step["reward_safety"] == pytest.approx(-(0.1 * 10.0 + 991 * 0.05))
     lag = reward(StepOutcome(sync_gap=0.4))
     assert lag["reward_sync"] == pytest.approx(-0.2)
 
@@ -290,3 +295,43 @@ def test_layouts_by_size_and_tracking_features_read_both_robots(env):
     np.testing.assert_allclose(numpy_features[0, 44:56], joint_error, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(numpy_features[0, 56:62], (batch[0, 12:18] - batch[0, 30:36]) / 0.1,
                                rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_the_cli_trains_evaluates_renders_and_plots_the_bilateral_id(tmp_path, capsys):
+    import json
+
+    import imageio.v2 as imageio
+
+    from rehabbot.cli import main
+
+    runs = tmp_path / "runs"
+    assert main(["train", "rehab-bilateral-v1", "--algo", "sac", "--backend", "sb3",
+                 "--timesteps", "300", "--demos", "1", "--eval-freq", "150",
+                 "--eval-episodes", "1", "--checkpoint-freq", "150", "--out", str(runs),
+                 "--no-progress"]) == 0
+    run = runs / "rehab-bilateral-v1" / "sac" / "seed0"
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["env_id"] == ENV_ID and manifest["timesteps_done"] == 300
+    evaluation = tmp_path / "eval"
+    assert main(["evaluate", str(run / "model.zip"), "expert", "--episodes", "1",
+                 "--seed", "7", "--out", str(evaluation)]) == 0
+    expert = json.loads((evaluation / "expert" / "evaluation.json").read_text())
+    assert expert["per_episode"][0]["success"]
+    model = json.loads((evaluation / "sac-seed0" / "evaluation.json").read_text())
+    assert model["per_episode"][0]["length"] > 0
+    video = tmp_path / "expert.gif"
+    assert main(["render", "expert", "--env", "rehab-bilateral-v1", "--out", str(video),
+                 "--width", "96", "--height", "72", "--frame-every", "25"]) == 0
+    frames = imageio.mimread(video)
+    assert len(frames) > 2 and frames[0].shape[:2] == (72, 96)
+    figures = tmp_path / "figures"
+    assert main(["plot", str(run), "--out", str(figures), "--formats", "png",
+                 "--source", "eval"]) == 0
+    assert (figures / "fig4_learning_curves.png").stat().st_size > 10_000
+    # Fig. 3 draws each robot's tool path in its own base frame: two panels side by side.
+    path = imageio.imread(figures / "fig3_tool_path_sac-seed0_rehab-bilateral-v1.png")
+    assert path.shape[1] > 1.8 * path.shape[0]
+    for figure in ("fig5_kinematics", "fig6_torques"):
+        assert (figures / f"{figure}_sac-seed0_rehab-bilateral-v1.png").stat().st_size > 10_000
+    capsys.readouterr()

@@ -8,12 +8,16 @@ import pytest
 
 from rehabbot.envs.registration import ENV_SPECS
 from rehabbot.rl.experts import ScriptedExpert
+from rehabbot.sim.robots import ROBOT_NAMES, get_robot
 
-# The resistive knee's full-speed expert meets the cuff's force limit at weight level 4 (by
-# design: docs/conditions.md; tests/test_conditions.py checks the gentler controllers).
+# The resistive knee's full-speed expert meets the cuff's force limit (by design, at weight
+# level 4 with the UR5e and in knee extension at every level with the softer FR3:
+# docs/conditions.md; tests/test_conditions.py checks the gentler controllers).
 EXPERT_IDS = tuple(i for i in ENV_SPECS if i != "rehabbot/rehab-knee-resistive-v1")
 
-def run_expert(env, expert, exercise, level, seed=0):
+def run_expert(env, expert, exercise, level, seed=0, torque_limits_nm=None):
+    """Run one expert episode; return its steps, return, last info and peak cuff force. With
+    ``torque_limits_nm`` every step's robot torques are checked against them."""
     obs, info = env.reset(seed=seed, options={"exercise": exercise, "weight_level": level})
     steps, ret, peak_force = 0, 0.0, 0.0
     while True:
@@ -22,21 +26,28 @@ def run_expert(env, expert, exercise, level, seed=0):
         steps += 1
         ret += reward
         peak_force = max(peak_force, info["interaction_force_n"])
+        if torque_limits_nm is not None:
+            assert np.all(np.abs(info["robot_torque_nm"]) <= torque_limits_nm + 1e-9)
         if terminated or truncated:
             return steps, ret, info, peak_force
 
 
 # The -v1 ids have the -v0 ids' dynamics and expert (only the pay differs): the fast selection
-# runs the -v0 ids, the full suite all eight.
+# runs the -v0 ids, the full suite every id; each with either robot.
+@pytest.mark.parametrize("robot", ROBOT_NAMES)
 @pytest.mark.parametrize("env_id", [pytest.param(i, marks=pytest.mark.slow if i.endswith("-v1")
                                                  else ()) for i in EXPERT_IDS])
-def test_expert_finishes_every_exercise_at_every_weight_level_without_safety_events(env_id):
-    env = gym.make(env_id)
+def test_expert_finishes_every_exercise_at_every_weight_level_without_safety_events(env_id,
+                                                                                    robot):
+    env = gym.make(env_id, robot=robot)
     expert = ScriptedExpert(env)
     limit = env.unwrapped.safety.force_limit_n
+    torque_limits = np.tile(get_robot(robot).torque_limits(),
+                            env.action_space.shape[0] // get_robot(robot).n_joints)
     for exercise in (0, 1):
         for level in range(5):
-            steps, _ret, info, peak = run_expert(env, expert, exercise, level)
+            steps, _ret, info, peak = run_expert(env, expert, exercise, level,
+                                                 torque_limits_nm=torque_limits)
             assert info["is_success"], (env_id, exercise, level, info["safety_violation"])
             assert info["safety_violation"] is None
             assert steps < 1000

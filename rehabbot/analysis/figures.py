@@ -281,16 +281,27 @@ def _page_points_pt(ax, points_m: np.ndarray) -> np.ndarray:
 
 
 def build_tool_path(trace: Trace | Path | str) -> Figure:
-    """Fig. 3: 3-D tool path (purple) and numbered targets, equal axes, robot base frame."""
+    """Fig. 3: 3-D tool path (purple) and numbered targets, equal axes, robot base frame; one
+    panel per robot (the bilateral env's two, each in its own base frame, right first)."""
     trace = _as_trace(trace)
-    figure = new_figure((7.0, 6.5))
     try:
         import mpl_toolkits.mplot3d  # noqa: F401  (registers the "3d" projection)
     except ImportError as err:  # pragma: no cover - ships with matplotlib
         raise ImportError('plotting needs matplotlib: pip install "rehabbot[plot]"') from err
-    ax = figure.add_subplot(projection="3d")
-    path = trace.tool_pos_m
-    targets = trace.target_tool_pos_m
+    n_robots = trace.tool_pos_m.shape[1] // 3
+    figure = new_figure((7.0 * n_robots, 6.5))
+    names = ("right robot", "left robot") if n_robots == 2 else (None,) * n_robots
+    for k, name in enumerate(names):
+        ax = figure.add_subplot(1, n_robots, k + 1, projection="3d")
+        columns = slice(3 * k, 3 * k + 3)
+        title = f"Tool path (robot base frame): {trace.policy} on {trace.env_id}"
+        _draw_tool_path(ax, trace.tool_pos_m[:, columns], trace.target_tool_pos_m[:, columns],
+                        title if name is None else f"{title}, {name}")
+    return figure
+
+
+def _draw_tool_path(ax, path: np.ndarray, targets: np.ndarray, title: str) -> None:
+    """One robot's tool path and numbered targets on the 3-D axes ``ax``."""
     ax.plot(path[:, 0], path[:, 1], path[:, 2], color=TOOL_PATH_COLOR, linewidth=2.0,
             label="tool path")
     ax.scatter(*path[0], color=TOOL_PATH_COLOR, marker="o", s=30, label="start")
@@ -310,11 +321,10 @@ def build_tool_path(trace: Trace | Path | str) -> Figure:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
-    ax.set_title(f"Tool path (robot base frame): {trace.policy} on {trace.env_id}")
+    ax.set_title(title)
     if len(targets):
         markers.set_label(_draw_target_labels(ax, targets, extent_m=2 * half))
     ax.legend(loc="upper left", fontsize="small")
-    return figure
 
 
 def _draw_target_labels(ax, targets_m: np.ndarray, extent_m: float) -> str:

@@ -11,8 +11,9 @@ key                      what
 ``robot_torque_nm``      (T + 1, n) robot actuator torques
 ``torque_limit_nm``      (n,) the robot's torque limits
 ``joint_names``          (n,) the robot's joint names
-``tool_pos_m``           (T + 1, 3) tool (flange) position, robot base frame
-``target_tool_pos_m``    (N, 3) every target's tool position p*, robot base frame
+``tool_pos_m``           (T + 1, 3 k) tool (flange) position of each of the k robots, each in
+                         its own robot base frame (k = 2 in the bilateral env, right first)
+``target_tool_pos_m``    (N, 3 k) every target's tool positions p*, the same frames
 ``target_robot_rad``     (N, n) every target's joint angles theta*
 ``target_index``         (T + 1,) the active target
 ``patient_qpos_rad``     (T + 1, 3) the patient's exercised joints
@@ -108,6 +109,12 @@ def _str_item(value: np.ndarray) -> str:
     return str(np.asarray(value).reshape(-1)[0]) if np.size(value) else ""
 
 
+def _rows_of_points(value: np.ndarray) -> np.ndarray:
+    """Rows of one or more 3-D points (k robots: 3 k columns); a flat array is 3-D points."""
+    array = np.asarray(value, dtype=float)
+    return array if array.ndim == 2 else array.reshape(-1, 3)
+
+
 def load_trace(path: Path | str) -> Trace:
     """Read a ``trace.npz`` written by ``rehabbot evaluate``.
 
@@ -130,10 +137,8 @@ def load_trace(path: Path | str) -> Trace:
                 robot_torque_nm=np.asarray(data["robot_torque_nm"], dtype=float),
                 torque_limit_nm=np.asarray(data["torque_limit_nm"], dtype=float).reshape(-1),
                 joint_names=[str(name) for name in np.asarray(data["joint_names"]).reshape(-1)],
-                tool_pos_m=np.asarray(data["tool_pos_m"], dtype=float).reshape(-1, 3),
-                target_tool_pos_m=np.asarray(data["target_tool_pos_m"], dtype=float).reshape(
-                    -1, 3
-                ),
+                tool_pos_m=_rows_of_points(data["tool_pos_m"]),
+                target_tool_pos_m=_rows_of_points(data["target_tool_pos_m"]),
             )
     except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as err:
         raise ValueError(f"{path}: not a readable trace.npz ({err})") from err
@@ -144,6 +149,8 @@ def load_trace(path: Path | str) -> Trace:
         and trace.robot_qpos_rad.shape == (n_steps, n_joints)
         and trace.robot_torque_nm.shape == (n_steps, n_joints)
         and len(trace.tool_pos_m) == n_steps
+        and trace.tool_pos_m.shape[1] % 3 == 0 and trace.tool_pos_m.shape[1] >= 3
+        and trace.target_tool_pos_m.shape[1] == trace.tool_pos_m.shape[1]
         and len(trace.joint_names) == n_joints
         and len(trace.torque_limit_nm) == n_joints
         and trace.dt_s > 0

@@ -47,7 +47,7 @@ def _load_scene(args: argparse.Namespace) -> Scene:
         )
     try:
         profile = _profile_from_args(args)
-        options = {}
+        options = {"robot": args.robot}
         if getattr(args, "menagerie", None) is not None:
             options["menagerie_dir"] = args.menagerie
         return build_scene(args.scene, profile=profile, weight_level=args.weight_level,
@@ -198,6 +198,10 @@ def _add_scene_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--weight-level", type=int, default=0, metavar="L",
         help="wrist weight level of the exercise (default: 0, no weight)",
+    )
+    parser.add_argument(
+        "--robot", default="ur5e", metavar="NAME",
+        help="the robot on each cuff: ur5e (default, the paper's) or fr3 (Franka Research 3)",
     )
     parser.add_argument(
         "--menagerie", metavar="DIR",

@@ -9,7 +9,6 @@ same done alternating. ``exercise=`` indexes this table.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 from rehabbot.common.checks import check_choice, check_number
@@ -85,7 +84,3 @@ class BilateralEnvConfig(RehabEnvConfig):
         kwargs["patterns"] = list(self.patterns)
         return kwargs
 
-
-def bilateral_kwarg_names() -> tuple[str, ...]:
-    """The keyword arguments a BilateralEnv accepts."""
-    return tuple(f.name for f in dataclasses.fields(BilateralEnvConfig) if f.init)

@@ -79,8 +79,8 @@ import numpy as np
 from rehabbot.common.checks import check_options
 from rehabbot.envs.actions import checked_action
 from rehabbot.envs.bilateral_build import build_bilateral_parts
-from rehabbot.envs.bilateral_config import BilateralEnvConfig, bilateral_kwarg_names
-from rehabbot.envs.config import RENDER_MODES
+from rehabbot.envs.bilateral_config import BilateralEnvConfig
+from rehabbot.envs.config import RENDER_MODES, config_from, kwarg_names
 from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import WorkMeter
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
@@ -99,17 +99,7 @@ class BilateralEnv(gym.Env):
     metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
 
     def __init__(self, config: BilateralEnvConfig | None = None, **kwargs: Any) -> None:
-        if config is None:
-            unknown = sorted(set(kwargs) - set(bilateral_kwarg_names()))
-            if unknown:
-                raise TypeError(f"BilateralEnv got unknown keyword argument(s) {unknown}; "
-                                f"valid: {list(bilateral_kwarg_names())}")
-            config = BilateralEnvConfig(**kwargs)
-        elif kwargs:
-            raise TypeError("pass either a BilateralEnvConfig or keyword arguments, not both")
-        elif not isinstance(config, BilateralEnvConfig):
-            raise TypeError(f"config must be a BilateralEnvConfig, got {type(config).__name__}")
-        self.config = config
+        self.config = config = config_from(BilateralEnvConfig, "BilateralEnv", config, kwargs)
         parts = build_bilateral_parts(config)
         scene = self.scene = parts.scene
         self.model = scene.model
@@ -166,6 +156,7 @@ class BilateralEnv(gym.Env):
         self._sequence = self.targets[0]
         self._path_left = 0.0
         self._fractions = np.ones(2)
+        self._gap = 0.0  # the arms' sync gap in the active target's segment, at this state
         self._needs_reset = True
         self._closed = False
         self._rendering = EnvRendering(self.model, self.render_mode, config.width,
@@ -214,7 +205,7 @@ class BilateralEnv(gym.Env):
         self._record_trace()
         distances = self._arm_distances()
         self._path_left = self._path(distances, self._target_index)
-        self._fractions[:] = self._segment_fractions(distances)
+        self._fractions[:], self._gap = self._progress_in_segment(distances)
         info = self._info(None, False, self.reward_function.zero_terms(), 0, 0.0)
         self._needs_reset = False
         if self.render_mode == "human":
@@ -249,15 +240,15 @@ class BilateralEnv(gym.Env):
         largest = float(np.max(np.abs(theta - self._sequence.robot_rad[index])))
         reached = largest < self._tolerance and not safety_stop
         switching = reached and not last
-        fractions = self._segment_fractions(distances)
-        moving = self._segments[self._exercise][index] > self._tolerance
+        fractions, gap = self._progress_in_segment(distances)
         outcome = self._outcome
-        outcome.sync_gap = sync_gap(fractions[0], fractions[1], bool(moving[0]),
-                                    bool(moving[1]), self.reward_function.sync_tolerance)
+        outcome.sync_gap, outcome.sync_gap_before = gap, self._gap
         outcome.path_left_before_rad = self._path_left
+        self._gap = gap
         if switching:
             self._target_index += 1
             distances = self._arm_distances()
+            self._gap = self._progress_in_segment(distances)[1]
         self._path_left = outcome.path_left_rad = self._path(distances, self._target_index)
         outcome.distance_rad = float(np.linalg.norm(theta - self._sequence.robot_rad[index]))
         outcome.reached, outcome.last_target = reached, last
@@ -346,7 +337,7 @@ class BilateralEnv(gym.Env):
 
     def __getattr__(self, name: str) -> Any:
         config = self.__dict__.get("config")
-        if config is not None and name in bilateral_kwarg_names():
+        if config is not None and name in kwarg_names(BilateralEnvConfig):
             return getattr(config, name)
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
@@ -396,10 +387,14 @@ class BilateralEnv(gym.Env):
         """The path both arms still have to travel [rad] (the reward's D)."""
         return float(distances.sum() + self._rests[self._exercise][index].sum())
 
-    def _segment_fractions(self, distances: np.ndarray) -> np.ndarray:
+    def _progress_in_segment(self, distances: np.ndarray) -> tuple[np.ndarray, float]:
+        """Each arm's share of the active target's segment done and the arms' sync gap."""
         lengths = self._segments[self._exercise][self._target_index]
-        return np.array([segment_fraction(float(d), float(length))
-                         for d, length in zip(distances, lengths, strict=True)])
+        fractions = np.array([segment_fraction(float(d), float(length))
+                              for d, length in zip(distances, lengths, strict=True)])
+        moving = lengths > self._tolerance
+        return fractions, sync_gap(fractions[0], fractions[1], bool(moving[0]),
+                                   bool(moving[1]), self.reward_function.sync_tolerance)
 
     def _info(self, violation, is_success, terms, clipped, gap) -> dict:
         forces = self.safety.cuff_forces_n(self.data).copy()

@@ -180,9 +180,26 @@ class RehabEnvConfig:
         return kwargs
 
 
-def kwarg_names() -> tuple[str, ...]:
-    """The keyword arguments a RehabEnv accepts."""
-    return tuple(f.name for f in dataclasses.fields(RehabEnvConfig) if f.init)
+def kwarg_names(config_class: type = RehabEnvConfig) -> tuple[str, ...]:
+    """The keyword arguments an env whose config is ``config_class`` accepts."""
+    return tuple(f.name for f in dataclasses.fields(config_class) if f.init)
+
+
+def config_from(config_class: type, env_name: str, config: Any, kwargs: dict) -> Any:
+    """An env's config: ``config`` (an instance of ``config_class``) or one built from the
+    env's keyword arguments. ``TypeError`` for an unknown keyword (listing the valid ones), for
+    both a config and keywords, or for a config of another class."""
+    if config is None:
+        unknown = sorted(set(kwargs) - set(kwarg_names(config_class)))
+        if unknown:
+            raise TypeError(f"{env_name} got unknown keyword argument(s) {unknown}; valid: "
+                            f"{list(kwarg_names(config_class))}")
+        return config_class(**kwargs)
+    if kwargs:
+        raise TypeError(f"pass either a {config_class.__name__} or keyword arguments, not both")
+    if not isinstance(config, config_class):
+        raise TypeError(f"config must be a {config_class.__name__}, got {type(config).__name__}")
+    return config
 
 
 def _as_profile(profile: Any) -> PatientProfile:

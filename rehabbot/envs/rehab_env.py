@@ -24,7 +24,9 @@ targets in order, within ``target_tolerance_rad`` on every joint, without hurtin
 | 5 | wrist_3 | rad |
 
 A setpoint drives a gravity-compensated joint impedance controller whose torque is saturated
-at the UR5e limits (150 / 28 N·m); setpoints are kept inside the setpoint bounds (the paper's
+at the UR5e limits (150 / 28 N·m). With ``robot="fr3"`` the action has 7 values, one per joint
+``fr3_joint1`` .. ``fr3_joint7`` (limits 87 / 12 N·m), and theta*, theta are 7 wide (25
+observations; :mod:`rehabbot.sim.robots`). Setpoints are kept inside the setpoint bounds (the paper's
 Table 3 ranges in robot joint space). Other modes (:mod:`rehabbot.envs.control`):
 ``"joint_position"`` (``Box(-r - 0.5, r + 0.5)`` with ``r`` the joints' hardware ranges, rad;
 actions outside this patient's setpoint bounds are clipped to them), ``"joint_velocity"``
@@ -111,6 +113,7 @@ takes a config instead.
 | ``weight_level`` | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
 | ``exercise`` | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
 | ``exercises`` | ``None`` | the exercise table: :class:`Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
+| ``robot`` | ``"ur5e"`` | the robot on the cuff: ``"ur5e"`` (the paper's) or ``"fr3"`` (Franka Research 3, 7 joints) |
 | ``cuff`` | ``"connect"`` | ``"connect"`` (strap: position only) or ``"weld"`` |
 | ``base_reorientation_deg`` | 0.0 | rotation of the robot base about its vertical axis |
 | ``frame_skip`` | 10 | physics steps per decision |
@@ -156,7 +159,7 @@ from rehabbot.common.arrays import as_index
 from rehabbot.common.checks import check_options
 from rehabbot.envs.actions import checked_action
 from rehabbot.envs.build import build_parts
-from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig, kwarg_names
+from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig, config_from, kwarg_names
 from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import LimbPhysics
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
@@ -177,17 +180,7 @@ class RehabEnv(gym.Env):
     metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
 
     def __init__(self, config: RehabEnvConfig | None = None, **kwargs: Any) -> None:
-        if config is None:
-            unknown = sorted(set(kwargs) - set(kwarg_names()))
-            if unknown:
-                raise TypeError(f"RehabEnv got unknown keyword argument(s) {unknown}; valid: "
-                                f"{list(kwarg_names())}")
-            config = RehabEnvConfig(**kwargs)
-        elif kwargs:
-            raise TypeError("pass either a RehabEnvConfig or keyword arguments, not both")
-        elif not isinstance(config, RehabEnvConfig):
-            raise TypeError(f"config must be a RehabEnvConfig, got {type(config).__name__}")
-        self.config = config
+        self.config = config = config_from(RehabEnvConfig, "RehabEnv", config, kwargs)
         parts = build_parts(config)  # ValueError for a patient who cannot do the exercises
         self.scene = parts.scene
         self.model = self.scene.model

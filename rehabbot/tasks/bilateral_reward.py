@@ -19,9 +19,14 @@ so arms that move in step within ``sync_tolerance`` (10 % of the segment by defa
 nothing, and an arm that lags a whole segment costs ``sync_weight x (1 - sync_tolerance)`` a
 step. In the alternating pattern only one arm moves per segment, so the term is 0.
 
-A stop never pays: the safety penalty of the ``-v1`` reward charges, for every step left, the
-most a step of holding still can cost, here ``time_cost + sync_weight`` (plus the optional
-terms' maxima).
+A stop never pays: the safety penalty of the ``-v1`` reward charges, for every step left,
+what a step of holding still costs (``time_cost``, plus the optional terms' maxima), and here
+also what holding still would pay in synchronisation from where the arms are: ``sync_weight``
+times the larger of the gaps before and after the stopping step (holding still keeps the gap).
+So a stop pays less than holding still from the state before it and from the state it stops
+in. An earlier design charged ``sync_weight`` a step whatever the gap (the worst case): a stop
+then cost about 550, twice what a whole successful episode earns, and SAC backed away from the
+arms and learned nothing in 200 000 steps (README, "Both arms").
 """
 
 from __future__ import annotations
@@ -79,7 +84,8 @@ class BilateralReward:
             steps_left = max(self.progress.max_episode_steps - outcome.steps_done, 0) + 1
             if self.progress.safety_penalty_steps is not None:
                 steps_left = min(steps_left, self.progress.safety_penalty_steps)
-            terms["reward_safety"] -= steps_left * self.sync_weight
+            gap = max(outcome.sync_gap, outcome.sync_gap_before)
+            terms["reward_safety"] -= steps_left * self.sync_weight * gap
             terms["reward_sync"] = 0.0
         else:
             terms["reward_sync"] = -self.sync_weight * outcome.sync_gap if outcome.sync_gap \

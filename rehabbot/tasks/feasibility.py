@@ -10,7 +10,10 @@ when
   Table 3 ranges), or
 * the home state at a weight level the env can use already breaks a safety rule: the cuff
   carries more than its ISO/TS 15066 limit at rest (a heavy leg held up by the strap), or the
-  robot already touches the patient or the furniture.
+  robot already touches the patient or the furniture; or
+* a robot joint needs its whole torque limit to hold the limb at rest (the FR3, 87 N·m on its
+  shoulder, holding a tall patient's heavy leg up on the bed), so the limb sags and nothing is
+  left to move it.
 
 The README's "Failure modes" section lists the profiles known to be refused.
 """
@@ -28,6 +31,9 @@ from rehabbot.tasks.targets import TargetSequence
 
 TARGET_BOUND_TOLERANCE_RAD = 1e-9
 SETTLE_STEPS = 100  # physics steps of holding still (0.2 s at the default 2 ms)
+# A joint whose actuator torque is this share of its limit at rest is saturated (the limit
+# clamps the total, so a saturated joint reads its limit exactly).
+SATURATED_SHARE = 0.999
 
 
 def check_targets(targets: Sequence[TargetSequence], low_rad: np.ndarray,
@@ -55,7 +61,8 @@ def home_violation(scene: Scene, data: mujoco.MjData, safety: SafetyMonitor,
     """The safety rule (and the cuff force [N]) that the home state at ``level`` breaks while
     the robot's servos hold it for ``SETTLE_STEPS`` physics steps, or None. The load shared
     between the cuff and the furniture settles within the first steps (the cuff's share can
-    rise by about 10 % from the reset's solution), so the rules are checked on every step."""
+    rise by about 10 % from the reset's solution), so the rules are checked on every step.
+    ``data`` is left at the settled state."""
     if level != scene.weight_level:
         scene.set_weight_level(level)
     model = scene.model
@@ -75,14 +82,35 @@ def home_violation(scene: Scene, data: mujoco.MjData, safety: SafetyMonitor,
         model.opt.disableactuator = disabled
 
 
+def saturated_joint(scene: Scene, data: mujoco.MjData) -> tuple[str, float] | None:
+    """``(joint name, torque limit [N·m])`` of a robot joint working at its torque limit in
+    ``data`` (the first found), or None."""
+    for handle in scene.robots:
+        limits = handle.robot.torque_limits()
+        share = np.abs(data.qfrc_actuator[handle.dof_adr]) / limits
+        j = int(share.argmax())
+        if share[j] >= SATURATED_SHARE:
+            return f"{handle.prefix}{handle.robot.joint_names[j]}", float(limits[j])
+    return None
+
+
 def unusable_levels(scene: Scene, data: mujoco.MjData, safety: SafetyMonitor,
                     levels: Iterable[int], profile) -> dict[int, str]:
-    """Weight levels whose home state breaks a safety rule, each with the error message to
-    raise when it is asked for. Leaves the scene at the last level checked."""
+    """Weight levels whose home state breaks a safety rule or saturates a robot joint, each
+    with the error message to raise when it is asked for. Leaves the scene at the last level
+    checked."""
     messages = {}
     for level in levels:
         found = home_violation(scene, data, safety, level)
         if found is None:
+            saturated = saturated_joint(scene, data)
+            if saturated is not None:
+                joint, limit = saturated
+                messages[level] = (
+                    f"profile {profile} at weight_level {level}: robot joint {joint} needs its "
+                    f"whole {limit:.0f} N·m torque limit to hold the limb at rest, with "
+                    f"robot={scene.options.robot!r}; this scene does not support the profile "
+                    "(README, Failure modes)")
             continue
         rule, force_n = found
         if rule == "cuff_force":

@@ -66,8 +66,10 @@ class StepOutcome:
     action: np.ndarray | None = None  # the action applied (inside the action space)
     previous_action: np.ndarray | None = None
     torque_nm: np.ndarray | None = None  # the robot's actuator torques after the step
-    # The arms' synchronisation gap (bilateral env: rehabbot.tasks.bilateral_reward).
+    # The arms' synchronisation gap after and before the step, in the step's segment (bilateral
+    # env: rehabbot.tasks.bilateral_reward).
     sync_gap: float = 0.0
+    sync_gap_before: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,146 @@
+"""How well each robot's stand placement serves each limb: the evidence behind a robot's
+``base_offset_m`` (``docs/physics.md``, "Placing a robot").
+
+For every robot, scene and patient height, the limb's whole workspace box (the patient poses of
+:data:`rehabbot.tasks.workspace.WORKSPACE_DEG`, every 5 degrees) is solved by the robot's IK the
+way the env does when it derives its setpoint bounds (each pose from its nearest solved
+neighbour, :func:`rehabbot.tasks.workspace.workspace_robot_angles`), and the table reports:
+
+* ``reached``: poses solved on the home branch (to 1 mm, no joint jumping more than 0.6 rad
+  from its neighbour) out of all; a pose left out narrows the setpoint bounds;
+* ``margin``: the smallest distance of any solved joint angle to its joint's range [rad];
+* ``contacts``: solved poses where a robot geom presses more than 2 mm into the patient or the
+  furniture;
+* ``torque at home``: the largest share of a joint's torque limit used to hold the limb at
+  home at weight level 4, and which joint.
+
+A scene the robot cannot reach at home (the env refuses it) is marked ``refused``.
+
+Usage::
+
+    python benchmarks/robot_placement.py [--robots ur5e fr3] [--heights 1.4 1.6 1.75 2.0]
+                                         [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from rehabbot.sim import PatientProfile, build_scene
+from rehabbot.sim.ik import RobotIK, quat_from_mat
+from rehabbot.sim.robots import ROBOT_NAMES
+from rehabbot.tasks.workspace import workspace_grid_deg
+
+# (scene preset, its options, the limb whose workspace box is swept)
+SCENES = (("upper_right", {}, "arm"), ("hip", {}, "hip"), ("knee", {}, "knee"))
+HEIGHTS_M = (1.4, 1.6, 1.75, 2.0)
+MASS_KG = 75.0
+MAX_ERROR_M, MAX_JUMP_RAD, CONTACT_DEPTH_M = 1e-3, 0.6, 2e-3
+
+
+def sweep_workspace(scene, limb: str) -> dict:
+    """Solve ``limb``'s workspace box in ``scene`` as the env does; count and measure."""
+    model, handle = scene.model, scene.robots[0]
+    robot = handle.robot
+    low, high = robot.joint_low_rad(), robot.joint_high_rad()
+    data = mujoco.MjData(model)
+    data.qpos[:] = scene.home_qpos
+    grid = workspace_grid_deg(scene, limb)
+    ik = RobotIK(model)
+    solved_deg = [np.degrees(scene.home_qpos[scene.exercised_qpos_adr])]
+    solved_q = [scene.home_qpos[handle.qpos_adr].copy()]
+    robot_geoms = set(handle.geom_ids.tolist())
+    others = set(scene.patient_geom_ids.tolist()) | set(scene.furniture_geom_ids.tolist())
+    margin, contacts = np.inf, 0
+    order = np.argsort(np.max(np.abs(grid - solved_deg[0]), axis=1), kind="stable")
+    for row in grid[order]:
+        nearest = int(np.argmin(np.max(np.abs(np.array(solved_deg) - row), axis=1)))
+        data.qpos[scene.exercised_qpos_adr] = np.radians(row)
+        mujoco.mj_kinematics(model, data)
+        site = handle.patient_cuff_site_id
+        q, err = ik.solve(data, handle, data.site_xpos[site].copy(),
+                          quat_from_mat(data.site_xmat[site]), solved_q[nearest])
+        if err > MAX_ERROR_M or np.max(np.abs(q - solved_q[nearest])) > MAX_JUMP_RAD:
+            continue
+        solved_deg.append(row)
+        solved_q.append(q)
+        margin = min(margin, float(np.min(np.minimum(q - low, high - q))))
+        mujoco.mj_forward(model, data)
+        pressed = any(((c.geom1 in robot_geoms and c.geom2 in others)
+                       or (c.geom2 in robot_geoms and c.geom1 in others))
+                      and c.dist < -CONTACT_DEPTH_M for c in data.contact[:data.ncon])
+        contacts += int(pressed)
+    return {"reached": len(solved_q) - 1, "poses": len(grid), "margin_rad": margin,
+            "contacts": contacts}
+
+
+def home_torque_share(scene) -> tuple[float, int]:
+    """The largest share of a joint's torque limit holding the limb at home, and its joint."""
+    data = scene.make_data()
+    handle = scene.robots[0]
+    share = np.abs(data.qfrc_actuator[handle.dof_adr]) / handle.robot.torque_limits()
+    return float(share.max()), int(share.argmax()) + 1
+
+
+def measure(robots: Sequence[str], heights: Sequence[float]) -> list[dict]:
+    rows = []
+    for robot in robots:
+        for preset, options, limb in SCENES:
+            for height in heights:
+                profile = PatientProfile(height, MASS_KG, "male")
+                row = {"robot": robot, "scene": preset, "height_m": height}
+                try:
+                    scene = build_scene(preset, profile=profile, robot=robot, **options)
+                except ValueError as err:
+                    rows.append({**row, "refused": str(err)})
+                    continue
+                row.update(sweep_workspace(scene, limb))
+                scene.set_weight_level(4)
+                row["torque_share"], row["torque_joint"] = home_torque_share(scene)
+                rows.append(row)
+    return rows
+
+
+def format_table(rows: Sequence[dict]) -> str:
+    lines = ["| robot | scene | height [m] | reached | margin [rad] | contacts | "
+             "torque at home, level 4 |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        head = f"| {r['robot']} | {r['scene']} | {r['height_m']:.2f} |"
+        if "refused" in r:
+            lines.append(f"{head} refused | - | - | - |")
+            continue
+        lines.append(f"{head} {r['reached']}/{r['poses']} | {r['margin_rad']:.2f} | "
+                     f"{r['contacts']} | {100 * r['torque_share']:.0f} % (joint "
+                     f"{r['torque_joint']}) |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", nargs="+", default=list(ROBOT_NAMES), metavar="NAME",
+                        help=f"robots (default: {' '.join(ROBOT_NAMES)})")
+    parser.add_argument("--heights", nargs="+", type=float, default=list(HEIGHTS_M),
+                        metavar="M", help="patient heights [m] (75 kg, male)")
+    parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows")
+    args = parser.parse_args(argv)
+    unknown = [name for name in args.robots if name not in ROBOT_NAMES]
+    if unknown:
+        print(f"unknown robot(s) {', '.join(unknown)}; valid: {', '.join(ROBOT_NAMES)}",
+              file=sys.stderr)
+        return 2
+    rows = measure(args.robots, args.heights)
+    print(format_table(rows))
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
