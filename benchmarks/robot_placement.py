@@ -66,7 +66,8 @@ def sweep_workspace(scene, limb: str) -> dict:
         mujoco.mj_kinematics(model, data)
         site = handle.patient_cuff_site_id
         q, err = ik.solve(data, handle, data.site_xpos[site].copy(),
-                          quat_from_mat(data.site_xmat[site]), solved_q[nearest])
+                          quat_from_mat(data.site_xmat[site]), solved_q[nearest],
+                          posture=solved_q[0])
         if err > MAX_ERROR_M or np.max(np.abs(q - solved_q[nearest])) > MAX_JUMP_RAD:
             continue
         solved_deg.append(row)

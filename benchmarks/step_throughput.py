@@ -18,7 +18,9 @@ The absolute rates depend on the machine; the share is a ratio measured in the s
 Usage::
 
     python benchmarks/step_throughput.py [--steps 300] [--rounds 7] [--warmup 100]
-                                         [--ids ID ...] [--json FILE]
+                                         [--ids ID ...] [--robot NAME] [--json FILE]
+
+``--robot fr3`` makes every id with that robot (``gym.make(id, robot=...)``).
 """
 
 from __future__ import annotations
@@ -100,8 +102,9 @@ def time_physics(model: mujoco.MjModel, data: mujoco.MjData, frame_skip: int,
     return clock() - start
 
 
-def measure(env_id: str, steps: int, rounds: int, warmup: int, seed: int) -> Row:
-    env = gym.make(env_id)
+def measure(env_id: str, steps: int, rounds: int, warmup: int, seed: int,
+            robot: str | None = None) -> Row:
+    env = gym.make(env_id) if robot is None else gym.make(env_id, robot=robot)
     try:
         env.reset(seed=seed)
         base = env.unwrapped
@@ -125,7 +128,8 @@ def measure(env_id: str, steps: int, rounds: int, warmup: int, seed: int) -> Row
         raise RuntimeError(f"{env_id}: the physics copy diverged")
     shares = [p / e for e, p in zip(env_s, physics_s, strict=True)]
     env_rate = steps / statistics.median(env_s)
-    return Row(env_id=env_id, wrappers=wrappers, frame_skip=frame_skip, dt_s=dt_s,
+    label = env_id if robot is None else f"{env_id} (robot={robot})"
+    return Row(env_id=label, wrappers=wrappers, frame_skip=frame_skip, dt_s=dt_s,
                env_steps_per_s=env_rate, physics_steps_per_s=steps / statistics.median(physics_s),
                physics_share=statistics.median(shares),
                overhead_us=statistics.median((e - p) / steps * 1e6
@@ -151,6 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--warmup", type=int, default=100, help="untimed steps first (100)")
     parser.add_argument("--seed", type=int, default=0, help="reset seed (0)")
     parser.add_argument("--ids", nargs="+", metavar="ID", help="default: every rehabbot/ id")
+    parser.add_argument("--robot", metavar="NAME", help="make every id with this robot")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows as JSON")
     return parser
 
@@ -169,7 +174,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"unknown id(s) {', '.join(unknown)}; valid: {', '.join(registered)}",
               file=sys.stderr)
         return 2
-    rows = [measure(i, args.steps, args.rounds, args.warmup, args.seed) for i in ids]
+    rows = [measure(i, args.steps, args.rounds, args.warmup, args.seed, args.robot)
+            for i in ids]
     print(f"command: {shlex.join([Path(sys.argv[0]).as_posix(), *(argv or sys.argv[1:])])}")
     print(f"machine: {platform.platform()}, python {platform.python_version()}, mujoco "
           f"{mujoco.__version__}, gymnasium {gym.__version__}, numpy {np.__version__}")

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from benchmarks import expert_agreement, step_throughput
+from benchmarks import expert_agreement, robot_placement, step_throughput
 
 ENV = "rehabbot/rehab-reach-v0"
 
@@ -29,6 +29,26 @@ def test_step_throughput_measures_the_env_as_users_make_it(capsys) -> None:
 def test_step_throughput_refuses_unknown_ids(capsys) -> None:
     assert step_throughput.main(["--ids", "rehab-elbow-v9"]) == 2
     assert "unknown id(s) rehabbot/rehab-elbow-v9" in capsys.readouterr().err
+
+
+def test_step_throughput_makes_the_ids_with_the_robot_asked_for(capsys) -> None:
+    assert step_throughput.main(["--steps", "10", "--rounds", "1", "--warmup", "2",
+                                 "--ids", "rehab-knee-v1", "--robot", "fr3"]) == 0
+    assert "| rehabbot/rehab-knee-v1 (robot=fr3) |" in capsys.readouterr().out
+
+
+def test_robot_placement_measures_reach_margins_and_the_torque_to_hold_the_limb(capsys):
+    rows = robot_placement.measure(["ur5e", "fr3"], [1.75])
+    by = {(r["robot"], r["scene"]): r for r in rows}
+    for robot in ("ur5e", "fr3"):
+        knee = by[(robot, "knee")]
+        assert knee["reached"] == knee["poses"] == 25 and knee["margin_rad"] > 0.1
+        assert 0.0 < knee["torque_share"] < 1.0 and knee["torque_joint"] == 2
+    # The FR3 holds the supine leg at level 4 near its joint-2 limit; the UR5e far from it.
+    assert by[("fr3", "hip")]["torque_share"] > by[("ur5e", "hip")]["torque_share"] + 0.2
+    assert "| fr3 | knee | 1.75 | 25/25 |" in robot_placement.format_table(rows)
+    assert robot_placement.main(["--robots", "kuka"]) == 2
+    assert "unknown robot(s) kuka" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -27,10 +27,13 @@ class RobotIK:
     A robot with more joints than the cuff's six constraints (the FR3's seven) has a null space:
     a self-motion that leaves the cuff where it is. Left free, it drifts with each solve, so
     neighbouring patient poses get far-apart arm postures and the joints wander into their
-    limits. For such a robot every step also moves, inside the null space, towards the seed
-    (``posture_gain`` of the way per iteration), so the solution is the pose nearest the seed:
-    a neighbour's solution when a path or a workspace is swept, the robot's own seed posture at
-    home. A robot with six joints has no null space and takes the plain damped step.
+    limits. For such a robot every step also moves, inside the null space, towards a rest
+    posture (``posture_gain`` of the way per iteration): the solution is the pose nearest it.
+    The rest posture is ``solve``'s ``posture``, else its seed. Sweeps of a workspace or a path
+    pass the robot's home angles, so that a cuff pose gets the same arm posture whatever
+    neighbour it was solved from (the targets of an exercise then lie inside the setpoint
+    bounds swept from the workspace). A robot with six joints has no null space and takes the
+    plain damped step.
     """
 
     def __init__(self, model: mujoco.MjModel, damping: float = 1e-3, max_iters: int = 300,
@@ -47,12 +50,13 @@ class RobotIK:
         self._rot_err = np.zeros(3)
 
     def solve(self, data: mujoco.MjData, handle: RobotHandle, target_pos: np.ndarray,
-              target_quat: np.ndarray, seed: np.ndarray,
-              orientation_weight_m: float = 0.1) -> tuple[np.ndarray, float]:
+              target_quat: np.ndarray, seed: np.ndarray, orientation_weight_m: float = 0.1,
+              posture: np.ndarray | None = None) -> tuple[np.ndarray, float]:
         """Joint angles putting ``handle``'s cuff site at the target; returns (q, pose error).
 
         The pose error is the position error [m] plus ``orientation_weight_m`` x the rotation
-        error [rad]. ``data.qpos`` of the robot is left at the solution.
+        error [rad]. ``posture`` is the rest posture of a redundant robot (default: ``seed``).
+        ``data.qpos`` of the robot is left at the solution.
         """
         model = self.model
         qadr, dadr, site = handle.qpos_adr, handle.dof_adr, handle.cuff_site_id
@@ -61,6 +65,7 @@ class RobotIK:
         seed = np.array(seed, dtype=float)
         data.qpos[qadr] = seed
         redundant = len(dadr) > TASK_DIMENSION
+        rest = seed if posture is None else np.asarray(posture, dtype=float)
         err = np.inf
         for _ in range(self.max_iters):
             mujoco.mj_kinematics(model, data)
@@ -82,7 +87,7 @@ class RobotIK:
                 # The exact projector onto the null space: a damped one would leak the posture
                 # pull into the cuff's pose and stall the solve short of its tolerance.
                 null = np.eye(len(dadr)) - np.linalg.pinv(jac) @ jac
-                step += null @ (self.posture_gain * (seed - data.qpos[qadr]))
+                step += null @ (self.posture_gain * (rest - data.qpos[qadr]))
             scale = min(1.0, 0.3 / max(np.abs(step).max(), 1e-12))
             data.qpos[qadr] = np.clip(data.qpos[qadr] + scale * step, low, high)
         return data.qpos[qadr].copy(), err

@@ -34,7 +34,9 @@ def coupled_path(scene: Scene, patient_deg: np.ndarray, dt_s: float) -> CoupledP
 
     Each waypoint is solved by IK warm-started from the previous one, so the robot stays on
     one continuous branch; the servo setpoints add the static preload that carries the limb
-    there (:mod:`rehabbot.statics`).
+    there (:mod:`rehabbot.statics`). A redundant robot (more than six joints) takes, at each
+    waypoint, the posture nearest its home angles, as the workspace sweep of the setpoint
+    bounds does (:mod:`rehabbot.sim.ik`).
     """
     model = scene.model
     data = mujoco.MjData(model)
@@ -45,13 +47,15 @@ def coupled_path(scene: Scene, patient_deg: np.ndarray, dt_s: float) -> CoupledP
     setpoints = np.zeros_like(robot)
     errors = np.zeros(len(patient_deg))
     seeds = [scene.home_qpos[h.qpos_adr].copy() for h in scene.robots]
+    rests = [seed.copy() for seed in seeds]
     for t, row in enumerate(patient_deg):
         data.qpos[scene.exercised_qpos_adr] = np.radians(row)
         mujoco.mj_kinematics(model, data)
         for k, handle in enumerate(scene.robots):
             site = handle.patient_cuff_site_id
             q, err = ik.solve(data, handle, data.site_xpos[site].copy(),
-                              quat_from_mat(data.site_xmat[site]), seeds[k])
+                              quat_from_mat(data.site_xmat[site]), seeds[k],
+                              posture=rests[k])
             robot[t, k] = q
             seeds[k] = q
             errors[t] = max(errors[t], err)

@@ -109,6 +109,7 @@ def workspace_robot_angles(scene: Scene, grid_deg: np.ndarray, max_jump_rad: flo
     ik = RobotIK(model)
     solved_deg = [np.degrees(scene.home_qpos[scene.exercised_qpos_adr])]
     solved_q = [scene.home_qpos[handle.qpos_adr].copy()]
+    rest = solved_q[0]  # a redundant robot's rest posture (rehabbot.sim.ik.RobotIK)
     out = []
     # Grow outwards from home, so each pose's nearest solved pose is a neighbour.
     order = np.argsort(np.max(np.abs(grid_deg - solved_deg[0]), axis=1), kind="stable")
@@ -118,7 +119,7 @@ def workspace_robot_angles(scene: Scene, grid_deg: np.ndarray, max_jump_rad: flo
         mujoco.mj_kinematics(model, data)
         site = handle.patient_cuff_site_id
         q, err = ik.solve(data, handle, data.site_xpos[site].copy(),
-                          quat_from_mat(data.site_xmat[site]), solved_q[nearest])
+                          quat_from_mat(data.site_xmat[site]), solved_q[nearest], posture=rest)
         if err > max_error_m or np.max(np.abs(q - solved_q[nearest])) > max_jump_rad:
             continue
         solved_deg.append(row)
