@@ -112,9 +112,8 @@ def test_other_control_modes_have_honest_spaces(mode):
     if mode == "joint_position":
         # The hardware ranges (+ 0.5 rad), the same for every patient; this patient's setpoint
         # bounds lie inside, and actions beyond them are clipped to them (and counted).
-        hardware = np.array(base.robot.joint_range_rad)
-        np.testing.assert_allclose(space.high, hardware + 0.5, rtol=1e-6)
-        np.testing.assert_allclose(space.low, -hardware - 0.5, rtol=1e-6)
+        np.testing.assert_allclose(space.high, base.robot.joint_high_rad() + 0.5, rtol=1e-6)
+        np.testing.assert_allclose(space.low, base.robot.joint_low_rad() - 0.5, rtol=1e-6)
         assert np.all(space.low < base.setpoint_low_rad)
         assert np.all(space.high > base.setpoint_high_rad)
         env.reset(seed=3)

@@ -72,7 +72,6 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-import gymnasium as gym
 import mujoco
 import numpy as np
 
@@ -80,7 +79,8 @@ from rehabbot.common.checks import check_options
 from rehabbot.envs.actions import checked_action
 from rehabbot.envs.bilateral_build import build_bilateral_parts
 from rehabbot.envs.bilateral_config import BilateralEnvConfig
-from rehabbot.envs.config import RENDER_MODES, config_from, kwarg_names
+from rehabbot.envs.config import config_from
+from rehabbot.envs.env_base import RehabEnvBase
 from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import WorkMeter
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
@@ -93,10 +93,10 @@ from rehabbot.tasks.targets import TargetSequence
 RESET_OPTIONS = ("exercise", "weight_level")
 
 
-class BilateralEnv(gym.Env):
+class BilateralEnv(RehabEnvBase):
     """Two robots move both of a patient's arms through an exercise (module docstring)."""
 
-    metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
+    config_class: ClassVar[type] = BilateralEnvConfig
 
     def __init__(self, config: BilateralEnvConfig | None = None, **kwargs: Any) -> None:
         self.config = config = config_from(BilateralEnvConfig, "BilateralEnv", config, kwargs)
@@ -268,63 +268,9 @@ class BilateralEnv(gym.Env):
             self.render()
         return self._obs.copy(), reward, terminated, False, info
 
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode="
-                            "'human', 'rgb_array' or 'depth_array' to the constructor")
-            return None
-        if self._closed:
-            raise RuntimeError("render() called after close()")
-        targets = self._sequence.tool_pos_base_m[:, :3]  # the right robot's
-        if self.render_mode == "human":
-            self._rendering.human(self.data, targets, self._target_index)
-            return None
-        return self._rendering.offscreen(self.data, self.render_mode == "depth_array",
-                                         targets, self._target_index)
-
-    def close(self) -> None:
-        self._rendering.close()
-        self._closed = True
-        self._needs_reset = True
-
     # ------------------------------------------------------------------------------------------
     # Properties
     # ------------------------------------------------------------------------------------------
-    @property
-    def dt(self) -> float:
-        """Seconds per step (``frame_skip x timestep``)."""
-        return self.dt_s
-
-    @property
-    def healthy_obs_low(self) -> np.ndarray:
-        """Lower corner of the box a healthy observation stays in (instability rule)."""
-        return self._healthy_low
-
-    @property
-    def healthy_obs_high(self) -> np.ndarray:
-        """Upper corner of the healthy box."""
-        return self._healthy_high
-
-    @property
-    def episode_steps(self) -> int:
-        """Steps taken since the last ``reset()``."""
-        return self._steps
-
-    @property
-    def target_index(self) -> int:
-        """Index of the active target in the episode's sequence."""
-        return self._target_index
-
-    @property
-    def exercise(self) -> int:
-        """The episode's entry of the bilateral exercise table."""
-        return self._exercise
-
-    @property
-    def target_sequence(self) -> TargetSequence:
-        """The episode's targets (rows: the right robot's joints, then the left's)."""
-        return self._sequence
-
     @property
     def torque_limits_nm(self) -> np.ndarray:
         """Both robots' joint torque limits [N·m], right first (a new array)."""
@@ -335,22 +281,12 @@ class BilateralEnv(gym.Env):
         """Each arm's progress through the current segment (a copy)."""
         return self._fractions.copy()
 
-    def __getattr__(self, name: str) -> Any:
-        config = self.__dict__.get("config")
-        if config is not None and name in kwarg_names(BilateralEnvConfig):
-            return getattr(config, name)
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-
     # ------------------------------------------------------------------------------------------
     # Helpers
     # ------------------------------------------------------------------------------------------
-    def _refuse_step(self) -> None:
-        if self._closed:
-            raise RuntimeError("step() called after close(); make a new env")
-        if self._steps == 0:
-            raise gym.error.ResetNeeded("step() called before reset(); call env.reset() first")
-        raise gym.error.ResetNeeded("step() called after the episode terminated; call "
-                                    "env.reset() to start the next one")
+    def _render_targets(self) -> np.ndarray:
+        """The right robot's target tool positions (the rendering draws its path)."""
+        return self._sequence.tool_pos_base_m[:, :3]
 
     def _write_target(self) -> None:
         i = self._target_index

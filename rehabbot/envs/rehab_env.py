@@ -151,7 +151,6 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-import gymnasium as gym
 import mujoco
 import numpy as np
 
@@ -159,7 +158,8 @@ from rehabbot.common.arrays import as_index
 from rehabbot.common.checks import check_options
 from rehabbot.envs.actions import checked_action
 from rehabbot.envs.build import build_parts
-from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig, config_from, kwarg_names
+from rehabbot.envs.config import RehabEnvConfig, config_from
+from rehabbot.envs.env_base import RehabEnvBase
 from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import LimbPhysics
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
@@ -174,10 +174,10 @@ RESET_OPTIONS = ("exercise", "weight_level")
 BOUND_CLEARANCE = 1e-5
 
 
-class RehabEnv(gym.Env):
+class RehabEnv(RehabEnvBase):
     """A UR5e moves a patient's limb through a therapy exercise (see the module docstring)."""
 
-    metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
+    config_class: ClassVar[type] = RehabEnvConfig
 
     def __init__(self, config: RehabEnvConfig | None = None, **kwargs: Any) -> None:
         self.config = config = config_from(RehabEnvConfig, "RehabEnv", config, kwargs)
@@ -407,45 +407,9 @@ class RehabEnv(gym.Env):
             self.render()
         return obs.copy(), reward, terminated, False, info
 
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode="
-                            "'human', 'rgb_array' or 'depth_array' to the constructor")
-            return None
-        if self._closed:
-            raise RuntimeError("render() called after close()")
-        targets = self._sequence.tool_pos_base_m
-        if self.render_mode == "human":
-            self._rendering.human(self.data, targets, self._target_index)
-            return None
-        return self._rendering.offscreen(self.data, self.render_mode == "depth_array",
-                                         targets, self._target_index)
-
-    def close(self) -> None:
-        self._rendering.close()
-        self._closed = True
-        self._needs_reset = True
-
     # ------------------------------------------------------------------------------------------
     # Properties
     # ------------------------------------------------------------------------------------------
-    @property
-    def dt(self) -> float:
-        """Seconds per step (``frame_skip x timestep``), as in Gymnasium's MuJoCo envs."""
-        return self.dt_s
-
-    @property
-    def healthy_obs_low(self) -> np.ndarray:
-        """Lower corner of the box (this patient's setpoint bounds and joint limits) that a
-        healthy observation stays in; leaving it is an "instability". Read-only: change it
-        with :meth:`set_healthy_box`."""
-        return self._healthy_low
-
-    @property
-    def healthy_obs_high(self) -> np.ndarray:
-        """Upper corner of the healthy box (see :attr:`healthy_obs_low`)."""
-        return self._healthy_high
-
     def set_healthy_box(self, low: np.ndarray, high: np.ndarray) -> None:
         """Replace the box a healthy observation must stay in (float32, read-only copies)."""
         self._healthy_low = np.array(low, dtype=np.float32)
@@ -465,44 +429,9 @@ class RehabEnv(gym.Env):
         None for the progress reward, which has no such penalty."""
         return getattr(self.reward_function, "worst_step_reward", None)
 
-    @property
-    def episode_steps(self) -> int:
-        """Steps taken since the last ``reset()``."""
-        return self._steps
-
-    @property
-    def target_index(self) -> int:
-        """Index of the active target in the episode's sequence."""
-        return self._target_index
-
-    @property
-    def exercise(self) -> int:
-        """The episode's exercise (an index into :attr:`exercises`)."""
-        return self._exercise
-
-    @property
-    def target_sequence(self) -> TargetSequence:
-        """The episode's targets (patient and robot joint space)."""
-        return self._sequence
-
-    def __getattr__(self, name: str) -> Any:
-        # The config's settings read as attributes (env.limb, env.target_tolerance_rad, ...).
-        config = self.__dict__.get("config")
-        if config is not None and name in kwarg_names():
-            return getattr(config, name)
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-
     # ------------------------------------------------------------------------------------------
     # Helpers
     # ------------------------------------------------------------------------------------------
-    def _refuse_step(self) -> None:
-        if self._closed:
-            raise RuntimeError("step() called after close(); make a new env")
-        if self._steps == 0:
-            raise gym.error.ResetNeeded("step() called before reset(); call env.reset() first")
-        raise gym.error.ResetNeeded("step() called after the episode terminated; call "
-                                    "env.reset() to start the next one")
-
     def _write_target(self) -> None:
         """The active target's fields of the observation (theta*, p*)."""
         obs, i = self._obs, self._target_index
