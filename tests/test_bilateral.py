@@ -57,6 +57,22 @@ def test_spaces_are_both_robots_side_by_side(env):
     assert base.torque_limits_nm.shape == (12,)
 
 
+def test_the_horizon_gives_alternating_exercises_the_one_arm_ids_slack(env):
+    """An alternating exercise makes every move twice: the id registers 2000 steps (the
+    safety penalty counts to the same limit), so the expert uses at most about 43 % of it, as
+    on the one-arm ids (its longest one-arm exercise: 446 of 1000 steps)."""
+    assert gym.spec(ENV_ID).max_episode_steps == 2000
+    assert env.unwrapped.config.max_episode_steps == 2000
+    expert = ScriptedExpert(env)
+    for exercise in (2, 3):
+        obs, _ = env.reset(seed=0, options={"exercise": exercise, "weight_level": 0})
+        steps, done = 0, False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(expert(obs))
+            steps, done = steps + 1, terminated or truncated
+        assert info["is_success"] and steps < 0.45 * 2000
+
+
 @pytest.mark.slow
 def test_bounds_do_not_depend_on_the_patient(env):
     other = gym.make(ENV_ID, profile={"height_m": 1.6, "mass_kg": 60.0, "sex": "female"})

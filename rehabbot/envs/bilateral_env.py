@@ -44,7 +44,8 @@ moving out of step when both move (``sync_weight``, ``sync_tolerance``). A stop 
 Success when both arms reach the last target; a safety stop when a rule of
 :mod:`rehabbot.tasks.safety` fires: each cuff against its own ISO/TS 15066 limit (hand, 140 N),
 the range of motion of every patient joint, and unintended contact, which includes contact
-between the two robots; truncation at ``max_episode_steps`` (1000 = 20 s).
+between the two robots; truncation at ``max_episode_steps`` (the id registers 2000 = 40 s: an
+alternating exercise makes every move twice).
 
 ## Info
 As :class:`rehabbot.envs.rehab_env.RehabEnv`'s (``interaction_force_n`` is the larger cuff

@@ -1,7 +1,8 @@
 """The registered environment ids: one class (:class:`rehabbot.envs.rehab_env.RehabEnv`),
 variants by keyword arguments. ``import rehabbot`` calls :func:`register_envs`.
 
-Every id is registered with Gymnasium's ``TimeLimit`` (``max_episode_steps=1000``) and without
+Every id is registered with Gymnasium's ``TimeLimit`` (``max_episode_steps=1000``; 2000 for the
+bilateral id, whose alternating exercises move each arm in turn) and without
 its ``OrderEnforcing`` and ``PassiveEnvChecker`` wrappers: the env itself refuses ``step()``
 before ``reset()`` (``gymnasium.error.ResetNeeded``) and checks its actions, and the test suite
 runs Gymnasium's full ``check_env`` on every id. Gymnasium 1.4's passive checker also broke an
@@ -90,8 +91,11 @@ for _id, _base_id in POPULATION_VARIANTS.items():
 # arms with a synchronisation term; symmetric and alternating patterns.
 BILATERAL_ENTRY_POINT = "rehabbot.envs.bilateral_env:BilateralEnv"
 BILATERAL_IDS: tuple[str, ...] = ("rehabbot/rehab-bilateral-v1",)
+# 40 s: an alternating exercise makes every move twice, one arm at a time (the scripted expert
+# needs up to 847 steps of the UR5e; one-arm exercises up to 446 of 1000).
+BILATERAL_MAX_EPISODE_STEPS = 2000
 ENV_SPECS["rehabbot/rehab-bilateral-v1"] = (
-    {"limb": "arm", "task_type": "reaching"},
+    {"limb": "arm", "task_type": "reaching", "max_episode_steps": BILATERAL_MAX_EPISODE_STEPS},
     "both arms, seated, a robot on each hand: reach shoulder or elbow key poses with both arms "
     "together (symmetric) or in turns (alternating); learnable progress reward with a "
     "synchronisation term")
@@ -110,8 +114,8 @@ def register_envs() -> None:
         if env_id in gym.registry:
             continue
         gym.register(id=env_id, entry_point=entry_point_of(env_id), kwargs=dict(kwargs),
-                     max_episode_steps=MAX_EPISODE_STEPS, order_enforce=False,
-                     disable_env_checker=True)
+                     max_episode_steps=kwargs.get("max_episode_steps", MAX_EPISODE_STEPS),
+                     order_enforce=False, disable_env_checker=True)
 
 
 def resolve_env_id(name: str) -> str:
