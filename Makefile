@@ -25,13 +25,16 @@ $(STAMP): pyproject.toml
 # viewer) is tested too.
 XVFB := $(if $(DISPLAY),,$(shell command -v xvfb-run >/dev/null 2>&1 && echo xvfb-run -a))
 
-# The full suite (CI runs this). `make test-fast` (or plain `pytest`) runs the fast selection:
-# every test not marked slow, in under two minutes.
+# The full suite (CI runs this), on every core (pytest-xdist, at most 4 workers). `make
+# test-fast` (or plain `pytest`, in one process) runs the fast selection: every test not marked
+# slow, in under two minutes.
+PARALLEL := -n auto --maxprocesses 4
+
 test: $(STAMP)
-	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q --full
+	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q --full $(PARALLEL)
 
 test-fast: $(STAMP)
-	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q
+	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q $(PARALLEL)
 
 demo: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot demo --out runs/demo

@@ -63,8 +63,10 @@ def test_fine_features_resolve_errors_near_the_tolerance(env) -> None:
 
 
 def test_other_observation_shapes_are_refused() -> None:
-    with pytest.raises(ValueError, match=r"\(23,\).*\(3,\)"):
-        TrackingErrorFeatures(gym.spaces.Box(-1, 1, (3,)))
+    # Any robot's layout (2 n + 11) and the two-arm one (4 n + 20) are read; others refused.
+    for shape in [(3,), (26,), (23, 2)]:
+        with pytest.raises(ValueError, match=rf"2 n \+ 11 .*got \({shape[0]},"):
+            TrackingErrorFeatures(gym.spaces.Box(-1, 1, shape))
 
 
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
