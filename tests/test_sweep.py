@@ -127,6 +127,20 @@ def test_the_shipped_sweep_files_load() -> None:
     assert len(td3) == 12 and {(t.algo, t.backend, t.demos, t.total_timesteps) for t in td3} \
         == {("td3", "sbx", 20, 100_000)}
     assert {t.hyperparams["source"] for t in td3} == {"td3"}
+    # The grids behind the README's bilateral and FR3 tables.
+    fr3 = load_sweep_config(ROOT / "sweeps" / "sac-fr3-v1.yaml").trials()
+    assert len(fr3) == 12 and {t.total_timesteps for t in fr3} == {100_000}
+    assert all(t.env_kwargs == {"robot": "fr3"} for t in fr3)
+    bilateral = load_sweep_config(ROOT / "sweeps" / "sac-bilateral-v1.yaml").trials()
+    assert {(t.env_id, t.algo, t.total_timesteps) for t in bilateral} == \
+        {("rehabbot/rehab-bilateral-v1", "sac", 300_000)} and len(bilateral) == 3
+    for name, env_id, env_kwargs in (("ppo-bc-bilateral-v1", "rehabbot/rehab-bilateral-v1", None),
+                                     ("ppo-bc-fr3-hip-v1", "rehabbot/rehab-hip-v1",
+                                      {"robot": "fr3"})):
+        trials = load_sweep_config(ROOT / "sweeps" / f"{name}.yaml").trials()
+        assert {(t.env_id, t.algo, t.bc, t.demos, t.total_timesteps) for t in trials} == \
+            {(env_id, "ppo", True, 20, 300_000)} and len(trials) == 3
+        assert all(t.env_kwargs == env_kwargs for t in trials)
 
 
 @pytest.mark.parametrize(("change", "message"), [
