@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from benchmarks import expert_agreement, robot_placement, step_throughput
+from benchmarks import bilateral_sync, expert_agreement, robot_placement, step_throughput
 
 ENV = "rehabbot/rehab-reach-v0"
 
@@ -35,6 +35,14 @@ def test_step_throughput_makes_the_ids_with_the_robot_asked_for(capsys) -> None:
     assert step_throughput.main(["--steps", "10", "--rounds", "1", "--warmup", "2",
                                  "--ids", "rehab-knee-v1", "--robot", "fr3"]) == 0
     assert "| rehabbot/rehab-knee-v1 (robot=fr3) |" in capsys.readouterr().out
+
+
+def test_bilateral_sync_reads_the_gap_of_symmetric_episodes(capsys) -> None:
+    # The expert moves both arms in step: no gap beyond the tolerance, nothing paid.
+    expert = bilateral_sync.sync_of("expert", episodes=2, seed=0)
+    assert expert["success"] == 1.0 and expert["mean_gap"] == 0.0 and expert["reward_sync"] == 0
+    assert bilateral_sync.main(["expert", "--episodes", "1"]) == 0
+    assert "| expert | 100 % | 0.000 | 0.000 | 0.00 |" in capsys.readouterr().out
 
 
 def test_robot_placement_measures_reach_margins_and_the_torque_to_hold_the_limb(capsys):
