@@ -25,10 +25,11 @@ MASSES_KG = (30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 100.0, 120.0, 140.0, 160.0, 180
 SEXES = ("male", "female")
 COMBOS = tuple(itertools.product(("arm", "hip", "knee"), ("right", "left")))
 MASS_CAPS_KG = (100.0, 140.0, 200.0)
+# Refusal reasons by a phrase of their message (rehabbot.tasks.feasibility), most specific
+# first: the torque and cuff-force messages both say "at rest".
 REASONS = {"cannot reach": "robot cannot reach the cuff", "setpoint bounds":
-           "target outside the setpoint bounds", "at rest": "cuff force at rest",
-           "touches": "robot touches the body at home",
-           "torque limit": "robot joint saturated at rest"}
+           "target outside the setpoint bounds", "torque limit": "robot joint saturated at rest",
+           "touches": "robot touches the body at home", "cuff carries": "cuff force at rest"}
 
 
 def survey(combo: tuple[str, str], robot: str = "ur5e") -> list[dict]:
@@ -38,15 +39,21 @@ def survey(combo: tuple[str, str], robot: str = "ur5e") -> list[dict]:
     limb, side = combo
     rows = []
     for h, m, sex in itertools.product(HEIGHTS_M, MASSES_KG, SEXES):
-        reason = None
+        reason = message = None
         try:
             RehabEnv(limb=limb, side=side, robot=robot,
                      profile={"height_m": h, "mass_kg": m, "sex": sex})
         except ValueError as err:
-            reason = next((v for k, v in REASONS.items() if k in str(err)), str(err))
+            message = str(err)
+            reason = refusal_reason(message)
         rows.append({"limb": limb, "side": side, "height_m": h, "mass_kg": m, "sex": sex,
-                     "refused": reason})
+                     "refused": reason, "message": message})
     return rows
+
+
+def refusal_reason(message: str) -> str:
+    """The :data:`REASONS` class of a refusal message (the message itself if none fits)."""
+    return next((v for k, v in REASONS.items() if k in message), message)
 
 
 def lowest_supported_height(rows: list[dict], mass_cap_kg: float) -> float | None:

@@ -34,9 +34,8 @@ import mujoco
 import numpy as np
 
 from rehabbot.sim import PatientProfile, build_scene
-from rehabbot.sim.ik import RobotIK, quat_from_mat
 from rehabbot.sim.robots import ROBOT_NAMES
-from rehabbot.tasks.workspace import workspace_grid_deg
+from rehabbot.tasks.workspace import solve_workspace, workspace_grid_deg
 
 # (scene preset, its options, the limb whose workspace box is swept)
 SCENES = (("upper_right", {}, "arm"), ("hip", {}, "hip"), ("knee", {}, "knee"))
@@ -47,38 +46,21 @@ MAX_ERROR_M, MAX_JUMP_RAD, CONTACT_DEPTH_M = 1e-3, 0.6, 2e-3
 
 def sweep_workspace(scene, limb: str) -> dict:
     """Solve ``limb``'s workspace box in ``scene`` as the env does; count and measure."""
-    model, handle = scene.model, scene.robots[0]
-    robot = handle.robot
-    low, high = robot.joint_low_rad(), robot.joint_high_rad()
-    data = mujoco.MjData(model)
-    data.qpos[:] = scene.home_qpos
+    handle = scene.robots[0]
+    low, high = handle.robot.joint_low_rad(), handle.robot.joint_high_rad()
     grid = workspace_grid_deg(scene, limb)
-    ik = RobotIK(model)
-    solved_deg = [np.degrees(scene.home_qpos[scene.exercised_qpos_adr])]
-    solved_q = [scene.home_qpos[handle.qpos_adr].copy()]
     robot_geoms = set(handle.geom_ids.tolist())
     others = set(scene.patient_geom_ids.tolist()) | set(scene.furniture_geom_ids.tolist())
-    margin, contacts = np.inf, 0
-    order = np.argsort(np.max(np.abs(grid - solved_deg[0]), axis=1), kind="stable")
-    for row in grid[order]:
-        nearest = int(np.argmin(np.max(np.abs(np.array(solved_deg) - row), axis=1)))
-        data.qpos[scene.exercised_qpos_adr] = np.radians(row)
-        mujoco.mj_kinematics(model, data)
-        site = handle.patient_cuff_site_id
-        q, err = ik.solve(data, handle, data.site_xpos[site].copy(),
-                          quat_from_mat(data.site_xmat[site]), solved_q[nearest],
-                          posture=solved_q[0])
-        if err > MAX_ERROR_M or np.max(np.abs(q - solved_q[nearest])) > MAX_JUMP_RAD:
-            continue
-        solved_deg.append(row)
-        solved_q.append(q)
+    reached, margin, contacts = 0, np.inf, 0
+    for q, data in solve_workspace(scene, grid, MAX_JUMP_RAD, MAX_ERROR_M):
+        reached += 1
         margin = min(margin, float(np.min(np.minimum(q - low, high - q))))
-        mujoco.mj_forward(model, data)
+        mujoco.mj_forward(scene.model, data)
         pressed = any(((c.geom1 in robot_geoms and c.geom2 in others)
                        or (c.geom2 in robot_geoms and c.geom1 in others))
                       and c.dist < -CONTACT_DEPTH_M for c in data.contact[:data.ncon])
         contacts += int(pressed)
-    return {"reached": len(solved_q) - 1, "poses": len(grid), "margin_rad": margin,
+    return {"reached": reached, "poses": len(grid), "margin_rad": margin,
             "contacts": contacts}
 
 

@@ -7,7 +7,14 @@ import re
 
 import pytest
 
-from benchmarks import bilateral_sync, expert_agreement, robot_placement, step_throughput
+from benchmarks import (
+    bilateral_sync,
+    expert_agreement,
+    profile_envelope,
+    robot_placement,
+    step_throughput,
+)
+from rehabbot.envs.rehab_env import RehabEnv
 
 ENV = "rehabbot/rehab-reach-v0"
 
@@ -60,6 +67,18 @@ def test_robot_placement_measures_reach_margins_and_the_torque_to_hold_the_limb(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize(("kwargs", "reason"), [
+    ({"robot": "fr3", "profile": {"height_m": 1.85, "mass_kg": 90.0, "sex": "male"}},
+     "robot joint saturated at rest"),
+    ({"profile": {"height_m": 1.75, "mass_kg": 160.0, "sex": "male"}}, "cuff force at rest"),
+])
+def test_profile_envelope_names_each_refusal_by_its_own_reason(kwargs, reason) -> None:
+    # Both messages say "at rest": a torque refusal once counted as a cuff-force one.
+    with pytest.raises(ValueError) as refused:
+        RehabEnv(limb="hip", **kwargs)
+    assert profile_envelope.refusal_reason(str(refused.value)) == reason
+
+
 def test_expert_agreement_tells_a_trained_agent_from_one_that_pushes_the_wrong_way() -> None:
     # The shipped PPO agent finishes reach-v1 episodes: it moves the way the expert does.
     rows = expert_agreement.agreement("zoo:rehab-reach-v1/ppo", episodes=1, seed=1000,

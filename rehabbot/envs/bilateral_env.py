@@ -76,7 +76,6 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
-from rehabbot.common.checks import check_options
 from rehabbot.envs.actions import checked_action
 from rehabbot.envs.bilateral_build import build_bilateral_parts
 from rehabbot.envs.bilateral_config import BilateralEnvConfig
@@ -84,14 +83,9 @@ from rehabbot.envs.config import config_from
 from rehabbot.envs.env_base import RehabEnvBase
 from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import WorkMeter
-from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
-from rehabbot.tasks import feasibility
 from rehabbot.tasks.bilateral import arm_view
 from rehabbot.tasks.bilateral_reward import segment_fraction, sync_gap
 from rehabbot.tasks.reward import StepOutcome, total
-from rehabbot.tasks.targets import TargetSequence
-
-RESET_OPTIONS = ("exercise", "weight_level")
 
 
 class BilateralEnv(RehabEnvBase):
@@ -102,30 +96,14 @@ class BilateralEnv(RehabEnvBase):
     def __init__(self, config: BilateralEnvConfig | None = None, **kwargs: Any) -> None:
         self.config = config = config_from(BilateralEnvConfig, "BilateralEnv", config, kwargs)
         parts = build_bilateral_parts(config)
-        scene = self.scene = parts.scene
-        self.model = scene.model
-        self.data = mujoco.MjData(self.model)
+        self._adopt_parts(parts, config)
+        scene = self.scene
         self.handles = scene.robots
         self.robot = scene.robots[0].robot
         self.n_joints_per_robot = n = scene.n_robot_joints
         self.joint_names = tuple(f"{h.prefix}{j}" for h in scene.robots
                                  for j in h.robot.joint_names)
-        self.setpoint_low_rad, self.setpoint_high_rad = (parts.setpoint_low_rad,
-                                                         parts.setpoint_high_rad)
-        self.targets: tuple[TargetSequence, ...] = parts.targets
         self.exercises = config.bilateral_exercises
-        self.controller = parts.controller
-        self.safety = parts.safety
-        self.reward_function = parts.reward
-        self.layout = parts.layout
-        self.action_space = self.controller.action_space
-        self.observation_space = parts.observation_space
-        self.render_mode = config.render_mode
-        self.frame_skip = config.frame_skip
-        self.max_episode_steps = config.max_episode_steps
-        self.dt_s = self.frame_skip * self.model.opt.timestep
-        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
-        self._unusable_levels = parts.unusable_levels
         self._segments = parts.segment_lengths_rad
         self._rests = parts.remaining_paths
         self._healthy_low, self._healthy_high = parts.healthy_low, parts.healthy_high
@@ -172,26 +150,8 @@ class BilateralEnv(RehabEnvBase):
     # Gymnasium API
     # ------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        options = check_options(options, RESET_OPTIONS)
-        drawn_exercise = int(self.np_random.integers(len(self.targets)))
-        drawn_level = int(self.np_random.integers(len(WEIGHT_LEVELS)))
-        exercise = options.get("exercise", self.config.exercise)
-        exercise = drawn_exercise if exercise is None else exercise
-        if isinstance(exercise, bool) or exercise not in range(len(self.targets)):
-            raise ValueError(f"exercise={exercise!r} is not one of "
-                             f"{list(range(len(self.targets)))}")
-        level = options.get("weight_level", self.config.weight_level)
-        level = drawn_level if level is None else check_weight_level(level)
-        if level in self._unusable_levels:
-            feasibility.refuse(self._unusable_levels, WEIGHT_LEVELS, level)
-        if level != self.scene.weight_level:
-            self.scene.set_weight_level(level)
-        self._exercise = int(exercise)
-        self._sequence = self.targets[self._exercise]
-        self._target_index = self._steps = 0
+        self._start_episode(seed, options)
         data = self.data
-        self.scene.reset_data(data)
         self.controller.reset(data, self.scene.home_setpoints)
         self.safety.reset(data)
         for meter in self._meters:

@@ -8,17 +8,24 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 
+from rehabbot.common.checks import check_options
 from rehabbot.envs.config import RENDER_MODES, kwarg_names
+from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
+from rehabbot.tasks import feasibility
 from rehabbot.tasks.targets import TargetSequence
+
+RESET_OPTIONS = ("exercise", "weight_level")
 
 
 class RehabEnvBase(gym.Env):
     """The shared part of the RehabBot envs. A subclass sets :attr:`config_class` and, in its
-    constructor, ``config``, ``dt_s``, ``render_mode``, ``_rendering``, ``_healthy_low`` and
-    ``_healthy_high``; ``reset`` and ``step`` keep ``_steps``, ``_target_index``,
-    ``_exercise``, ``_sequence``, ``_closed`` and ``_needs_reset``."""
+    constructor, ``config``, calls :meth:`_adopt_parts` on its built parts, and sets
+    ``_rendering``, ``_healthy_low`` and ``_healthy_high``; ``reset`` and ``step`` keep
+    ``_steps``, ``_target_index``, ``_exercise``, ``_sequence``, ``_closed`` and
+    ``_needs_reset``."""
 
     metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
     config_class: ClassVar[type]
@@ -91,6 +98,53 @@ class RehabEnvBase(gym.Env):
     # ------------------------------------------------------------------------------------------
     # Helpers
     # ------------------------------------------------------------------------------------------
+    def _adopt_parts(self, parts: Any, config: Any) -> None:
+        """Take what both env classes read from their built parts (``build_parts`` and
+        ``build_bilateral_parts``) and from the config: the model and its data, the setpoint
+        bounds, targets, controller, safety rules, reward, layout and spaces, and the timing."""
+        self.scene = parts.scene
+        self.model = parts.scene.model
+        self.data = mujoco.MjData(self.model)
+        self.setpoint_low_rad, self.setpoint_high_rad = (parts.setpoint_low_rad,
+                                                         parts.setpoint_high_rad)
+        self.targets: tuple[TargetSequence, ...] = parts.targets
+        self.controller = parts.controller
+        self.safety = parts.safety
+        self.reward_function = parts.reward
+        self.layout = parts.layout
+        self.action_space = self.controller.action_space
+        self.observation_space = parts.observation_space
+        self.render_mode = config.render_mode
+        self.frame_skip = config.frame_skip
+        self.max_episode_steps = config.max_episode_steps
+        self.dt_s = self.frame_skip * self.model.opt.timestep
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
+        self._unusable_levels = parts.unusable_levels
+
+    def _start_episode(self, seed: int | None, options: dict | None) -> None:
+        """The part of ``reset`` both env classes share: seed, check the options, draw the
+        exercise and weight level (both drawn every reset, so that the draws stay the same
+        whichever the options fix), load the level and put the scene at home in ``data``."""
+        super().reset(seed=seed)
+        options = check_options(options, RESET_OPTIONS)
+        drawn_exercise = int(self.np_random.integers(len(self.targets)))
+        drawn_level = int(self.np_random.integers(len(WEIGHT_LEVELS)))
+        exercise = options.get("exercise", self.config.exercise)
+        exercise = drawn_exercise if exercise is None else exercise
+        if isinstance(exercise, bool) or exercise not in range(len(self.targets)):
+            raise ValueError(f"exercise={exercise!r} is not one of "
+                             f"{list(range(len(self.targets)))}")
+        level = options.get("weight_level", self.config.weight_level)
+        level = drawn_level if level is None else check_weight_level(level)
+        if level in self._unusable_levels:
+            feasibility.refuse(self._unusable_levels, WEIGHT_LEVELS, level)
+        if level != self.scene.weight_level:
+            self.scene.set_weight_level(level)
+        self._exercise = int(exercise)
+        self._sequence = self.targets[self._exercise]
+        self._target_index = self._steps = 0
+        self.scene.reset_data(self.data)
+
     def _render_targets(self) -> np.ndarray:
         """The target tool positions the rendering marks (robot base frame)."""
         return self._sequence.tool_pos_base_m

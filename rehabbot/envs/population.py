@@ -33,7 +33,8 @@ import gymnasium as gym
 
 from rehabbot.common.checks import check_options
 from rehabbot.envs.config import RENDER_MODES, RehabEnvConfig
-from rehabbot.envs.rehab_env import RESET_OPTIONS, RehabEnv
+from rehabbot.envs.env_base import RESET_OPTIONS
+from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.sim.populations import PatientPopulation, as_population
 
 POPULATION_RESET_OPTIONS = (*RESET_OPTIONS, "patient")

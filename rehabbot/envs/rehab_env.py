@@ -155,20 +155,15 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.arrays import as_index
-from rehabbot.common.checks import check_options
 from rehabbot.envs.actions import checked_action
 from rehabbot.envs.build import build_parts
 from rehabbot.envs.config import RehabEnvConfig, config_from
 from rehabbot.envs.env_base import RehabEnvBase
 from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import LimbPhysics
-from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
-from rehabbot.tasks import feasibility
 from rehabbot.tasks.exercises import Exercise
 from rehabbot.tasks.reward import StepOutcome, joint_distance, total
-from rehabbot.tasks.targets import TargetSequence
 
-RESET_OPTIONS = ("exercise", "weight_level")
 # A value this far inside a bound of the healthy box is inside whatever float32 rounding does
 # (the bounds are below 10 in magnitude; float32 rounds them by at most 5e-7).
 BOUND_CLEARANCE = 1e-5
@@ -182,28 +177,11 @@ class RehabEnv(RehabEnvBase):
     def __init__(self, config: RehabEnvConfig | None = None, **kwargs: Any) -> None:
         self.config = config = config_from(RehabEnvConfig, "RehabEnv", config, kwargs)
         parts = build_parts(config)  # ValueError for a patient who cannot do the exercises
-        self.scene = parts.scene
-        self.model = self.scene.model
-        self.data = mujoco.MjData(self.model)
+        self._adopt_parts(parts, config)
         self.handle = parts.handle
         self.robot = self.handle.robot
-        self.setpoint_low_rad, self.setpoint_high_rad = parts.setpoint_low_rad, \
-            parts.setpoint_high_rad
         self.joint_low_rad, self.joint_high_rad = parts.joint_low_rad, parts.joint_high_rad
-        self.targets: tuple[TargetSequence, ...] = parts.targets
         self.exercises: tuple[Exercise, ...] = parts.exercise_table
-        self.controller = parts.controller
-        self.safety = parts.safety
-        self.reward_function = parts.reward
-        self.layout = parts.layout
-        self.action_space = self.controller.action_space
-        self.observation_space = parts.observation_space
-        self.render_mode = config.render_mode
-        self.frame_skip = config.frame_skip
-        self.max_episode_steps = config.max_episode_steps
-        self.dt_s = self.frame_skip * self.model.opt.timestep
-        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
-        self._unusable_levels = parts.unusable_levels
         self._remaining_paths = parts.remaining_paths
         self._uses_path = self.reward_function.uses_path
         self._rest: tuple[float, ...] = parts.remaining_paths[0]
@@ -279,29 +257,8 @@ class RehabEnv(RehabEnvBase):
     # Gymnasium API
     # ------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        super().reset(seed=seed)
-        options = check_options(options, RESET_OPTIONS)
-        drawn_exercise = int(self.np_random.integers(len(self.targets)))
-        drawn_level = int(self.np_random.integers(len(WEIGHT_LEVELS)))
-        exercise = options.get("exercise", self.config.exercise)
-        if exercise is None:
-            exercise = drawn_exercise
-        if isinstance(exercise, bool) or exercise not in range(len(self.targets)):
-            raise ValueError(f"exercise={exercise!r} is not one of "
-                             f"{list(range(len(self.targets)))}")
-        level = options.get("weight_level", self.config.weight_level)
-        level = drawn_level if level is None else check_weight_level(level)
-        if level in self._unusable_levels:
-            feasibility.refuse(self._unusable_levels, WEIGHT_LEVELS, level)
-
-        if level != self.scene.weight_level:
-            self.scene.set_weight_level(level)
-        self._exercise = int(exercise)
-        self._sequence = self.targets[self._exercise]
-        self._target_index = 0
-        self._steps = 0
+        self._start_episode(seed, options)
         data = self.data
-        self.scene.reset_data(data)
         self.controller.reset(data, self.scene.home_setpoints[0])
         self.safety.reset(data)
         self._physics.reset(data, self.np_random)

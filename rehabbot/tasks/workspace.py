@@ -6,6 +6,7 @@ hold the limb anywhere in it (:func:`setpoint_bounds`).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import mujoco
 import numpy as np
@@ -93,14 +94,15 @@ def setpoint_bounds(scene: Scene, limb: str) -> tuple[np.ndarray, np.ndarray]:
     return _BOUNDS_CACHE[key]
 
 
-def workspace_robot_angles(scene: Scene, grid_deg: np.ndarray, max_jump_rad: float = 0.6,
-                           max_error_m: float = 1e-3) -> np.ndarray:
-    """Robot angles and load-carrying setpoints (2 per reachable pose, stacked) for patient
-    poses ``grid_deg``, all on the home IK branch.
+def solve_workspace(scene: Scene, grid_deg: np.ndarray, max_jump_rad: float = 0.6,
+                    max_error_m: float = 1e-3) -> Iterator[tuple[np.ndarray, mujoco.MjData]]:
+    """Solve the robot's IK for patient poses ``grid_deg`` on the home IK branch, yielding
+    ``(q, data)`` per reachable pose: its robot angles, and ``data`` holding the pose (patient
+    and robot angles set, kinematics only; valid until the next pose).
 
-    Each pose is solved from the nearest pose solved so far; a pose the IK cannot reach
-    (``max_error_m``) or reaches only by jumping to another branch (a joint moving more than
-    ``max_jump_rad`` from its seed) is left out.
+    Poses are solved outwards from home, each from the nearest pose solved so far; a pose the
+    IK cannot reach (``max_error_m``) or reaches only by jumping to another branch (a joint
+    moving more than ``max_jump_rad`` from its seed) is left out.
     """
     model = scene.model
     data = mujoco.MjData(model)
@@ -110,21 +112,29 @@ def workspace_robot_angles(scene: Scene, grid_deg: np.ndarray, max_jump_rad: flo
     solved_deg = [np.degrees(scene.home_qpos[scene.exercised_qpos_adr])]
     solved_q = [scene.home_qpos[handle.qpos_adr].copy()]
     rest = solved_q[0]  # a redundant robot's rest posture (rehabbot.sim.ik.RobotIK)
-    out = []
+    site = handle.patient_cuff_site_id
     # Grow outwards from home, so each pose's nearest solved pose is a neighbour.
     order = np.argsort(np.max(np.abs(grid_deg - solved_deg[0]), axis=1), kind="stable")
     for row in grid_deg[order]:
         nearest = int(np.argmin(np.max(np.abs(np.array(solved_deg) - row), axis=1)))
         data.qpos[scene.exercised_qpos_adr] = np.radians(row)
         mujoco.mj_kinematics(model, data)
-        site = handle.patient_cuff_site_id
         q, err = ik.solve(data, handle, data.site_xpos[site].copy(),
                           quat_from_mat(data.site_xmat[site]), solved_q[nearest], posture=rest)
         if err > max_error_m or np.max(np.abs(q - solved_q[nearest])) > max_jump_rad:
             continue
         solved_deg.append(row)
         solved_q.append(q)
-        mujoco.mj_forward(model, data)
+        yield q, data
+
+
+def workspace_robot_angles(scene: Scene, grid_deg: np.ndarray, max_jump_rad: float = 0.6,
+                           max_error_m: float = 1e-3) -> np.ndarray:
+    """Robot angles and load-carrying setpoints (2 per reachable pose, stacked) for patient
+    poses ``grid_deg``, all on the home IK branch (:func:`solve_workspace`)."""
+    out = []
+    for q, data in solve_workspace(scene, grid_deg, max_jump_rad, max_error_m):
+        mujoco.mj_forward(scene.model, data)
         setpoint = statics.servo_setpoints(scene, data, statics.cuff_load_torque(scene, data))
         out.extend([q, setpoint[0]])
     return np.array(out)

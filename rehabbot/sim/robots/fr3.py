@@ -29,6 +29,7 @@ from rehabbot.sim.robots.parts import (
     add_joint_actuators,
     add_tube,
     limit_joint_torque,
+    standalone_spec,
 )
 
 JOINT_NAMES: tuple[str, ...] = tuple(f"fr3_joint{i}" for i in range(1, 8))
@@ -173,13 +174,7 @@ def add_fr3(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: RobotBuildOptions
 
 def build_fr3_spec(opts: RobotBuildOptions | None = None) -> mujoco.MjSpec:
     """A spec holding one FR3 on the world origin (for tests, benchmarks and inspection)."""
-    spec = mujoco.MjSpec()
-    spec.compiler.degree = False
-    spec.modelname = "fr3"
-    spec.option.timestep = 0.002
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    add_fr3(spec.worldbody, spec, opts)
-    return spec
+    return standalone_spec("fr3", add_fr3, opts)
 
 
 def modified_dh_forward_kinematics(q_rad: np.ndarray) -> np.ndarray:

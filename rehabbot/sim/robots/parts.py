@@ -4,7 +4,7 @@ the per-joint servo + motor pair and the joint's torque clamp (see :mod:`rehabbo
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -92,3 +92,16 @@ def add_joint_actuators(spec: mujoco.MjSpec, prefix: str, joint_names: Sequence[
         motor.gainprm[0] = 1.0
         motor.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
         motor.ctrlrange = [-limit, limit]
+
+
+def standalone_spec(name: str, add_robot: Callable[..., mujoco.MjsBody],
+                    opts: RobotBuildOptions | None = None) -> mujoco.MjSpec:
+    """A spec holding one robot on the world origin, with the scene's timestep and integrator
+    (for tests, benchmarks and inspection); ``add_robot(worldbody, spec, opts)`` builds it."""
+    spec = mujoco.MjSpec()
+    spec.compiler.degree = False
+    spec.modelname = name
+    spec.option.timestep = 0.002
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    add_robot(spec.worldbody, spec, opts)
+    return spec

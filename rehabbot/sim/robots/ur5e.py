@@ -33,6 +33,7 @@ from rehabbot.sim.robots.parts import (
     add_joint_actuators,
     add_tube,
     limit_joint_torque,
+    standalone_spec,
 )
 
 JOINT_NAMES: tuple[str, ...] = (
@@ -193,13 +194,7 @@ def add_ur5e(parent: mujoco.MjsBody, spec: mujoco.MjSpec, opts: RobotBuildOption
 
 def build_ur5e_spec(opts: RobotBuildOptions | None = None) -> mujoco.MjSpec:
     """A spec holding one UR5e on the world origin (for tests, benchmarks and inspection)."""
-    spec = mujoco.MjSpec()
-    spec.compiler.degree = False
-    spec.modelname = "ur5e"
-    spec.option.timestep = 0.002
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    add_ur5e(spec.worldbody, spec, opts)
-    return spec
+    return standalone_spec("ur5e", add_ur5e, opts)
 
 
 def dh_forward_kinematics(q_rad: np.ndarray) -> np.ndarray:
