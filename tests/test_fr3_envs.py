@@ -9,10 +9,14 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
 
 import rehabbot  # noqa: F401  (registers the ids)
+from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim import build_scene
+from rehabbot.sim import patient as pt
 from rehabbot.sim.ik import RobotIK, quat_from_mat
 from rehabbot.sim.robots import ROBOT_NAMES, get_robot
 from rehabbot.tasks.workspace import workspace_grid_deg, workspace_robot_angles
@@ -193,3 +197,48 @@ def test_bad_robot_arguments_are_refused_naming_the_value(kwargs, needle):
 def test_menagerie_meshes_are_refused_for_the_fr3(tmp_path):
     with pytest.raises(ValueError, match="draw the UR5e only, not robot='fr3'"):
         build_scene("upper_right", robot="fr3", menagerie_dir=str(tmp_path))
+
+
+def test_a_level_at_which_an_fr3_joint_saturates_holding_the_leg_is_refused():
+    # The 1.85 m, 90 kg man's supine leg at weight levels 3-4: the FR3's joint 2 (87 N·m) needs
+    # its whole limit to hold it at rest; the UR5e (150 N·m) holds him at every level.
+    profile = {"height_m": 1.85, "mass_kg": 90.0, "sex": "male"}
+    with pytest.raises(ValueError, match=r"fr3_joint2 needs its whole 87 N·m torque limit.*"
+                                         r"weight levels \[0, 1, 2\] are usable"):
+        RehabEnv(limb="hip", robot="fr3", profile=profile, weight_level=3)
+    env = RehabEnv(limb="hip", robot="fr3", profile=profile, weight_level=2)
+    env.reset(seed=0)
+    joint2 = env.handle.dof_adr[1]
+    held_nm = abs(float(env.data.qfrc_actuator[joint2]))
+    assert held_nm < 0.99 * 87.0, held_nm  # level 2 is held with torque to spare
+    with pytest.raises(ValueError, match=r"weight levels \[0, 1, 2\] are usable"):
+        env.reset(seed=0, options={"weight_level": 4})
+    RehabEnv(limb="hip", profile=profile, weight_level=4)  # the UR5e holds him
+
+
+# The FR3's envelope the README promises (python benchmarks/profile_envelope.py --robot fr3):
+# every arm and knee profile; the hip from the grid's lowest fully accepted height + 5 cm
+# (right 1.35 m, left 1.60 m on the grid) up to 50 kg (at 2.15-2.20 m, 60 kg is refused).
+FR3_HIP_FROM_M = {"right": 1.40, "left": 1.65}
+FR3_HIP_UP_TO_KG = 50.0
+
+
+@settings(max_examples=12, deadline=None, derandomize=True, phases=(Phase.generate,),
+          suppress_health_check=[HealthCheck.too_slow])
+@given(limb=st.sampled_from(("arm", "knee", "hip")), side=st.sampled_from(("right", "left")),
+       height_m=st.floats(*pt.HEIGHT_RANGE_M), mass_kg=st.floats(*pt.MASS_RANGE_KG),
+       sex=st.sampled_from(pt.SEXES), level=st.integers(0, 4))
+@pytest.mark.slow
+def test_the_fr3_builds_every_profile_of_its_envelope_with_the_cuff_on(limb, side, height_m,
+                                                                       mass_kg, sex, level):
+    if limb == "hip":
+        height_m = max(height_m, FR3_HIP_FROM_M[side])
+        mass_kg = min(mass_kg, FR3_HIP_UP_TO_KG)
+    profile = pt.PatientProfile(height_m, mass_kg, sex)
+    env = RehabEnv(limb=limb, side=side, robot="fr3", profile=profile)  # every level checked
+    for exercise in range(len(env.targets)):
+        env.reset(seed=0, options={"exercise": exercise, "weight_level": level})
+        assert np.all(env.scene.cuff_errors_m(env.data) < 1e-3), env.scene.cuff_errors_m(env.data)
+        held = np.abs(env.data.qfrc_actuator[env.handle.dof_adr]) / env.robot.torque_limits()
+        assert held.max() < 0.99, (exercise, level, held)
+    env.close()
