@@ -249,11 +249,17 @@ def test_a_trial_trains_then_skips_then_resumes_to_more_steps(tmp_path: Path) ->
 
 
 def test_a_failing_trial_is_reported_not_raised(tmp_path: Path) -> None:
-    config = parse_sweep_config(_config(tmp_path, grid={"target_entropy": ["bogus"]}))
+    # The sweep's checks refuse every bad value they can before anything runs...
+    with pytest.raises(SweepConfigError, match="target_entropy='bogus'"):
+        parse_sweep_config(_config(tmp_path, grid={"target_entropy": ["bogus"]})).trials()
+    # ...but a policy_kwargs key is known only to the policy's constructor: this trial
+    # fails at run time, when train_run builds the model.
+    config = parse_sweep_config(_config(
+        tmp_path, grid={"policy_kwargs": ["dict(net_arch=[16, 16], bogus_option=1)"]}))
     (trial,) = config.trials()
     record = run_trial(trial.to_json())
     assert record["status"] == "failed" and record["action"] == "trained", record
-    assert "bogus" in record["error"] and "\n" not in record["error"]
+    assert "bogus_option" in record["error"] and "\n" not in record["error"]
     assert not trial.run_dir.exists()  # train_run leaves nothing behind for a new run
 
 

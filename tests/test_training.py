@@ -166,7 +166,7 @@ def test_resume_continues_to_the_requested_total(tmp_path: Path, capsys) -> None
     run_dir = out / ENV / "td3" / "seed0"
     first = _manifest(run_dir)
     lines_before, rows_before = _monitor_rows(run_dir)
-    assert (run_dir / "vecnormalize.pkl").is_file()
+    assert (run_dir / "vecnormalize.json").is_file()
 
     assert cmd_train(_train_args(tmp_path, "td3", out, "--timesteps", "2000", "--resume",
                                  hp=hp, freq=500)) == 0
@@ -192,7 +192,7 @@ def test_resume_continues_to_the_requested_total(tmp_path: Path, capsys) -> None
     tb_runs = [p for p in (run_dir / "tb").iterdir() if p.is_dir()]
     assert [p.name for p in tb_runs] == ["TD3_1"]
     assert len(list(tb_runs[0].glob("events.out.tfevents.*"))) == 2
-    assert (run_dir / "checkpoints" / "rl_model_vecnormalize_2000_steps.pkl").is_file()
+    assert (run_dir / "checkpoints" / "rl_model_vecnormalize_2000_steps.json").is_file()
 
     capsys.readouterr()
     assert cmd_train(_train_args(tmp_path, "td3", out, "--resume", hp=hp, freq=500)) == 0

@@ -37,7 +37,9 @@ SAC_SMALL = {"learning_starts": 100, "buffer_size": 5000, "batch_size": 32, "tra
 # No gradient updates: the buffer holds exactly what was collected.
 NO_UPDATES = {"learning_starts": 100_000, "buffer_size": 5000,
               "policy_kwargs": "dict(net_arch=[16, 16])"}
-PPO_FROZEN = {"n_steps": 64, "batch_size": 64, "n_epochs": 1, "learning_rate": 0.0}
+# One PPO update of a negligible size (a learning rate must be > 0): after --bc, the cloned
+# policy is what the run saves, give or take 1e-12 (Adam steps by about the learning rate).
+PPO_FROZEN = {"n_steps": 64, "batch_size": 64, "n_epochs": 1, "learning_rate": 1e-12}
 
 
 @pytest.fixture
@@ -380,7 +382,7 @@ def test_demos_with_several_envs_cut_unfinished_episodes() -> None:
 
 def _bc_run(tmp_path: Path, backend: str, hp: dict) -> tuple[dict, Path]:
     out = tmp_path / backend
-    # learning_rate 0: PPO's own update leaves the cloned policy as it is.
+    # PPO_FROZEN's learning rate of 1e-12: PPO's own update leaves the cloned policy as it is.
     assert cmd_train(_args(tmp_path, "ppo", out, hp, "--timesteps", "64", "--eval-freq", "0",
                            "--checkpoint-freq", "0", "--bc", "--demos", "3",
                            "--backend", backend)) == 0

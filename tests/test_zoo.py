@@ -191,13 +191,16 @@ def test_vecnormalize_statistics_are_exported(env, observations, tmp_path) -> No
 
     venv = VecNormalize(DummyVecEnv([lambda: gym.make(FULL_ID)]), norm_reward=False)
     venv.seed(0)
+    venv.action_space.seed(0)  # the same statistics every run (float32 noise varies with them)
     venv.reset()
     for _ in range(50):
         venv.step(np.array([venv.action_space.sample()]))
     run = tmp_path / "run"
     model = _perturbed(_sb3_model("ppo", env))
     model.save(run / "model")
-    venv.save(run / "vecnormalize.pkl")
+    from rehabbot.rl.vecnormalize_io import save_vecnormalize
+
+    save_vecnormalize(venv, run / "vecnormalize.json")
     (run / "manifest.json").write_text(json.dumps({"env_id": FULL_ID, "algo": "ppo",
                                                    "seed": 0}))
     export_policy(run, None, None, tmp_path / "ppo.npz", episodes=0)

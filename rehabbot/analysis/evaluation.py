@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -37,9 +38,9 @@ import gymnasium as gym
 import numpy as np
 
 from rehabbot.analysis.metrics import kinematic_summary
-from rehabbot.analysis.traces import TRACE_NAME, save_trace, trace_from_episode
-from rehabbot.common.errors import UsageError
-from rehabbot.common.files import atomic_write_text
+from rehabbot.analysis.traces import TRACE_NAME, load_trace, save_trace_file, trace_from_episode
+from rehabbot.common.errors import DataError, UsageError
+from rehabbot.common.files import atomic_save_all, atomic_write_text
 from rehabbot.common.provenance import package_versions
 from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import runs
@@ -150,6 +151,25 @@ def summarize(episodes: list[dict]) -> dict:
     return summary
 
 
+# A policy's label names its output folder: letters, digits, ".", "_" and "-" only, so that
+# a label built from a file's contents (a manifest's seed, a zoo file's algorithm) can never
+# name a path elsewhere.
+LABEL_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
+
+
+def check_label(label: Any) -> str:
+    """``label`` if it is a safe folder name, else :class:`DataError` naming it."""
+    if not isinstance(label, str) or not LABEL_RE.match(label) or ".." in label:
+        raise DataError(f"policy label {label!r} is not a safe folder name (letters, digits, "
+                        "'.', '_' and '-' only); it was built from a file's contents")
+    return label
+
+
+def label_dir(out_dir: Path, label: Any) -> Path:
+    """``out_dir/<label>``, the output folder of one policy (:func:`check_label`)."""
+    return Path(out_dir) / check_label(label)
+
+
 def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
                       episodes: int = DEFAULT_EPISODES, seed: int = 0,
                       env_kwargs: dict | None = None,
@@ -169,6 +189,8 @@ def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
     env = gym.make(env_id, **kwargs)
     try:
         policies = [load_policy(spec, env, seed=seed) for spec in specs]
+        for policy in policies:
+            check_label(policy.label)  # before any episode runs
         zoo = [p.label for p in policies if p.kind == "zoo"]
         if zoo and not deterministic:
             raise UsageError(f"{', '.join(zoo)}: zoo agents are deterministic only (their "
@@ -211,13 +233,27 @@ def evaluate(spec: str, env_id: str | None = None, episodes: int = DEFAULT_EPISO
 
 
 def save_report(report: dict, trace: dict, out_dir: Path) -> tuple[Path, Path]:
-    """``out_dir/evaluation.json`` and ``out_dir/trace.npz``, each written atomically."""
+    """``out_dir/evaluation.json`` and ``out_dir/trace.npz``, written as a pair: both go to
+    temporary names, are read back (the JSON parsed, the trace loaded and its shapes
+    checked) and only then renamed, so a failure (a full disk) raises
+    :class:`~rehabbot.common.errors.OutputError` and leaves the earlier pair as it was,
+    never a new report beside an old trace."""
     out_dir = Path(out_dir)
     json_path, trace_path = out_dir / REPORT_NAME, out_dir / TRACE_NAME
     out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(json_path, json.dumps(report, indent=2, default=_json_default) + "\n")
-    save_trace(trace_path, trace)
+    atomic_save_all(
+        {json_path: lambda name: save_report_file(name, report),
+         trace_path: lambda name: save_trace_file(name, trace)},
+        {json_path: lambda tmp: json.loads(Path(tmp).read_text(encoding="utf-8")),
+         trace_path: load_trace},
+    )
     return json_path, trace_path
+
+
+def save_report_file(name: str | Path, report: dict) -> None:
+    """Write ``report`` as indented JSON to the file ``name`` as it is (no temporary)."""
+    text = json.dumps(report, indent=2, default=_json_default) + "\n"
+    Path(name).write_text(text, encoding="utf-8")
 
 
 def _json_default(value: Any) -> Any:
@@ -285,8 +321,12 @@ def ensure_trace(run_dir: Path, seed: int | None = None) -> Path:
     if existing:
         return existing[0]
     manifest = runs.read_manifest(run_dir) or {}
-    seed = int(manifest.get("seed", 0)) if seed is None else seed
+    if seed is None:
+        seed = manifest.get("seed", 0)
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise DataError(f"{run_dir / runs.MANIFEST_NAME}: seed {seed!r} is not an integer "
+                            ">= 0")
     report, trace = evaluate(str(run_dir / runs.MODEL_NAME), None, episodes=1, seed=seed)
-    _json, trace_path = save_report(report, trace,
-                                    run_dir / runs.EVALUATION_DIR / report["policy"]["label"])
+    _json, trace_path = save_report(report, trace, label_dir(run_dir / runs.EVALUATION_DIR,
+                                                             report["policy"]["label"]))
     return trace_path

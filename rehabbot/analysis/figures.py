@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rehabbot.analysis.traces import Trace, load_trace
+from rehabbot.common.files import atomic_save_verified
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -81,15 +82,42 @@ def check_formats(formats: Sequence[str]) -> tuple[str, ...]:
 
 def save_figure(figure: Figure, out_dir: Path | str, stem: str,
                 formats: Sequence[str] = DEFAULT_FORMATS) -> list[Path]:
-    """Write ``<out_dir>/<stem>.<fmt>`` for each format; creates ``out_dir``."""
+    """Write ``<out_dir>/<stem>.<fmt>`` for each format; creates ``out_dir``.
+
+    Each file is written under a temporary name, read back (:func:`verify_figure`) and
+    renamed: a full disk raises :class:`~rehabbot.common.errors.OutputError` and keeps an
+    earlier file of the same name.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for fmt in check_formats(formats):
         target = out / f"{stem}.{fmt}"
-        figure.savefig(target, format=fmt, dpi=DPI)
+        atomic_save_verified(target,
+                             lambda name, fmt=fmt: figure.savefig(name, format=fmt, dpi=DPI),
+                             lambda tmp, fmt=fmt: verify_figure(tmp, fmt))
         written.append(target)
     return written
+
+
+def verify_figure(path: Path, fmt: str) -> None:
+    """Read a written figure back: a PNG is decoded whole, a PDF must begin with ``%PDF``
+    and end with ``%%EOF``, an SVG must parse as XML. Raises ValueError (or the reader's
+    error) when the file is damaged."""
+    path = Path(path)
+    if fmt == "png":
+        from PIL import Image  # matplotlib's own dependency
+
+        with Image.open(path) as image:
+            image.load()
+    elif fmt == "pdf":
+        data = path.read_bytes()
+        if not data.startswith(b"%PDF") or b"%%EOF" not in data[-1024:]:
+            raise ValueError("not a complete PDF")
+    elif fmt == "svg":
+        import xml.etree.ElementTree as ElementTree
+
+        ElementTree.parse(path)  # our own file, just written
 
 
 def _as_trace(trace: Trace | Path | str) -> Trace:

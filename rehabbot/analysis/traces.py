@@ -187,3 +187,10 @@ def save_trace(path: Path, trace: dict[str, np.ndarray]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda stream: np.savez_compressed(stream, **trace))
     return path
+
+
+def save_trace_file(name: str | Path, trace: dict[str, np.ndarray]) -> None:
+    """Write ``trace`` to the file ``name`` as it is (no temporary; callers that need a
+    complete-or-absent file use :func:`save_trace` or :func:`.files.atomic_save_all`)."""
+    with open(name, "wb") as stream:
+        np.savez_compressed(stream, **trace)

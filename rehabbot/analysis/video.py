@@ -6,20 +6,23 @@
 Frames go to the writer as they are rendered, so memory stays flat however long the episode:
 ``.mp4`` through imageio's FFmpeg plugin (``imageio-ffmpeg``), ``.gif`` through Pillow, which
 keeps each frame until the end as a 256-colour image (one byte per pixel). Both come with
-``pip install "rehabbot[video]"``. The file is written under a temporary name and renamed
-when complete (usual permissions, ``0666`` minus the umask), so an interrupted render leaves
-no half-written video.
+``pip install "rehabbot[video]"``. The output path (suffix, folder) is checked before the
+episode starts. The file is written under a temporary name, re-opened and its frames counted
+(:func:`verify_video`), and renamed only then (usual permissions, ``0666`` minus the umask):
+an interrupted render, a full disk or a writer that fails silently leaves no half-written
+video and keeps an earlier file of the same name.
 """
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
 from rehabbot.common.errors import UsageError
-from rehabbot.common.files import atomic_save
+from rehabbot.common.files import atomic_save_verified, check_output_file
 from rehabbot.rl.policies import env_for, load_policy
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
@@ -38,21 +41,13 @@ class _FrameWriter:
     """Appends RGB frames to an ``.mp4`` or ``.gif`` file as they come."""
 
     def __init__(self, path: str, fps: float) -> None:
-        try:
-            import imageio.v3 as iio
-        except ImportError as err:
-            raise RuntimeError('writing videos needs imageio: pip install "rehabbot[video]"'
-                               ) from err
         self._gif = path.lower().endswith(".gif")
         if self._gif:
-            self._file = iio.imopen(path, "w", plugin="pillow")
+            iio = _imageio()
+            self._file: Any = iio.imopen(path, "w", plugin="pillow")
             self._options = {"duration": 1000.0 / fps, "loop": 0, "bits": 8}
         else:
-            try:
-                import imageio_ffmpeg  # noqa: F401
-            except ImportError as err:
-                raise RuntimeError('writing .mp4 needs imageio-ffmpeg: pip install '
-                                   '"rehabbot[video]" (or write a .gif)') from err
+            _imageio_ffmpeg()
             import imageio.v2 as iio2
 
             self._file = iio2.get_writer(path, format="FFMPEG", mode="I", fps=fps,
@@ -68,7 +63,107 @@ class _FrameWriter:
         self.frames += 1
 
     def close(self) -> None:
-        self._file.close()
+        """Finish the file (once; a second call does nothing). Whether closing succeeds or
+        fails (a full disk), imageio's writer is disarmed so that its ``__del__`` does not
+        try again and print the same error after the command has reported it."""
+        file, self._file = self._file, None
+        if file is None:
+            return
+        try:
+            file.close()
+        finally:
+            _disarm(file)
+
+    def abort(self) -> None:
+        """Close after a failure, keeping the failure as the error: whatever closing the
+        half-written file raises is dropped, and nothing is left for ``__del__`` to do."""
+        with contextlib.suppress(Exception):
+            self.close()
+
+
+def _disarm(file: Any) -> None:
+    """Make ``file.close`` (which imageio's ``__del__`` calls) do nothing, and drop what a
+    failed Pillow save still holds (its pending frames)."""
+    with contextlib.suppress(AttributeError, TypeError):
+        file.images_to_write = []
+    with contextlib.suppress(AttributeError, TypeError):
+        file.close = lambda: None
+
+
+def _imageio() -> Any:
+    try:
+        import imageio.v3 as iio
+    except ImportError as err:
+        raise RuntimeError('writing videos needs imageio: pip install "rehabbot[video]"'
+                           ) from err
+    return iio
+
+
+def _imageio_ffmpeg() -> Any:
+    _imageio()
+    try:
+        import imageio_ffmpeg
+    except ImportError as err:
+        raise RuntimeError('writing .mp4 needs imageio-ffmpeg: pip install '
+                           '"rehabbot[video]" (or write a .gif)') from err
+    return imageio_ffmpeg
+
+
+def check_video_writer(out_path: Path) -> None:
+    """:class:`RuntimeError` now, before an episode is rendered, if the writer of
+    ``out_path``'s format is not installed."""
+    if Path(out_path).suffix.lower() == ".gif":
+        _imageio()
+    else:
+        _imageio_ffmpeg()
+
+
+def verify_video(path: Path, frames: int, fps: float) -> None:
+    """Re-open a written video and check that it holds ``frames`` frames (a GIF: that every
+    frame decodes and the frames last as long as ``frames`` at ``fps``; Pillow merges
+    identical neighbours). Raises ValueError (or the reader's error) when it does not."""
+    path = Path(path)
+    if path.suffix.lower() == ".gif":
+        _verify_gif(path, frames, fps)
+        return
+    try:
+        read, _seconds = _imageio_ffmpeg().count_frames_and_secs(str(path))
+    except RuntimeError as err:  # FFmpeg's whole banner: keep its last line, the reason
+        lines = [line.strip() for line in str(err).splitlines() if line.strip()]
+        raise ValueError(f"FFmpeg cannot read it: {lines[-1] if lines else err}") from None
+    if read != frames:
+        raise ValueError(f"{read} frames read back, {frames} written")
+
+
+def _verify_gif(path: Path, frames: int, fps: float) -> None:
+    from PIL import Image
+
+    total_ms = 0.0
+    with Image.open(path) as image:
+        count = int(getattr(image, "n_frames", 1))
+        for index in range(count):
+            image.seek(index)
+            image.load()
+            total_ms += float(image.info.get("duration", 0))
+    expected_ms = frames * 1000.0 / fps
+    if not 1 <= count <= frames or abs(total_ms - expected_ms) > 10.0 * frames + 1e-6:
+        raise ValueError(f"{count} frames lasting {total_ms:.0f} ms read back, {frames} "
+                         f"frames lasting {expected_ms:.0f} ms written")
+
+
+def _record_episode(env: gym.Env, policy: Any, writer: _FrameWriter, seed: int,
+                    frame_every: int, deterministic: bool) -> dict[str, Any]:
+    obs, info = env.reset(seed=seed)
+    writer.append(env.render())
+    steps, total = 0, 0.0
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, deterministic))
+        steps += 1
+        total += float(reward)
+        if steps % frame_every == 0 or terminated or truncated:
+            writer.append(env.render())
+        if terminated or truncated:
+            return {"steps": steps, "total": total, "info": info}
 
 
 def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
@@ -77,11 +172,15 @@ def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
                    deterministic: bool = True) -> dict:
     """Render one episode of a policy to ``out_path`` (.mp4 or .gif); return what happened.
 
-    Every argument is checked before the episode starts (:class:`UsageError`).
+    Every argument and the output path are checked before the episode starts
+    (:class:`UsageError`, :class:`OutputError`). The video is written under a temporary
+    name, re-opened and its frames counted, then renamed over ``out_path``: a full disk or a
+    damaged file raises :class:`OutputError` and leaves an earlier ``out_path`` as it was.
     """
-    out_path = check_video_path(out_path)
+    out_path = check_output_file(check_video_path(out_path), VIDEO_SUFFIXES, "--out")
     if isinstance(frame_every, bool) or not isinstance(frame_every, int) or frame_every < 1:
         raise UsageError(f"frame_every={frame_every!r} must be an integer >= 1")
+    check_video_writer(out_path)
     env_id, kwargs = env_for([spec], env_id, env_kwargs)
     env = gym.make(env_id, render_mode="rgb_array", width=width, height=height,
                    camera_name=camera, **kwargs)
@@ -94,23 +193,16 @@ def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
         def write(tmp: str) -> None:
             writer = _FrameWriter(tmp, fps)
             try:
-                obs, info = env.reset(seed=seed)
-                writer.append(env.render())
-                steps, total = 0, 0.0
-                while True:
-                    obs, reward, terminated, truncated, info = env.step(
-                        policy.act(obs, deterministic))
-                    steps += 1
-                    total += float(reward)
-                    if steps % frame_every == 0 or terminated or truncated:
-                        writer.append(env.render())
-                    if terminated or truncated:
-                        break
-            finally:
-                writer.close()
-            result.update(steps=steps, total=total, info=info, frames=writer.frames)
+                result.update(_record_episode(env, policy, writer, seed, frame_every,
+                                              deterministic))
+            except BaseException:
+                writer.abort()
+                raise
+            writer.close()
+            result["frames"] = writer.frames
 
-        atomic_save(out_path, write)
+        atomic_save_verified(out_path, write,
+                             lambda tmp: verify_video(tmp, result["frames"], fps))
     finally:
         env.close()
     info = result["info"]

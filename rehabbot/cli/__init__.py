@@ -22,14 +22,21 @@ Heavy imports (Stable-Baselines3, matplotlib) happen inside the command function
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Sequence
 
 from rehabbot.cli.display import has_display, use_headless_gl_by_default
-from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, CliError
+from rehabbot.cli.errors import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    EXIT_SIGINT,
+    EXIT_USAGE,
+    CliError,
+    quiet_third_parties,
+    report,
+)
 
-__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_USAGE", "CliError", "build_parser", "has_display",
-           "main", "use_headless_gl_by_default"]
+__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_SIGINT", "EXIT_USAGE", "CliError", "build_parser",
+           "has_display", "main", "use_headless_gl_by_default"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,7 +63,8 @@ def build_parser() -> argparse.ArgumentParser:
                "  rehabbot plot runs/rehab-reach-v0\n"
                "  rehabbot render runs/rehab-reach-v0/sac/seed0/model.zip --out sac.mp4\n\n"
                "`rehabbot COMMAND --help` describes each command. Exit codes: 0 success, "
-               "1 failure, 2 bad usage, 130/143 training interrupted (resumable).",
+               "1 failure, 2 bad usage, 130 interrupted by Ctrl-C (training: resumable; "
+               "143 for SIGTERM). Every failure is one line on stderr.",
     )
     parser.add_argument("--version", action="version", version=f"rehabbot {VERSION}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -72,12 +80,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``rehabbot`` command; returns the process exit code."""
+    """Entry point of the ``rehabbot`` command; returns the process exit code.
+
+    Whatever goes wrong is one line on stderr and an exit code (:func:`.errors.report`):
+    Ctrl-C gives 130, a library's error its code, anything unforeseen 1; never a traceback.
+    """
     use_headless_gl_by_default()  # before anything imports mujoco
-    args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args))
-    except CliError as err:
-        one_line = " ".join(str(err).split())
-        print(f"rehabbot: error: {one_line}", file=sys.stderr)
-        return err.exit_code
+        args = build_parser().parse_args(argv)
+        with quiet_third_parties():
+            return int(args.func(args))
+    except (Exception, KeyboardInterrupt) as err:  # every failure: one line
+        return report(err)

@@ -34,7 +34,7 @@ import argparse
 import time
 from pathlib import Path
 
-from rehabbot.cli.errors import cli_command
+from rehabbot.cli.errors import cli_command, non_negative_int
 from rehabbot.envs.registration import env_short_name
 
 ENV_ID = "rehabbot/rehab-reach-v1"
@@ -64,7 +64,8 @@ def add_demo_parser(commands: argparse._SubParsersAction) -> None:
                         f"(default: {DEFAULT_DEMOS})")
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
                         help=f"evaluation episodes per policy (default: {DEFAULT_EPISODES})")
-    parser.add_argument("--seed", type=int, default=0, metavar="S", help="training seed (0)")
+    parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
+                        help="training seed (default: 0; S >= 0)")
     parser.add_argument("--hyperparams", default=HYPERPARAMS, metavar="FILE.yml|NAME",
                         help="PPO hyperparameters (default: ppo, shipped with rehabbot)")
     parser.add_argument("--no-video", action="store_true", help="skip the video")
@@ -88,11 +89,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def run_demo(args: argparse.Namespace) -> int:
     from rehabbot.analysis import evaluation, plotting, video
-    from rehabbot.common.files import atomic_write_json, atomic_write_text, check_writable_dir
+    from rehabbot.common.files import (
+        atomic_write_json,
+        atomic_write_text,
+        check_output_file,
+        check_writable_dir,
+    )
     from rehabbot.rl import runs, training
 
     out: Path = args.out
     check_writable_dir(out)
+    if not args.no_video:  # before training, not after it
+        check_output_file(out / f"{ALGO}.mp4", video.VIDEO_SUFFIXES, "video")
+        video.check_video_writer(out / f"{ALGO}.mp4")
     stages: dict[str, float] = {}
     commands: dict[str, str] = {}
 

@@ -6,22 +6,18 @@ output folder probed before the first episode runs."""
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command
+from rehabbot.cli.errors import (
+    EXIT_OK,
+    EXIT_USAGE,
+    CliError,
+    cli_command,
+    env_kwargs_object,
+    non_negative_int,
+)
 
 DEFAULT_EPISODES = 10
-
-
-def _json_object(text: str) -> dict:
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise argparse.ArgumentTypeError(f"not valid JSON: {err}") from None
-    if not isinstance(value, dict):
-        raise argparse.ArgumentTypeError(f"must be a JSON object, got {text!r}")
-    return value
 
 
 def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
@@ -59,11 +55,11 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
                              "models were trained on; required for expert, aan and random alone)")
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
                         help=f"episodes per policy (default: {DEFAULT_EPISODES})")
-    parser.add_argument("--seed", type=int, default=0, metavar="S",
-                        help="episode k is reset with seed S + k (default: 0)")
+    parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
+                        help="episode k is reset with seed S + k (default: 0; S >= 0)")
     parser.add_argument("--stochastic", action="store_true",
                         help="sample the model's actions instead of using its mean")
-    parser.add_argument("--env-kwargs", type=_json_object, default=None, metavar="JSON",
+    parser.add_argument("--env-kwargs", type=env_kwargs_object, default=None, metavar="JSON",
                         help="RehabEnv keyword arguments (override the training run's), e.g. "
                              "'{\"weight_level\": 4}'")
     parser.add_argument("--out", type=Path, metavar="DIR",
@@ -88,8 +84,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                                            args.env_kwargs, deterministic=not args.stochastic)
     reports = []
     for report, trace in results:
-        json_path, trace_path = evaluation.save_report(report, trace,
-                                                       out_dir / report["policy"]["label"])
+        json_path, trace_path = evaluation.save_report(
+            report, trace, evaluation.label_dir(out_dir, report["policy"]["label"]))
         print(f"{report['policy']['label']}: wrote {json_path} and {trace_path}")
         reports.append(report)
     table = evaluation.format_table(reports)

@@ -72,10 +72,19 @@ def add_plot_parser(commands: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=cmd_plot)
 
 
+def _own_warnings(caught: list[warnings.WarningMessage]) -> list[warnings.WarningMessage]:
+    """The warnings RehabBot itself gave (third parties' are not shown to users)."""
+    package = Path(__file__).resolve().parents[1]
+    return [warning for warning in caught
+            if Path(warning.filename).resolve().is_relative_to(package)]
+
+
 def cmd_plot(args: argparse.Namespace) -> int:
     """Run ``rehabbot plot``: write the figures, print each path, return 0."""
     from rehabbot.analysis.plotting import plot_all
     from rehabbot.analysis.traces import TRACE_NAME, find_files, find_traces
+    from rehabbot.common.errors import OutputError
+    from rehabbot.common.files import check_writable_dir
     from rehabbot.rl.runs import MANIFEST_NAME
 
     run_dirs = [Path(path) for path in args.run_dirs]
@@ -95,6 +104,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
                 f"{bad}: no training runs ({MANIFEST_NAME}) or evaluated episodes "
                 f"({TRACE_NAME}) found there", EXIT_USAGE,
             )
+        check_writable_dir(out_dir, "--out folder")  # before any run is evaluated
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             written = plot_all(run_dirs, out_dir, smooth=args.smooth, source=args.source,
@@ -105,10 +115,12 @@ def cmd_plot(args: argparse.Namespace) -> int:
         raise CliError(str(err)) from err
     except ValueError as err:
         raise CliError(str(err), EXIT_FAILURE) from err
+    except OutputError as err:  # names the file, says the earlier one is kept
+        raise CliError(str(err)) from err
     except OSError as err:
         where = err.filename or out_dir
         raise CliError(f"cannot write {where}: {err.strerror or err}") from err
-    for warning in caught:
+    for warning in _own_warnings(caught):
         print(f"rehabbot plot: warning: {warning.message}", file=sys.stderr)
     if not written:
         raise CliError(f"nothing to plot under {', '.join(map(str, run_dirs))}", EXIT_USAGE)

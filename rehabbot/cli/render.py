@@ -4,10 +4,18 @@ the tool's path in purple and the targets (:mod:`rehabbot.analysis.video`)."""
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from rehabbot.cli.errors import EXIT_OK, cli_command
+from rehabbot.cli.errors import (
+    EXIT_OK,
+    EXIT_USAGE,
+    CliError,
+    cli_command,
+    env_kwargs_object,
+    non_negative_int,
+)
+
+RENDER_KWARGS = ("render_mode", "width", "height", "camera_name")  # set by render itself
 
 
 def add_render_parser(commands: argparse._SubParsersAction) -> None:
@@ -18,7 +26,10 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
                     "the upcoming ones. Every --frame-every-th decision becomes a frame "
                     "(default 2: 25 fps, real time at 50 Hz). Frames are streamed to the file: "
                     ".mp4 through FFmpeg (imageio-ffmpeg), .gif through Pillow; both come with "
-                    'pip install "rehabbot[video]". The file appears only when complete.',
+                    'pip install "rehabbot[video]". The output path is checked before the '
+                    "episode starts; the file is written under a temporary name, re-opened "
+                    "and its frames counted, and appears only when complete and readable: a "
+                    "failure (a full disk) exits 1 and keeps an earlier file of that name.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n"
                "  rehabbot render expert --env rehab-reach-v0 --out expert.mp4\n"
@@ -33,15 +44,17 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
                              "env; required for expert and random)")
     parser.add_argument("--out", type=Path, required=True, metavar="FILE.mp4|FILE.gif",
                         help="video file to write")
-    parser.add_argument("--seed", type=int, default=0, metavar="S", help="reset seed (0)")
+    parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
+                        help="reset seed (default: 0; S >= 0)")
     parser.add_argument("--width", type=int, default=640, metavar="W", help="pixels (640)")
     parser.add_argument("--height", type=int, default=480, metavar="H", help="pixels (480)")
     parser.add_argument("--camera", default="overview",
                         help="overview, front or side (default: overview)")
     parser.add_argument("--frame-every", type=int, default=2, metavar="K",
                         help="keep every K-th decision as a frame (default: 2, 25 fps)")
-    parser.add_argument("--env-kwargs", type=json.loads, default=None, metavar="JSON",
-                        help="extra RehabEnv keyword arguments")
+    parser.add_argument("--env-kwargs", type=env_kwargs_object, default=None, metavar="JSON",
+                        help="extra RehabEnv keyword arguments (not render_mode, width, "
+                             "height or camera_name: render sets them)")
     parser.set_defaults(func=cmd_render)
 
 
@@ -50,6 +63,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     """Run ``rehabbot render``."""
     from rehabbot.analysis.video import render_episode
 
+    taken = [key for key in RENDER_KWARGS if key in (args.env_kwargs or {})]
+    if taken:
+        raise CliError(f"--env-kwargs: {', '.join(taken)} cannot be given to render (it "
+                       "renders rgb_array frames; use --width, --height and --camera)",
+                       EXIT_USAGE)
     result = render_episode(args.policy, args.env, args.out, args.seed, args.width,
                             args.height, args.camera, args.frame_every, args.env_kwargs)
     outcome = "success" if result["success"] else (result["safety_violation"] or "time limit")

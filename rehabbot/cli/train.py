@@ -5,14 +5,13 @@ resumes an interrupted one."""
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import signal
 import sys
 from collections.abc import Sequence
 from typing import Any
 
-from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command
+from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_kwargs_object
 from rehabbot.envs.registration import ENV_SPECS, env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
@@ -57,13 +56,10 @@ def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
     """``--env-kwargs`` as a dict (None if not given); :class:`CliError` (usage) otherwise."""
     if text is None:
         return None
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise CliError(f"--env-kwargs is not valid JSON: {err}", EXIT_USAGE) from err
-    if not isinstance(value, dict):
-        raise CliError(f"--env-kwargs must be a JSON object, got {text!r}", EXIT_USAGE)
-    return value
+    try:  # the checks of evaluate's and render's --env-kwargs (render_mode included)
+        return env_kwargs_object(text)
+    except argparse.ArgumentTypeError as err:
+        raise CliError(f"--env-kwargs: {err}", EXIT_USAGE) from None
 
 
 TRAIN_EPILOG = """\

@@ -33,7 +33,9 @@ def check_number(name: str, value: Any, low: float = -math.inf, high: float = ma
         ok = float(value).is_integer()
     if not ok:
         kind = "an integer" if integer else "a finite number"
-        raise ValueError(f"{name}={value!r} must be {kind} in [{low}, {high}]")
+        # bool is an int subclass: say why True is refused where 1 would pass.
+        why = " (a bool is not a number)" if isinstance(value, (bool, np.bool_)) else ""
+        raise ValueError(f"{name}={value!r} must be {kind} in [{low}, {high}]{why}")
     return int(value) if integer else float(value)
 
 

@@ -9,11 +9,11 @@ import contextlib
 import io
 import json
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from rehabbot.common.errors import OutputError
+from rehabbot.common.errors import OutputError, UsageError
 
 
 def temp_path(path: Path) -> Path:
@@ -112,3 +112,192 @@ def check_writable_dir(path: Path, what: str = "output folder") -> None:
         import shutil
 
         shutil.rmtree(created, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- checked outputs
+# Every output a command hands to a user (video, figure, JSON, trace) is written under a
+# temporary name, checked by reading it back, and only then renamed over the earlier file:
+# a full disk or a writer that fails silently leaves the earlier good file and no temporary.
+
+
+def check_output_file(path: Path, suffixes: Sequence[str] = (),
+                      what: str = "output file") -> Path:
+    """``path`` as a Path, checked before any work starts.
+
+    Raises:
+        UsageError: the suffix is not one of ``suffixes`` (when given), or ``path`` is a
+            folder.
+        OutputError: its folder cannot be created or written.
+    """
+    path = Path(path)
+    allowed = tuple(suffix.lower() for suffix in suffixes)
+    if allowed and path.suffix.lower() not in allowed:
+        raise UsageError(f"{what} {str(path)!r}: the file must end in {' or '.join(allowed)}")
+    if path.is_dir():
+        raise UsageError(f"{what} {str(path)!r} is a folder, not a file")
+    check_writable_dir(path.parent, what=f"folder of {what}")
+    return path
+
+
+def suffixed_temp_path(path: Path) -> Path:
+    """A hidden temporary name beside ``path`` that keeps its suffix (unique per process)."""
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+
+
+def _output_error(path: Path, err: BaseException) -> OutputError:
+    reason = getattr(err, "strerror", None) or str(err) or type(err).__name__
+    return OutputError(f"cannot write {str(path)!r}: {reason}; the earlier file, if any, "
+                       "is kept")
+
+
+def _remove_quietly(paths: Iterable[Path]) -> None:
+    for tmp in paths:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def _produce_checked(path: Path, tmp: Path, produce: Callable[[Path], Any],
+                     verify: Callable[[Path], Any] | None) -> None:
+    """``produce(tmp)``, flush it to disk, ``verify(tmp)``; an OSError or a failed check
+    becomes :class:`OutputError` naming ``path``."""
+    try:
+        produce(tmp)
+        with open(tmp, "rb+") as stream:
+            os.fsync(stream.fileno())
+    except OSError as err:
+        raise _output_error(path, err) from err
+    if verify is None:
+        return
+    try:
+        verify(tmp)
+    except Exception as err:  # any reader's complaint means the file is not good
+        reason = f"the file read back is damaged ({type(err).__name__}: {err})"
+        raise OutputError(f"cannot write {str(path)!r}: {reason}; the earlier file, if any, "
+                          "is kept") from err
+
+
+def atomic_save_verified(path: Path, save: Callable[[str], Any],
+                         verify: Callable[[Path], Any]) -> None:
+    """Like :func:`atomic_save`, and ``verify(tmp)`` reads the file back before the rename
+    (it raises when the file is damaged); the earlier ``path`` survives any failure.
+
+    Raises:
+        OutputError: the write failed (a full disk) or the file read back is damaged.
+    """
+    atomic_save_all({Path(path): save}, {Path(path): verify})
+
+
+def atomic_save_all(saves: Mapping[Path, Callable[[str], Any]],
+                    verifies: Mapping[Path, Callable[[Path], Any]] | None = None) -> None:
+    """Write several files together: each ``saves[path](tmp_name)`` writes a temporary
+    (keeping the suffix), ``verifies[path](tmp)`` checks it, and only when every one is
+    written and checked are they renamed into place. A failure leaves every earlier file
+    as it was (never a new one beside an old one) and no temporary.
+
+    Raises:
+        OutputError: a write failed or a file read back is damaged.
+    """
+    checks = {Path(path): verify for path, verify in (verifies or {}).items()}
+    temps = {Path(path): suffixed_temp_path(Path(path)) for path in saves}
+    try:
+        for raw, save in saves.items():
+            path = Path(raw)
+            _produce_checked(path, temps[path], lambda name, save=save: save(str(name)),
+                             checks.get(path))
+        for path, tmp in temps.items():
+            os.replace(tmp, path)
+    except OutputError:
+        _remove_quietly(temps.values())
+        raise
+    except OSError as err:  # a rename failed
+        _remove_quietly(temps.values())
+        raise _output_error(path, err) from err
+    except BaseException:
+        _remove_quietly(temps.values())
+        raise
+    for folder in {path.parent for path in temps}:
+        _fsync_dir(folder)
+
+
+def remove_tree(path: Path) -> None:
+    """Delete ``path`` without ever following a symbolic link: a link (to a file or a
+    folder) is removed as a link, a folder's links inside it too, and nothing they point to
+    is touched. Missing ``path``: nothing to do."""
+    import shutil
+
+    path = Path(path)
+    if path.is_symlink() or (path.exists() and not path.is_dir()):
+        path.unlink()
+    elif path.is_dir():
+        shutil.rmtree(path)  # does not follow links inside the tree (fd-based on Linux)
+
+
+def remove_contents(folder: Path, keep: tuple[str, ...] = ()) -> None:
+    """Delete everything in ``folder`` except the names in ``keep``, never following a
+    symbolic link (:func:`remove_tree`).
+
+    Raises:
+        OutputError: ``folder`` is itself a symbolic link (nothing is deleted).
+    """
+    folder = Path(folder)
+    if folder.is_symlink():
+        raise OutputError(f"refusing to empty {folder}: it is a symbolic link (to "
+                          f"{folder.readlink()})")
+    if not folder.is_dir():
+        return
+    for child in folder.iterdir():
+        if child.name not in keep:
+            remove_tree(child)
+
+
+class FolderLockedError(OutputError):
+    """Another process holds the lock of a folder (:func:`lock_folder`)."""
+
+
+class FolderLock:
+    """An exclusive ``flock`` on ``folder/name`` that holds this process's pid; the kernel
+    releases it when the process ends, however it ends, so a killed process never leaves a
+    lock that blocks."""
+
+    def __init__(self, folder: Path, name: str) -> None:
+        self.path = Path(folder) / name
+        self._fd: int | None = None
+
+    def acquire(self, what: str = "folder") -> FolderLock:
+        """Take the lock, or raise :class:`FolderLockedError` naming the folder and the pid of
+        the process that holds it."""
+        import fcntl
+
+        if self.path.is_symlink():
+            raise OutputError(f"refusing lock file {self.path}: it is a symbolic link")
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError as err:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "unknown"
+            os.close(fd)
+            raise FolderLockedError(f"{what} {self.path.parent} is being written by another "
+                                    f"process (pid {holder}); wait for it to end or stop it "
+                                    "first") from err
+        except BaseException:
+            os.close(fd)
+            raise
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        """Let go of the lock (the file stays: removing it would race with a new holder)."""
+        if self._fd is not None:
+            fd, self._fd = self._fd, None
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, 0)
+            os.close(fd)
+
+    def __enter__(self) -> FolderLock:
+        return self.acquire() if self._fd is None else self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.release()

@@ -10,7 +10,9 @@ patient) is what the instability rule checks.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -63,6 +65,19 @@ class EnvParts:
     exercise_table: tuple  # the exercises as done (key poses scaled by the condition's rom_scale)
     compliant_ranges_rad: np.ndarray  # (n_compliant, 2) the compliant joints' ranges
     goals_rad: tuple  # per exercise, per target: the compliant joints' angles [rad]
+
+
+def reward_with_horizon(reward: Any, max_episode_steps: int) -> Any:
+    """``reward`` (a frozen dataclass) with ``max_episode_steps`` replaced, in it and in every
+    reward it holds (the bilateral reward's progress reward)."""
+    changes: dict[str, Any] = {}
+    for item in dataclasses.fields(reward):
+        value = getattr(reward, item.name)
+        if item.name == "max_episode_steps":
+            changes[item.name] = max_episode_steps
+        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+            changes[item.name] = reward_with_horizon(value, max_episode_steps)
+    return dataclasses.replace(reward, **changes) if changes else reward
 
 
 def limit_robot_joints(scene: Scene, handle: RobotHandle, low_rad: np.ndarray,

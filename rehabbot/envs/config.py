@@ -22,7 +22,7 @@ from rehabbot.sim.scene import CAMERA_NAMES, SIDES, WEIGHT_LEVELS, SceneOptions,
 from rehabbot.tasks.exercises import LIMBS, TASK_TYPES, Exercise, exercise_table
 from rehabbot.tasks.progress_reward import PROGRESS_WEIGHT_PER_RAD, TIME_COST_PER_STEP
 from rehabbot.tasks.reward import SAFETY_PENALTIES, SAFETY_PENALTY_STEPS
-from rehabbot.tasks.safety import SafetyThresholds
+from rehabbot.tasks.safety import ISO_TS_15066_QUASI_STATIC_N, SafetyThresholds
 
 CONTROL_MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 RENDER_MODES = ("human", "rgb_array", "depth_array")
@@ -36,10 +36,32 @@ PRESET_OF: dict[tuple[str, str], str] = {
     ("knee", "right"): "knee", ("knee", "left"): "knee",
 }
 
-# name -> (low, high, integer): the numeric arguments and their valid ranges.
+# Physical upper bounds of the safety thresholds: a larger value would silently switch the
+# rule off (1e9 or True did, before these bounds).
+# Range-of-motion rule: the most a joint may go beyond its anatomical range. 10 deg is the
+# hyperextension a continuous-passive-motion device allows the knee (Artromot K1 extends to
+# -10 deg, domain-facts.md section 4.2) and about the spread between the normal-range tables
+# (AAOS vs Boone & Azen, section 3); beyond it the rule would accept joints past any range a
+# clinician or a device accepts.
+ROM_TOLERANCE_MAX_DEG = 10.0
+# Unintended-contact rule: the deepest penetration that may go unreported. At the ISO/TS 15066
+# quasi-static force limit the limb regions compress by at most F/k = 150 N / 30 N/mm = 5 mm
+# (upper arm; hand 1.9, forearm 4.0, thigh 4.4, lower leg 2.2 mm: Tables A.2 and A.3,
+# domain-facts.md section 4.1); twice that is the bound.
+CONTACT_TOLERANCE_MAX_M = 0.01
+# Cuff force rule: a limit given in N. Four times the largest ISO/TS 15066 quasi-static limit
+# of the limb regions (thighs and knees, 220 N), i.e. twice its transient limit (440 N); above
+# the largest spasm-protection setting of a knee CPM device (60 kg = 589 N, section 4.2).
+CUFF_FORCE_LIMIT_MIN_N = 1.0
+CUFF_FORCE_LIMIT_MAX_N = 4.0 * max(ISO_TS_15066_QUASI_STATIC_N.values())
+
+# name -> (low, high, integer): the numeric arguments and their valid ranges (bools, NaN and
+# infinities are refused too: rehabbot.common.checks.check_number).
 NUMBER_RANGES: dict[str, tuple[float, float, bool]] = {
     "frame_skip": (1, 1000, True),
-    "max_episode_steps": (1, 10**9, True),
+    # 10**6 steps: 5.6 h at the default 50 Hz, longer than any therapy session (the
+    # rendering keeps one trace row per step).
+    "max_episode_steps": (1, 10**6, True),
     "target_tolerance_rad": (1e-6, 1.0, False),
     "intermediate_bonus": (0.0, 1e6, False),
     "final_bonus": (0.0, 1e6, False),
@@ -49,6 +71,8 @@ NUMBER_RANGES: dict[str, tuple[float, float, bool]] = {
     "time_cost": (0.0, 1e6, False),
     "segment_s": (0.1, 60.0, False),
     "min_waypoint_spacing_rad": (0.0, 1.0, False),
+    "rom_tolerance_deg": (0.0, ROM_TOLERANCE_MAX_DEG, False),
+    "contact_tolerance_m": (0.0, CONTACT_TOLERANCE_MAX_M, False),
     "width": (1, 8192, True),
     "height": (1, 8192, True),
 }
@@ -132,9 +156,14 @@ class RehabEnvConfig:
         if self.reward == "progress" and self.safety_penalty != "hold":
             raise ValueError(f"safety_penalty={self.safety_penalty!r} applies to the paper's "
                              "reward only (reward='paper'); the progress reward has one penalty")
+        if self.cuff_force_limit_n is not None:
+            set_(self, "cuff_force_limit_n", check_number(
+                "cuff_force_limit_n", self.cuff_force_limit_n, CUFF_FORCE_LIMIT_MIN_N,
+                CUFF_FORCE_LIMIT_MAX_N))
         if self.safety_penalty_steps is not None:
             set_(self, "safety_penalty_steps", check_number(
-                "safety_penalty_steps", self.safety_penalty_steps, 1, 10**9, integer=True))
+                "safety_penalty_steps", self.safety_penalty_steps, 1,
+                NUMBER_RANGES["max_episode_steps"][1], integer=True))
         if self.camera_name is not None and self.camera_name not in CAMERA_NAMES:
             raise ValueError(f"camera_name={self.camera_name!r} is not one of "
                              f"{list(CAMERA_NAMES)} or None")

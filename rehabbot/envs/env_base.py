@@ -5,14 +5,18 @@ as read-only properties, the config's settings read as attributes, and the error
 
 from __future__ import annotations
 
+import dataclasses
+import sys
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import mujoco
 import numpy as np
 
-from rehabbot.common.checks import check_options
-from rehabbot.envs.config import RENDER_MODES, kwarg_names
+from rehabbot.common.checks import check_number, check_options
+from rehabbot.envs.build import reward_with_horizon
+from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES, kwarg_names
+from rehabbot.envs.registration import check_make
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
 from rehabbot.tasks import feasibility
 from rehabbot.tasks.targets import TargetSequence
@@ -87,6 +91,42 @@ class RehabEnvBase(gym.Env):
     def target_sequence(self) -> TargetSequence:
         """The episode's targets (patient and robot joint space)."""
         return self._sequence
+
+    @property
+    def spec(self) -> gym.envs.registration.EnvSpec | None:
+        """The spec ``gym.make`` gave the env (None when built directly)."""
+        return self.__dict__.get("_spec")
+
+    @spec.setter
+    def spec(self, spec: gym.envs.registration.EnvSpec | None) -> None:
+        # gym.make sets the spec right after building the env, then wraps it in its TimeLimit:
+        # the env takes that limit as its own (rehabbot.envs.registration).
+        try:
+            limit = None if spec is None else check_make(spec, sys._getframe(1))
+            if limit is not None:
+                self.set_time_limit(limit)
+        except ValueError:
+            self.close()
+            raise
+        self.__dict__["_spec"] = spec
+
+    def set_time_limit(self, max_episode_steps: int) -> None:
+        """Make ``max_episode_steps`` the env's horizon everywhere it is used: the config, the
+        safety penalties of the reward and the rendering's trace (``gym.make`` calls this with
+        the limit of its ``TimeLimit``). Between episodes only; ``ValueError`` for a limit
+        outside ``config.NUMBER_RANGES``."""
+        low, high, _integer = NUMBER_RANGES["max_episode_steps"]
+        limit = check_number("max_episode_steps", max_episode_steps, low, high, integer=True)
+        if limit == self.max_episode_steps:
+            return
+        if not self._needs_reset:
+            raise RuntimeError("set_time_limit() called during an episode; call it before "
+                               "reset()")
+        self.config = dataclasses.replace(self.config, max_episode_steps=limit)
+        self.max_episode_steps = limit
+        self.reward_function = reward_with_horizon(self.reward_function, limit)
+        self._rendering.trace = np.zeros((limit + 1, 3))
+        self._rendering.trace_len = 0
 
     def __getattr__(self, name: str) -> Any:
         # The config's settings read as attributes (env.limb, env.target_tolerance_rad, ...).

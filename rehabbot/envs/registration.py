@@ -9,11 +9,32 @@ runs Gymnasium's full ``check_env`` on every id. Gymnasium 1.4's passive checker
 env whose first ``reset()`` raised (the next ``step()`` failed with ``TypeError: cannot unpack
 non-iterable NoneType object``). ``gym.make(id, disable_env_checker=False)`` or
 ``order_enforce=True`` add them back.
+
+The env knows its time limit. ``gym.make(id, max_episode_steps=m)`` gives ``m`` to the
+``TimeLimit`` wrapper only (it never reaches the env's constructor), so the env reads it back
+when ``gym.make`` hands it its spec (:func:`time_limit_from_make`) and uses ``m`` wherever
+it uses ``max_episode_steps``: the safety penalties' steps left, ``config`` and the rendering's
+trace. A non-positive ``m`` is refused (``ValueError`` naming it), and so is Gymnasium's
+``m=-1`` ("no ``TimeLimit``"): the safety penalty needs a horizon. A spec without a time limit
+(``gym.make(spec)`` of a spec whose ``max_episode_steps`` is None) is refused too unless the
+env's own ``max_episode_steps=`` keyword is in its kwargs (then that is the horizon, and
+nothing truncates the episodes). Gymnasium offers no hook for this: the env's ``spec`` setter
+reads ``max_episode_steps``, ``env_spec`` and ``kwargs`` from the frame of
+``gymnasium.make`` that sets it (Gymnasium 1.x; ``tests/test_knobs.py`` fails if a new
+version moves them).
+
+A condition variant (:data:`CONDITION_VARIANTS`) is its base id with a condition: ``gym.make``
+of a variant id refuses a ``condition=`` that would replace it (``condition=None`` would
+silently give a healthy patient); use the base id with ``condition=`` instead.
 """
 
 from __future__ import annotations
 
+import types
+from typing import Any
+
 import gymnasium as gym
+import gymnasium.envs.registration as gym_registration
 
 from rehabbot.common.errors import UsageError
 
@@ -106,6 +127,74 @@ def entry_point_of(env_id: str) -> str:
     if env_id in BILATERAL_IDS:
         return BILATERAL_ENTRY_POINT
     return POPULATION_ENTRY_POINT if "patients" in ENV_SPECS[env_id][0] else ENTRY_POINT
+
+
+def _made_by_gym(caller: types.FrameType | None) -> bool:
+    return caller is not None and caller.f_code is gym_registration.make.__code__
+
+
+def check_variant_condition(spec: Any, caller: types.FrameType | None) -> None:
+    """Refuse (``ValueError``) a ``condition=`` given to ``gym.make`` of a condition variant id
+    that differs from the variant's own condition (``caller``: as in
+    :func:`time_limit_from_make`)."""
+    env_id = getattr(spec, "id", None)
+    if env_id not in CONDITION_VARIANTS or not _made_by_gym(caller):
+        return
+    given = caller.f_locals.get("kwargs") or {}
+    if "condition" not in given:
+        return
+    from rehabbot.sim.conditions import as_condition  # the env module imports this one
+
+    base_id, own, _description = CONDITION_VARIANTS[env_id]
+    if as_condition(given["condition"]) != as_condition(own):
+        raise ValueError(
+            f"condition={given['condition']!r} would replace the condition of {env_id} "
+            f"({own}); make the base id with a condition instead: "
+            f"gym.make({base_id!r}, condition=...)")
+
+
+def time_limit_from_make(spec: Any, caller: types.FrameType | None) -> int | None:
+    """The time limit of an env whose ``spec`` is being set by ``caller`` (the frame that sets
+    ``env.unwrapped.spec``): ``None`` to keep the env's own.
+
+    When ``caller`` is ``gymnasium.make`` (which sets a spec without the time limit, then
+    wraps the env in ``TimeLimit``), the limit is the ``max_episode_steps`` given to ``make``,
+    else the registered one; otherwise the spec's ``max_episode_steps`` when it has one.
+
+    Raises:
+        ValueError: a ``max_episode_steps`` that is not a positive integer (``-1``, Gymnasium's
+            "no time limit", included), or a spec without a time limit whose kwargs do not
+            set the env's own ``max_episode_steps``.
+    """
+    if _made_by_gym(caller):
+        given = caller.f_locals.get("max_episode_steps")
+        registered = getattr(caller.f_locals.get("env_spec"), "max_episode_steps", None)
+        if given is not None:
+            if isinstance(given, bool) or not isinstance(given, int) or given <= 0:
+                raise ValueError(
+                    f"max_episode_steps={given!r} must be a positive integer (the episode's "
+                    "time limit; -1, Gymnasium's 'no time limit', is refused: the safety "
+                    "penalty counts the steps left to the limit)")
+            return given
+        if registered is not None:
+            return registered
+        kwargs = getattr(spec, "kwargs", None) or {}
+        if "max_episode_steps" in kwargs:
+            return None  # the env's own horizon; nothing truncates
+        raise ValueError(f"{getattr(spec, 'id', 'this env')}: max_episode_steps=None gives no "
+                         "time limit; pass max_episode_steps=<a positive integer> (the safety "
+                         "penalty counts the steps left to the limit)")
+    limit = getattr(spec, "max_episode_steps", None)
+    if isinstance(limit, int) and not isinstance(limit, bool) and limit > 0:
+        return limit
+    return None
+
+
+def check_make(spec: Any, caller: types.FrameType | None) -> int | None:
+    """What an env checks when ``caller`` sets its ``spec``: :func:`check_variant_condition`,
+    then the time limit it takes (:func:`time_limit_from_make`)."""
+    check_variant_condition(spec, caller)
+    return time_limit_from_make(spec, caller)
 
 
 def register_envs() -> None:

@@ -9,9 +9,11 @@ import functools
 from collections.abc import Callable
 from pathlib import Path
 
-from rehabbot.common.files import atomic_save, atomic_write
+from rehabbot.common.files import atomic_write
 from rehabbot.rl import runs
 from rehabbot.rl.replay_buffer_io import save_replay_buffer
+from rehabbot.rl.safe_load import save_model
+from rehabbot.rl.vecnormalize_io import save_vecnormalize
 
 
 @functools.cache
@@ -48,9 +50,10 @@ def callback_classes() -> tuple[type, type]:
                              lambda stream: save_replay_buffer(self.model, stream))
             vec_normalize = self.model.get_vec_normalize_env()
             if vec_normalize is not None:
-                atomic_save(vecnormalize_path, vec_normalize.save)
+                save_vecnormalize(vec_normalize, vecnormalize_path)
             model_path = folder / f"{runs.CHECKPOINT_PREFIX}_{steps}_steps.zip"
-            atomic_write(model_path, self.model.save)  # last: a zip marks a full checkpoint
+            # last: a zip marks a full checkpoint
+            atomic_write(model_path, lambda stream: save_model(self.model, stream))
             for old in folder.glob(f"{runs.CHECKPOINT_PREFIX}_replay_buffer_*_steps.npz"):
                 if old != replay_path:
                     with contextlib.suppress(OSError):

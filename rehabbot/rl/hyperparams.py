@@ -10,7 +10,8 @@ constructor arguments of the algorithm plus the zoo keys ``n_timesteps``, ``n_en
 ``stable_baselines3.`` (``rehabbot.rl.features.TrackingErrorSACPolicy``); ``policy_kwargs`` may
 be a mapping or a zoo string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``,
 parsed without ``eval`` (:mod:`rehabbot.rl.zoo_strings`);
-``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``.
+``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``. Each value
+is checked against its valid range (:mod:`rehabbot.rl.hyperparam_checks`).
 
 Files are read for one backend (``backend="sb3"``, the default, or ``"sbx"``): keys are checked
 against that library's class; for SBX, what only PyTorch can run is translated or dropped and
@@ -36,6 +37,16 @@ from typing import Any
 from rehabbot.common.errors import RehabbotError, UsageError
 from rehabbot.envs.registration import ENV_SPECS, env_short_name, resolve_env_id
 from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
+from rehabbot.rl.hyperparam_checks import BOOL_KEYS as BOOL_KEYS  # re-exported
+from rehabbot.rl.hyperparam_checks import SCHEDULE_KEYS as SCHEDULE_KEYS  # re-exported
+from rehabbot.rl.hyperparam_checks import TRAIN_FREQ_UNITS as TRAIN_FREQ_UNITS  # re-exported
+from rehabbot.rl.hyperparam_checks import VALUE_RANGES as VALUE_RANGES  # re-exported
+from rehabbot.rl.hyperparam_checks import (  # re-exported
+    HyperparameterError as HyperparameterError,
+)
+from rehabbot.rl.hyperparam_checks import check_value as check_value  # re-exported
+from rehabbot.rl.hyperparam_checks import coerce_number as coerce_number  # re-exported
+from rehabbot.rl.hyperparam_checks import parse_schedule
 from rehabbot.rl.zoo_strings import TORCH_NAMES as TORCH_NAMES  # re-exported
 from rehabbot.rl.zoo_strings import _resolve_torch_names
 from rehabbot.rl.zoo_strings import parse_python_expression as parse_python_expression
@@ -49,10 +60,6 @@ DEFAULT_ENTRY = "default"  # RL Zoo's entry for every env id without its own
 # Packages a dotted ``policy`` may be imported from (a hyperparameter file names no other code).
 POLICY_PACKAGES = ("rehabbot", "stable_baselines3")
 SBX_POLICY_PACKAGES = ("sbx",)
-
-
-class HyperparameterError(UsageError):
-    """A bad hyperparameter file, key or value; the message names the file and the key."""
 
 
 def _check_algo(algo: str) -> str:
@@ -122,10 +129,7 @@ OBJECT_KEYS = {
     "replay_buffer_class": "not supported in hyperparameter files",
     "rollout_buffer_class": "not supported in hyperparameter files",
 }
-SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
-_NUMBER_RE = re.compile(r"^[+-]?(?:\d[\d_]*(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$")
-_INT_RE = re.compile(r"^[+-]?\d[\d_]*$")
 
 
 # --------------------------------------------------------------------------- hyperparameters
@@ -198,14 +202,6 @@ class Hyperparameters:
         }
 
 
-def coerce_number(value: Any) -> Any:
-    """``"3e-4"`` -> 0.0003 and ``"1_000"`` -> 1000 (PyYAML reads ``3e-4`` as a string)."""
-    if isinstance(value, str) and _NUMBER_RE.match(value.strip()):
-        text = value.strip().replace("_", "")
-        return int(text) if _INT_RE.match(text) else float(text)
-    return value
-
-
 def _as_count(value: Any, key: str, where: str, minimum: int = 1) -> int:
     value = coerce_number(value)
     if isinstance(value, float) and value.is_integer():
@@ -271,7 +267,7 @@ def _policy_error(where: str, raw: Any, cls: Any, why: str,
            else ""))
 
 
-def _parse_policy(raw: Any, cls: Any, where: str,
+def parse_policy(raw: Any, cls: Any, where: str,
                   packages: tuple[str, ...] = POLICY_PACKAGES) -> str | type:
     """An SB3 alias (kept as the string) or a dotted class name (imported, as RL Zoo does):
     only from ``packages``, and only a subclass of the algorithm's MlpPolicy."""
@@ -295,21 +291,6 @@ def _parse_policy(raw: Any, cls: Any, where: str,
     return policy
 
 
-def _parse_schedule(value: Any, key: str, where: str) -> Any:
-    if isinstance(value, str) and value.strip().startswith("lin_"):
-        try:
-            start = float(value.strip()[len("lin_"):])
-        except ValueError as err:
-            raise HyperparameterError(f"{where}: {key}: bad linear schedule {value!r} "
-                                "(expected lin_<float>, e.g. lin_3e-4)") from err
-        if not math.isfinite(start):
-            raise HyperparameterError(f"{where}: {key}: bad linear schedule {value!r}")
-        from stable_baselines3.common.utils import LinearSchedule
-
-        # progress_remaining goes 1 -> 0 over the run: start -> 0, linearly.
-        return LinearSchedule(start, 0.0, 1.0)
-    return value
-
 
 def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
                                  source: str = "python mapping",
@@ -322,7 +303,7 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     Accepted keys: the SB3 constructor arguments of the algorithm (checked against its
     signature) and the zoo keys ``n_timesteps``, ``n_envs``, ``policy``, ``normalize``,
     ``noise_type`` and ``noise_std``. ``policy`` may be an SB3 alias or the dotted name of a
-    policy class (see :func:`_parse_policy`), ``policy_kwargs`` a mapping or a zoo string,
+    policy class (see :func:`parse_policy`), ``policy_kwargs`` a mapping or a zoo string,
     ``learning_rate``/``clip_range``/``clip_range_vf`` ``"lin_<float>"``.
 
     Raises:
@@ -355,7 +336,7 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
             hp.backend_changes.append(sbx_settings.policy_change(raw) if counterpart is None
                                       else sbx_settings.counterpart_change(raw, counterpart))
         elif key == "policy":
-            hp.policy = _parse_policy(raw, cls, where,
+            hp.policy = parse_policy(raw, cls, where,
                                       SBX_POLICY_PACKAGES if sbx else POLICY_PACKAGES)
         elif key == "normalize":
             hp.normalize = _parse_normalize(raw, where)
@@ -396,10 +377,11 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
             if (isinstance(default, int) and not isinstance(default, bool)
                     and isinstance(value, float) and value.is_integer()):
                 value = int(value)
+            value = check_value(key, value, where)
             if key == "train_freq" and isinstance(value, list):
                 value = tuple(value)
             if key in SCHEDULE_KEYS:
-                value = _parse_schedule(value, key, where)
+                value = parse_schedule(value, key, where)
             hp.kwargs[key] = value
         hp.given[key] = jsonable(raw)
     if noise_std_given and hp.noise_type is None:

@@ -98,6 +98,15 @@ def check_demonstrations(algo: str, demos: int | None, bc: bool) -> tuple[int, b
     return episodes, bool(bc)
 
 
+def _companion_file(path: Path) -> Path | None:
+    """``path`` if it exists, else its legacy pickled twin (refused with a message that
+    says how to convert it when it is loaded), else None."""
+    if path.is_file():
+        return path
+    legacy = path.with_suffix(".pkl")
+    return legacy if legacy.is_file() else None
+
+
 def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumePoint | None:
     """The newest checkpoint (by step count); model.zip of a finished run without any."""
     found = runs.checkpoints(run_dir)
@@ -105,13 +114,24 @@ def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumeP
         steps, path = found[0]
         replay_buffer, vecnormalize = runs.companions(path.parent, steps)
         return ResumePoint(path, steps, replay_buffer if replay_buffer.is_file() else None,
-                           vecnormalize if vecnormalize.is_file() else None)
+                           _companion_file(vecnormalize))
     model = run_dir / runs.MODEL_NAME
     if model.is_file() and manifest and manifest.get("status") == "finished":
-        vecnormalize = run_dir / runs.VECNORMALIZE_NAME
         return ResumePoint(model, int(manifest.get("timesteps_done", 0)), None,
-                           vecnormalize if vecnormalize.is_file() else None)
+                           _companion_file(run_dir / runs.VECNORMALIZE_NAME))
     return None
+
+
+def run_is_complete(run_dir: Path, manifest: dict[str, Any] | None, steps: int) -> bool:
+    """Whether the run finished at ``steps`` or more with everything written: the manifest
+    says so, and model.zip (and the VecNormalize statistics of a normalised run) is there."""
+    if not manifest or manifest.get("status") != "finished":
+        return False
+    if int(manifest.get("timesteps_done") or 0) < steps:
+        return False
+    if not (run_dir / runs.MODEL_NAME).is_file():
+        return False
+    return not manifest.get("vecnormalize") or (run_dir / runs.VECNORMALIZE_NAME).is_file()
 
 
 def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
@@ -129,6 +149,7 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
         raise TrainingUsageError(f"seed must be an integer >= 0, got {seed!r}")
     out = Path(out_dir)
     run_dir = runs.run_directory(out, env_id, algo, seed)
+    runs.check_run_dir(run_dir, out)
     if run_dir.exists() and not run_dir.is_dir():
         raise TrainingError(f"run directory {run_dir} exists and is not a directory")
     for name, value, minimum in (("total_timesteps", total_timesteps, 1),
@@ -150,7 +171,7 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
         manifest = runs.read_manifest(run_dir) if run_dir.is_dir() else None
         point = find_resume_point(run_dir, manifest) if run_dir.is_dir() else None
         if point is None:
-            if run_dir.is_dir() and any(run_dir.iterdir()):
+            if runs.has_content(run_dir):
                 raise NothingToResumeError(
                     f"nothing to resume in {run_dir} (no checkpoint yet; "
                     f"{runs.describe(run_dir)}); start it again with --overwrite")
@@ -211,13 +232,14 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
             else int(manifest.get("eval_episodes", DEFAULT_EVAL_EPISODES)),
             progress_bar=progress_bar, vec=str(manifest.get("vec_env", vec)), resume=point,
             manifest=manifest, backend=trained_on, demos=saved_demos, bc=saved_bc)
-        if point.steps >= total:
-            status = manifest.get("status")
-            plan.skip = (f"{run_dir}: already {'finished' if status == 'finished' else 'at'} "
-                         f"{point.steps} steps (requested {total}); nothing to do")
+        if point.steps >= total and run_is_complete(run_dir, manifest, point.steps):
+            plan.skip = (f"{run_dir}: already finished {point.steps} steps (requested "
+                         f"{total}); nothing to do")
+        # Otherwise a checkpoint at or past ``total`` is finished without training (the
+        # final evaluation and save that an interrupt or a kill left undone).
         return plan
 
-    if run_dir.is_dir() and any(run_dir.iterdir()) and not overwrite:
+    if runs.has_content(run_dir) and not overwrite:
         raise TrainingError(f"{run_dir} already holds a run ({runs.describe(run_dir)}); "
                             "continue it with --resume or start over with --overwrite")
     total = total_timesteps if total_timesteps is not None \

@@ -17,7 +17,9 @@ random actions.
 
 A model is checked against the env before it runs: its observation and action spaces must
 equal the env's (:class:`PolicyError` names both otherwise). If the run directory holds
-VecNormalize statistics (``vecnormalize.pkl``), observations are normalised with them. A
+VecNormalize statistics (``vecnormalize.json``), observations are normalised with them. A
+model is loaded without unpickling anything (:mod:`rehabbot.rl.safe_load`); a legacy
+``vecnormalize.pkl`` is refused with a message that says how to convert it. A
 model is loaded with the library of the backend its run's manifest records (``backend``),
 else of the one its zip names (:func:`~rehabbot.rl.algorithms.detect_model`).
 Stable-Baselines3 (or SBX) is imported only when a model is loaded.
@@ -25,7 +27,6 @@ Stable-Baselines3 (or SBX) is imported only when a model is loaded.
 
 from __future__ import annotations
 
-import pickle
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -35,7 +36,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rehabbot.common.errors import UsageError
+from rehabbot.common.errors import DataError, UsageError
 from rehabbot.envs.registration import resolve_env_id
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import (
@@ -46,6 +47,8 @@ from rehabbot.rl.algorithms import (
     detect_model,
 )
 from rehabbot.rl.backends import saved_backend
+from rehabbot.rl.safe_load import load_safely
+from rehabbot.rl.vecnormalize_io import read_vecnormalize
 
 POLICY_KEYWORDS = ("expert", "aan", "random")
 
@@ -137,16 +140,24 @@ def check_spaces(model_obs: gym.Space, model_act: gym.Space, env: gym.Env, what:
 
 
 def _load_normalizer(run_dir: Path | None) -> Callable[[np.ndarray], np.ndarray] | None:
-    if run_dir is None or not (run_dir / runs.VECNORMALIZE_NAME).is_file():
+    """The observation normalisation of the run's ``vecnormalize.json`` (None without one).
+
+    Raises:
+        PolicyError: damaged statistics, or a legacy pickled ``vecnormalize.pkl`` only (it
+            is not unpickled; the message says how to convert a trusted one).
+    """
+    if run_dir is None:
         return None
+    path = run_dir / runs.VECNORMALIZE_NAME
+    if not path.is_file():
+        legacy = run_dir / runs.LEGACY_VECNORMALIZE_NAME
+        if not legacy.is_file():
+            return None
+        path = legacy
     try:
-        with open(run_dir / runs.VECNORMALIZE_NAME, "rb") as handle:
-            stats = pickle.load(handle)
-        stats.training = False
-        return stats.normalize_obs
-    except Exception as err:
-        raise PolicyError(f"corrupt normalisation statistics "
-                          f"{str(run_dir / runs.VECNORMALIZE_NAME)!r}: {err}") from err
+        return read_vecnormalize(path).normalize_obs
+    except DataError as err:
+        raise PolicyError(str(err)) from err
 
 
 def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
@@ -166,17 +177,33 @@ def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
             # SB3 warns that a saved n-step replay buffer class overrides ``n_steps``; acting
             # needs no replay buffer.
             warnings.filterwarnings("ignore", message=".*n_steps.*is ignored because a custom")
-            model = cls.load(path, device="cpu")
+            model = load_safely(cls, path, env, algo, backend, manifest, device="cpu")
+    except DataError:
+        raise
     except Exception as err:  # SB3 raises many kinds on a damaged file
         raise PolicyError(f"cannot load model {str(path)!r}: {type(err).__name__}: "
                           f"{err}") from err
     check_spaces(model.observation_space, model.action_space, env, f"model {str(path)!r}")
-    seed = manifest.get("seed")
-    label = algo if seed is None else f"{algo}-seed{seed}"
+    label = model_label(algo, manifest.get("seed"), path)
     return LoadedPolicy(policy=model, label=label, kind="model", algo=algo, backend=backend,
                         model_path=path,
                         run_dir=run_dir, manifest=manifest,
                         normalize_obs=_load_normalizer(run_dir))
+
+
+def model_label(algo: str, seed: Any, path: Path) -> str:
+    """``<algo>`` or ``<algo>-seed<k>``: a folder name, so ``seed`` (read from a manifest)
+    must be an integer >= 0.
+
+    Raises:
+        PolicyError: another seed (the message names it and the model).
+    """
+    if seed is None:
+        return algo
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise PolicyError(f"the manifest of model {str(path)!r} has seed {seed!r}; a seed must "
+                          "be an integer >= 0")
+    return f"{algo}-seed{seed}"
 
 
 def load_policy(spec: str | Path, env: gym.Env, seed: int | None = None) -> LoadedPolicy:

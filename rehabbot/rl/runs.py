@@ -9,10 +9,16 @@
         eval/evaluations.npz               SB3 EvalCallback log (deterministic episodes)
         tb/<ALGO>_1/                       TensorBoard event files
         checkpoints/rl_model_<n>_steps.zip (+ rl_model_replay_buffer_<n>_steps.npz, newest
-                                           only, for SAC/TD3; + rl_model_vecnormalize_<n>_steps.pkl)
+                                           only, for SAC/TD3;
+                                           + rl_model_vecnormalize_<n>_steps.json)
         model.zip                          the final model (once the run has finished)
-        vecnormalize.pkl                   the final VecNormalize statistics (if normalized)
+        vecnormalize.json                  the final VecNormalize statistics (if normalized;
+                                           JSON, :mod:`rehabbot.rl.vecnormalize_io`)
         evaluation/<policy>/               what ``rehabbot evaluate`` wrote for the run's model
+        .lock                              held (flock) by the process that writes the run
+
+A run folder must be a real folder, not a symbolic link (:func:`check_run_dir`), and nothing
+in it is unpickled when it is read back (see :mod:`rehabbot.rl.safe_load`).
 
 This module is the one place that knows these names: training writes them, evaluation,
 plotting and the policy loader read them.
@@ -36,7 +42,9 @@ from rehabbot.envs.registration import env_short_name
 
 MANIFEST_NAME = "manifest.json"
 MODEL_NAME = "model.zip"
-VECNORMALIZE_NAME = "vecnormalize.pkl"
+VECNORMALIZE_NAME = "vecnormalize.json"
+LEGACY_VECNORMALIZE_NAME = "vecnormalize.pkl"  # pickled: refused, see vecnormalize_io
+LOCK_NAME = ".lock"
 CHECKPOINT_DIR = "checkpoints"
 MONITOR_DIR = "monitor"
 EVAL_DIR = "eval"
@@ -102,7 +110,30 @@ def checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
 def companions(checkpoint_dir: Path, steps: int) -> tuple[Path, Path]:
     """The replay-buffer and VecNormalize files saved with the checkpoint of ``steps``."""
     return (checkpoint_dir / f"{CHECKPOINT_PREFIX}_replay_buffer_{steps}_steps.npz",
-            checkpoint_dir / f"{CHECKPOINT_PREFIX}_vecnormalize_{steps}_steps.pkl")
+            checkpoint_dir / f"{CHECKPOINT_PREFIX}_vecnormalize_{steps}_steps.json")
+
+
+def has_content(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds anything besides its lock file."""
+    run_dir = Path(run_dir)
+    return run_dir.is_dir() and any(child.name != LOCK_NAME for child in run_dir.iterdir())
+
+
+def check_run_dir(run_dir: Path, out_dir: Path) -> None:
+    """Refuse a run folder that is a symbolic link or lies below one under ``out_dir``
+    (``OUT/<env>/<algo>/seed<k>``): deleting or writing it would reach outside the output tree.
+
+    Raises:
+        DataError: naming the link.
+    """
+    run_dir, out_dir = Path(run_dir), Path(out_dir)
+    probe = run_dir
+    while probe != out_dir and probe != probe.parent:
+        if probe.is_symlink():
+            raise DataError(f"refusing run folder {run_dir}: {probe} is a symbolic link (to "
+                            f"{probe.readlink()}); a run folder must be a real folder inside "
+                            f"{out_dir}")
+        probe = probe.parent
 
 
 def describe(run_dir: Path) -> str:

@@ -96,7 +96,7 @@ def trial_state(trial: Trial) -> str:
     ``resume`` (a checkpoint to continue from), ``restart`` (files but no checkpoint: start
     again) or ``new`` (nothing there)."""
     run_dir = trial.run_dir
-    if not run_dir.is_dir() or not any(run_dir.iterdir()):
+    if not runs.has_content(run_dir):
         return "new"
     try:
         manifest = runs.read_manifest(run_dir)

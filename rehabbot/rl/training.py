@@ -21,7 +21,6 @@ import copy
 import functools
 import json
 import os
-import shutil
 import signal
 import sys
 import time
@@ -30,12 +29,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from rehabbot.common.errors import DataError
 from rehabbot.common.files import (
-    atomic_save,
     atomic_write,
     atomic_write_json,
     check_writable_dir,
-    make_dirs,
 )
 from rehabbot.common.provenance import git_commit, now_iso, package_versions
 from rehabbot.common.signals import handling_signals
@@ -56,6 +54,9 @@ from rehabbot.rl.planning import (
     plan_run,
 )
 from rehabbot.rl.replay_buffer_io import load_replay_buffer
+from rehabbot.rl.run_folder import discard_new_run, lock_run_dir, prepare_run_dir
+from rehabbot.rl.safe_load import action_noise, load_run_model, save_model
+from rehabbot.rl.vecnormalize_io import load_vecnormalize, save_vecnormalize
 
 EVAL_SEED_OFFSET = 10_000
 MONITOR_INFO_KEYWORDS = ("is_success", "safety_violation")
@@ -87,6 +88,11 @@ def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
     """Build the env once so that bad ``env_kwargs`` fail before anything is written."""
     import gymnasium as gym
 
+    mode = env_kwargs.get("render_mode")
+    if mode is not None and not isinstance(mode, str):  # gym.make calls mode.endswith first
+        raise TrainingUsageError(f"cannot make {env_id} with env kwargs "
+                                 f"{json.dumps(env_kwargs)}: render_mode must be a "
+                                 f"string or null, got {mode!r}")
     try:
         env = gym.make(env_id, **env_kwargs)
     except (TypeError, ValueError) as err:
@@ -144,19 +150,6 @@ def _make_vec_env(plan: RunPlan, n_envs: int, seed: int, monitor_dir: Path | Non
         if vec == "subproc" and n_envs > 1 else DummyVecEnv(factories)
     venv.seed(seed)
     return venv
-
-
-def action_noise(hp_block: Mapping[str, Any], n_actions: int) -> Any:
-    import numpy as np
-    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
-
-    noise_type, std = hp_block.get("noise_type"), hp_block.get("noise_std")
-    if noise_type is None:
-        return None
-    mean, sigma = np.zeros(n_actions), float(std) * np.ones(n_actions)
-    if noise_type == "normal":
-        return NormalActionNoise(mean=mean, sigma=sigma)
-    return OrnsteinUhlenbeckActionNoise(mean=mean, sigma=sigma)
 
 
 @contextlib.contextmanager
@@ -309,7 +302,7 @@ def _setup(plan: RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any]
             eval_venv = _make_vec_env(plan, 1, seeds["eval_env"], None)
         if plan.normalize is not None:
             if plan.resume is not None and plan.resume.vecnormalize is not None:
-                venv = VecNormalize.load(str(plan.resume.vecnormalize), venv)
+                venv = load_vecnormalize(plan.resume.vecnormalize, venv)  # DataError if bad
                 venv.training = True
             else:
                 venv = VecNormalize(venv, **plan.normalize)
@@ -339,8 +332,13 @@ def _setup(plan: RunPlan, run: _Run) -> tuple[Any, Any, Any, int, dict[str, Any]
                     # The saved n-step replay buffer class makes SB3 warn that ``n_steps`` is
                     # ignored; the buffer loaded below keeps its n-step returns.
                     warnings.filterwarnings("ignore", message=".*n_steps.*is ignored because")
-                    model = cls.load(str(plan.resume.checkpoint), env=venv, device="auto",
-                                     tensorboard_log=tb_dir, verbose=0)
+                    model = load_run_model(cls, plan.resume.checkpoint, venv, plan.manifest,
+                                           device="auto", tensorboard_log=tb_dir, verbose=0)
+            except TrainingError:
+                raise
+            except DataError as err:
+                raise TrainingError(f"cannot load checkpoint {plan.resume.checkpoint}: "
+                                    f"{err}") from err
             except Exception as err:  # SB3 raises many kinds on a damaged or foreign file
                 raise TrainingError(f"cannot load checkpoint {plan.resume.checkpoint}: "
                                     f"{type(err).__name__}: {err}") from err
@@ -378,36 +376,30 @@ def _learn_from_expert(model: Any, plan: RunPlan) -> dict[str, Any]:
 
 
 def execute(plan: RunPlan) -> Path:
-    """Train ``plan``; returns the run dir, raises :class:`TrainingInterrupted` on a signal."""
+    """Train ``plan`` (holding the run folder's lock); returns the run dir, raises
+    :class:`TrainingInterrupted` on a signal. A resumed run whose checkpoint already reached
+    ``plan.total_timesteps`` is only finished: model.zip, statistics and manifest written."""
+    lock, created_root = lock_run_dir(plan)
+    try:
+        return _execute_locked(plan, created_root)
+    finally:
+        lock.release()
+
+
+def _execute_locked(plan: RunPlan, created_root: Path | None) -> Path:
     import torch
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
 
     torch.set_num_threads(1)
     run_dir = plan.run_dir
     run = _Run(plan)
-    created_root: Path | None = None
-    if plan.resume is not None:  # temporary files of a process that was killed mid-write
-        for stale in (*run_dir.glob(".*.tmp"), *(run_dir / runs.CHECKPOINT_DIR).glob(".*.tmp")):
-            with contextlib.suppress(OSError):
-                stale.unlink()
     try:
-        if plan.resume is None:
-            if plan.overwrite and run_dir.exists():
-                shutil.rmtree(run_dir)
-            created_root = make_dirs(run_dir)
-            for sub in (runs.MONITOR_DIR, runs.CHECKPOINT_DIR):
-                (run_dir / sub).mkdir(exist_ok=True)
+        prepare_run_dir(plan)
         model, venv, eval_venv, done, previous_evals = _setup(plan, run)
     except BaseException:
         if plan.resume is None:  # leave nothing half-written behind
-            if created_root is not None:
-                shutil.rmtree(created_root, ignore_errors=True)
-            elif run_dir.is_dir():
-                for child in run_dir.iterdir():
-                    if child.is_dir():
-                        shutil.rmtree(child, ignore_errors=True)
-                    else:
-                        child.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                discard_new_run(plan, created_root)
         raise
 
     checkpointer_cls, stopper_cls = callback_classes()
@@ -420,7 +412,9 @@ def execute(plan: RunPlan) -> Path:
         max(plan.checkpoint_freq // n_envs, 1) if plan.checkpoint_freq > 0 else sys.maxsize,
         str(run_dir / runs.CHECKPOINT_DIR), on_saved)
     stopper = stopper_cls(plan.total_timesteps, exact_rollouts=plan.algo not in OFF_POLICY)
-    callbacks: list[Any] = [checkpointer]
+    # The evaluation of a step runs before its checkpoint: a checkpoint at step n means that
+    # the evaluation due at n is in the log (a resume from it does not skip it).
+    callbacks: list[Any] = []
     if eval_venv is not None:
         evaluator = EvalCallback(eval_venv, n_eval_episodes=plan.eval_episodes,
                                  eval_freq=max(plan.eval_freq // n_envs, 1),
@@ -432,7 +426,7 @@ def execute(plan: RunPlan) -> Path:
             evaluator.evaluations_length = previous_evals["ep_lengths"]
             evaluator.evaluations_successes = previous_evals["successes"]
         callbacks.append(evaluator)
-    callbacks.append(stopper)
+    callbacks += [checkpointer, stopper]
     # Keep the step-based triggers aligned with the run's total step count after a resume.
     for callback in callbacks:
         callback.n_calls = done // n_envs
@@ -443,22 +437,24 @@ def execute(plan: RunPlan) -> Path:
             warnings.filterwarnings("ignore", message="Training and eval env are not of the "
                                     "same type")
             try:
-                model.learn(plan.total_timesteps - done, callback=CallbackList(callbacks),
-                            reset_num_timesteps=plan.resume is None,
-                            tb_log_name=ALGO_NAMES[plan.algo], progress_bar=progress)
+                if done < plan.total_timesteps:  # else only the final save is left to do
+                    model.learn(plan.total_timesteps - done, callback=CallbackList(callbacks),
+                                reset_num_timesteps=plan.resume is None,
+                                tb_log_name=ALGO_NAMES[plan.algo], progress_bar=progress)
             except KeyboardInterrupt:
                 stopper.stop_signal = stopper.stop_signal or signal.SIGINT
         done = int(model.num_timesteps)
+        checkpointer.init_callback(model)  # a finish-only resume never ran learn
         if stopper.stop_signal is not None:
             checkpoint = checkpointer.save_now()
             run.write(status="interrupted", timesteps_done=done,
                       last_checkpoint=run.rel(checkpoint))
             raise TrainingInterrupted(run_dir, done, checkpoint, stopper.stop_signal)
         checkpoint = checkpointer.save_now()  # final checkpoint, so that --resume can extend
-        atomic_write(run_dir / runs.MODEL_NAME, model.save)
         vec_normalize = model.get_vec_normalize_env()
         if vec_normalize is not None:
-            atomic_save(run_dir / runs.VECNORMALIZE_NAME, vec_normalize.save)
+            save_vecnormalize(vec_normalize, run_dir / runs.VECNORMALIZE_NAME)
+        atomic_write(run_dir / runs.MODEL_NAME, lambda stream: save_model(model, stream))
         run.write(status="finished", timesteps_done=done, finished_at=now_iso(),
                   last_checkpoint=run.rel(checkpoint))
     except (TrainingInterrupted, TrainingError):
@@ -567,7 +563,7 @@ def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: in
     for seed, plan in zip(seeds, plans, strict=True):
         if plan is None:
             run_dir = runs.run_directory(out_dir, env_id, algo, seed)
-            if run_dir.is_dir() and any(run_dir.iterdir()):
+            if runs.has_content(run_dir):
                 raise TrainingError(f"nothing to resume in {run_dir} (no checkpoint yet); "
                                     "start it again with --overwrite")
             plan = plan_run(env_id, algo, seed, total_timesteps, out_dir, resume=False,

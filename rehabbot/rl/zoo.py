@@ -55,6 +55,7 @@ import argparse
 import hashlib
 import json
 import os
+import re
 import sys
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
@@ -308,9 +309,28 @@ def _short(env_id: str) -> str:
     return env_short_name(str(env_id).strip())
 
 
+# The two parts of a zoo file's path: folder names, never a way out of the zoo.
+ZOO_NAME_RE = re.compile(r"^[a-z0-9][a-z0-9._-]{0,99}$")
+
+
+def _check_zoo_name(value: str, what: str) -> str:
+    if not ZOO_NAME_RE.match(value) or ".." in value:
+        raise UsageError(f"zoo {what} {value!r} is not a zoo name (lower-case letters, digits, "
+                         "'.', '_' and '-'); zoo: specs name files inside the zoo only")
+    return value
+
+
 def zoo_path(env_id: str, algo: str, root: Path | None = None) -> Path:
-    """``<zoo>/<env-short-name>/<algo>.npz`` (whether or not it exists)."""
-    return Path(root or zoo_dir()) / _short(env_id) / f"{str(algo).strip().lower()}{SUFFIX}"
+    """``<zoo>/<env-short-name>/<algo>.npz`` (whether or not it exists), always inside the
+    zoo.
+
+    Raises:
+        UsageError: an env or algorithm that is not a plain name (``../``, ``/``, ...).
+    """
+    base = Path(root or zoo_dir())
+    env = _check_zoo_name(_short(env_id), "env")
+    name = _check_zoo_name(str(algo).strip().lower(), "algorithm")
+    return base / env / f"{name}{SUFFIX}"
 
 
 def available() -> list[tuple[str, str]]:
@@ -345,6 +365,9 @@ def load(env_id: str, algo: str) -> ZooPolicy:
     policy = ZooPolicy.from_file(path)
     if _short(policy.env_id) != _short(env_id):
         raise ZooError(f"{path} holds an agent for {policy.env_id!r}, not {env_id!r}")
+    if policy.algo.strip().lower() != path.stem:
+        raise ZooError(f"{path} holds an agent of algorithm {policy.algo!r}, not "
+                       f"{path.stem!r}")
     return policy
 
 

@@ -27,7 +27,6 @@ only inside the functions that read their models; this module never imports
 from __future__ import annotations
 
 import importlib
-import pickle
 import shlex
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -40,6 +39,8 @@ import numpy as np
 from rehabbot.common.errors import DataError, UsageError
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import policy_module_backend, read_model_data
+from rehabbot.rl.safe_load import load_safely
+from rehabbot.rl.vecnormalize_io import read_vecnormalize
 
 Op = tuple[str, dict[str, Any]]
 # (backend, algo) -> (module, class)
@@ -288,8 +289,23 @@ def _zip_policy_module(path: Path) -> str:
     return str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
 
 
-def load_model(path: Path, algo: str, backend: str | None = None) -> Any:
-    """A saved SB3 or SBX model (the backend from the zip's policy class unless given)."""
+def _manifest_env(path: Path, manifest: dict[str, Any]) -> gym.Env:
+    """The env of the model's run (its spaces replace the zip's pickled ones)."""
+    env_id = manifest.get("env_id")
+    if not isinstance(env_id, str):
+        raise DataError(f"cannot load {str(path)!r} without its run folder: a model zip is "
+                        "loaded without unpickling, and the env whose spaces it uses is named "
+                        "by the run's manifest.json")
+    try:
+        return gym.make(env_id, **dict(manifest.get("env_kwargs") or {}))
+    except (gym.error.Error, TypeError, ValueError) as err:
+        raise DataError(f"cannot make the env of {str(path)!r} ({env_id}): {err}") from err
+
+
+def load_model(path: Path, algo: str, backend: str | None = None,
+               manifest: dict[str, Any] | None = None) -> Any:
+    """A saved SB3 or SBX model (the backend from the zip's policy class unless given),
+    loaded without unpickling (:mod:`rehabbot.rl.safe_load`) in the env of ``manifest``."""
     if backend is None:
         backend = "sbx" if policy_module_backend(_zip_policy_module(path)) == "sbx" else "sb3"
     key = (backend, algo)
@@ -303,25 +319,28 @@ def load_model(path: Path, algo: str, backend: str | None = None) -> Any:
         raise UsageError(f"exporting {class_name} ({backend}) needs {module_name}: {err}"
                          ) from err
     kwargs = {"device": "cpu"} if backend == "sb3" else {}
+    env = _manifest_env(path, manifest or {})
     try:
-        return cls.load(path, **kwargs)
+        return load_safely(cls, path, env, algo, backend, manifest, **kwargs)
+    except DataError:
+        raise
     except Exception as err:  # the libraries raise many kinds on a damaged file
         raise DataError(f"cannot load model {str(path)!r}: {type(err).__name__}: {err}"
                         ) from err
 
 
 def _normalize_ops(run_dir: Path | None) -> list[Op]:
-    path = None if run_dir is None else run_dir / runs.VECNORMALIZE_NAME
-    if path is None or not path.is_file():
+    if run_dir is None:
         return []
-    try:
-        with open(path, "rb") as handle:
-            stats = pickle.load(handle)
-    except Exception as err:
-        raise DataError(f"corrupt normalisation statistics {str(path)!r}: {err}") from err
-    if not getattr(stats, "norm_obs", False):
+    path = run_dir / runs.VECNORMALIZE_NAME
+    if not path.is_file():
+        path = run_dir / runs.LEGACY_VECNORMALIZE_NAME  # refused by read_vecnormalize
+        if not path.is_file():
+            return []
+    stats = read_vecnormalize(path)  # DataError: damaged, or a pickle (not read)
+    if not stats.norm_obs:
         return []
-    return [("normalize", {"mean": stats.obs_rms.mean, "var": stats.obs_rms.var,
+    return [("normalize", {"mean": stats.obs_mean, "var": stats.obs_var,
                            "epsilon": stats.epsilon, "clip": stats.clip_obs})]
 
 
@@ -360,7 +379,7 @@ def load_source(model_or_run_dir: Any, algo: str | None = None) -> ExportSource:
         if not algo:
             raise UsageError(f"the algorithm of {str(path)!r} is unknown (no run manifest): "
                              "give algo / --algo")
-        model = load_model(path, algo, manifest.get("backend"))
+        model = load_model(path, algo, manifest.get("backend"), manifest)
     else:
         model = model_or_run_dir
         algo = str(algo or type(model).__name__).lower()

@@ -15,6 +15,12 @@ patient's torques on the compliant exercised joints into ``data.qfrc_applied``:
   pushes against the motion, ``-S tanh(v / 0.1 rad/s)``; both saturated at the available
   strength ``S = effort_fraction x strength_fraction x`` the healthy strength of the profile.
 
+Their sum on each joint is bounded by the patient's physiology: at most the healthy peak
+isometric torque of that joint, in that direction, for the profile's mass and sex
+(:func:`rehabbot.sim.conditions.healthy_strength_nm`; a reflex-driven muscle cannot pull
+harder than a maximal voluntary contraction). Without the bound a grade-4 stretch reflex grew
+with the stretch speed without limit (2,372 N·m with the safety stops off).
+
 :class:`WorkMeter` integrates the mechanical work on the limb: the patient's (torque x joint
 displacement over each physics step) and the robot's (cuff force on the limb x displacement of
 the patient's cuff site), each also as positive work only, and their ratio.
@@ -130,6 +136,8 @@ class PatientDrive:
         share = condition.strength_fraction * condition.effort_fraction
         strength = [healthy_strength_nm(b, profile.mass_kg, profile.sex) for b in bases]
         self.available_nm = [(share * pos, share * neg) for pos, neg in strength]
+        # The physiological bound of the summed torques: [-healthy negative, +healthy positive].
+        self.peak_nm = [(pos, neg) for pos, neg in strength]
         self._mode = condition.effort if share > 0 else "passive"
         self._kp = [max(pos, neg) / ACTIVE_SATURATION_RAD for pos, neg in self.available_nm]
         self._lag = max(1, round(REFLEX_LATENCY_S / self.dt_s))
@@ -217,6 +225,10 @@ class PatientDrive:
             for j in range(len(q)):
                 torque[j] += amplitude * math.sin(phase[j])
                 phase[j] += step
+        peak = self.peak_nm
+        for j in range(len(q)):
+            pos, neg = peak[j]
+            torque[j] = min(max(torque[j], -neg), pos)
         return torque
 
     def _advance_tremor_processes(self, rng: np.random.Generator) -> None:
