@@ -13,7 +13,7 @@ from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.tasks.bilateral import pattern_rows, segment_lengths_rad
 from rehabbot.tasks.bilateral_reward import BilateralReward, segment_fraction, sync_gap
 from rehabbot.tasks.progress_reward import ProgressReward
-from rehabbot.tasks.reward import StepOutcome
+from rehabbot.tasks.reward import STOP_MARGIN, StepOutcome
 from rehabbot.tasks.safety import SafetyMonitor, SafetyThresholds
 
 ENV_ID = "rehabbot/rehab-bilateral-v1"
@@ -178,16 +178,23 @@ def test_sync_helpers_and_a_stop_never_pays():
     assert segment_fraction(0.25, 1.0) == 0.75
     assert segment_fraction(2.0, 1.0) == 0.0 and segment_fraction(0.3, 0.0) == 1.0
     reward = BilateralReward(ProgressReward(max_episode_steps=1000), sync_weight=0.5)
+    # G: holding still from the best earlier state would have cost 60 more than the episode
+    # earned since. The stop pays G and this step's other terms (its progress 1.0, its time
+    # cost 0.05), one step's hold at the larger sync gap (0.05 + 0.5 x 0.4) and the margin.
     stop = reward(StepOutcome(safety_stop=True, steps_done=10, path_left_before_rad=2.0,
-                              path_left_rad=1.9, sync_gap=0.3, sync_gap_before=0.4))
-    # Holding still from the state before the stop costs time_cost + sync_weight x its gap
-    # (0.4) a step to the limit, from the state it stops in time_cost + sync_weight x 0.3: the
-    # stop is charged the larger, and gives the step's progress back.
-    assert stop["reward_safety"] == pytest.approx(-(0.1 * 10.0 + 991 * (0.05 + 0.5 * 0.4)))
+                              path_left_rad=1.9, sync_gap=0.3, sync_gap_before=0.4,
+                              hold_gap=60.0))
+    assert stop["reward_safety"] == pytest.approx(
+        -((60.0 + 1.0 - 0.05) + (0.05 + 0.5 * 0.4) + STOP_MARGIN))
     assert stop["reward_sync"] == 0.0 and stop["reward_bonus"] == 0.0
+    # G below what the step earned: the stop still pays one step's hold and the margin.
     in_step = reward(StepOutcome(safety_stop=True, steps_done=10, path_left_before_rad=2.0,
-                                 path_left_rad=1.9))
-    assert in_step["reward_safety"] == pytest.approx(-(0.1 * 10.0 + 991 * 0.05))
+                                 path_left_rad=1.9, hold_gap=-5.0))
+    assert in_step["reward_safety"] == pytest.approx(-(0.05 + STOP_MARGIN))
+    # The hold bound: the time cost and the sync term at the bounded gap every step, and the
+    # progress the joints' travel to their setpoints can undo.
+    assert reward.hold_cost(0.7, 0.02, 100, 0.3) == pytest.approx(
+        100 * (0.05 + 0.5 * 0.3) + 10.0 * 0.02)
     lag = reward(StepOutcome(sync_gap=0.4))
     assert lag["reward_sync"] == pytest.approx(-0.2)
 

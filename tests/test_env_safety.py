@@ -9,8 +9,10 @@ import mujoco
 import numpy as np
 import pytest
 
+from rehabbot.envs.config import CONTACT_TOLERANCE_MAX_M, CUFF_FORCE_LIMIT_MAX_N
 from rehabbot.sim.robots import ur5e as ur
 from rehabbot.tasks.exercises import Exercise
+from rehabbot.tasks.reward import STOP_MARGIN
 from rehabbot.tasks.safety import (
     BLOWUP_FORCE_N,
     BLOWUP_SPEED_RAD_S,
@@ -49,9 +51,10 @@ def _assert_safety_penalty(env, reward, info):
         extras = base.smoothness_weight + base.effort_weight
         per_step = max(-info["reward_distance"], info["test_hold_distance"]) + extras
         if base.safety_penalty_steps is None:
-            # The gap G to the best hold of the episode, this step's other terms, one step.
+            # The gap G to the best hold of the episode, this step's other terms, one step,
+            # the margin.
             rest = info["reward_distance"] + info["reward_smoothness"] + info["reward_effort"]
-            expected = -(max(base._hold_gap + rest, 0.0) + per_step)
+            expected = -(max(base._hold_gap + rest, 0.0) + per_step + STOP_MARGIN)
             assert info["reward_safety"] == pytest.approx(expected)
             # Never better than holding still from the state before the step: that pays its
             # distance for every step left (steps_left counts this one and one more).
@@ -80,8 +83,10 @@ def _pull_cuff_away_from_shoulder(base, scale):
 
 
 def test_forcing_the_elbow_into_hyperextension_ends_with_range_of_motion():
-    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", cuff_force_limit_n=1e5,
-                   contact_tolerance_m=1.0)
+    # The other two stops as loose as their physical bounds allow (rehabbot.envs.config).
+    env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque",
+                   cuff_force_limit_n=CUFF_FORCE_LIMIT_MAX_N,
+                   contact_tolerance_m=CONTACT_TOLERANCE_MAX_M)
     base = env.unwrapped
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
     reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))

@@ -25,6 +25,7 @@ from rehabbot.sim import scene as sc
 from rehabbot.sim.robots import ur5e as ur
 from rehabbot.tasks import exercises as ex
 from rehabbot.tasks.observation import P_STAR, THETA_STAR
+from rehabbot.tasks.reward import STOP_MARGIN
 from rehabbot.tasks.safety import RULES
 
 REWARD_TERMS = ("reward_distance", "reward_bonus", "reward_safety", "reward_smoothness",
@@ -435,10 +436,10 @@ def test_every_step_is_sound(limb, side, task_type, control_mode, profile, exerc
             hold = max(-info["reward_distance"], hold_before) + extras
             if safety_penalty == "worst_case":
                 expected = steps_left * env.worst_step_reward
-            else:  # the gap to the best hold of the episode, and one step more
+            else:  # the gap to the best hold of the episode, one step more and the margin
                 rest = info["reward_distance"] + info["reward_smoothness"] + \
                     info["reward_effort"]
-                expected = -(max(gap_before + rest, 0.0) + hold)
+                expected = -(max(gap_before + rest, 0.0) + hold + STOP_MARGIN)
                 # Never better than holding still from the state before this step.
                 assert reward < -(steps_left - 1) * (hold_before + 0.0)
             assert info["reward_safety"] == pytest.approx(expected, rel=1e-9)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
+from rehabbot.envs.control import PAPER_DELTA_RAD
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.tasks.observation import tracking_slices
 
@@ -186,3 +187,156 @@ def stop_cases(env_id: str, control_mode: str = "joint_delta", seed: int = 0,
     finally:
         env.close()
         expert_env.close()
+
+
+# -- a stop never pays (issue 25): push a joint into a stop, then hold from earlier states ----
+AUDIT_GAMMAS: tuple[float | None, ...] = (None, 0.95, 0.99, 0.999)  # None: undiscounted
+# Holding still in torque mode: a PD at this fraction of the robot's impedance gains, the
+# largest of 1, 0.3, 0.2, 0.1 with which every id holds its limb at rest for 1000 steps.
+TORQUE_HOLD_GAIN_FRACTION = 0.3
+
+
+@dataclass(frozen=True)
+class HoldComparison:
+    """From state ``state`` (the number of steps taken) of an episode that a safety rule
+    stopped: its return from there against holding still from there, for one ``gamma``
+    (``None``: undiscounted). ``hold_stop`` names the rule if holding still could not avoid a
+    stop either (the comparison then sets one stop against another). ``headway``: some step
+    of the episode between ``state`` and the stop paid more than holding still paid in that
+    step (it made progress that holding does not; discounted, that progress can outweigh the
+    later stop, whatever the penalty)."""
+
+    state: int
+    gamma: float | None
+    stop_value: float
+    hold_value: float
+    hold_stop: str | None
+    headway: bool
+
+    @property
+    def stop_pays(self) -> bool:
+        return self.hold_stop is None and not self.stop_value < self.hold_value
+
+
+@dataclass(frozen=True)
+class PushAudit:
+    """One push of ``joint`` at ``fraction`` of its action bound in direction ``sign`` (see
+    :func:`push_audit`): the rule that stopped it (None: none within ``max_steps``), at which
+    step, and the comparisons with holding still."""
+
+    env_id: str
+    control_mode: str
+    joint: int
+    sign: int
+    fraction: float
+    violation: str | None
+    stop_step: int
+    comparisons: tuple[HoldComparison, ...]
+
+
+def push_action(env: gym.Env, joint: int, sign: int, fraction: float) -> np.ndarray:
+    """The action that drives ``joint`` at ``fraction`` of its bound in every mode: an
+    increment (joint_delta), a velocity (joint_velocity), a torque (torque); in
+    joint_position mode, the current setpoints with that joint moved by the delta bound."""
+    base = env.unwrapped
+    space = env.action_space
+    if base.control_mode == "joint_position":
+        action = np.asarray(base.controller.setpoint_rad, float).copy()
+        action[joint] += sign * fraction * PAPER_DELTA_RAD
+        return np.clip(action, space.low, space.high).astype(space.dtype)
+    action = np.zeros(space.shape, space.dtype)
+    action[joint] = sign * fraction * space.high[joint]
+    return action
+
+
+def hold_action(env: gym.Env, held_rad: np.ndarray, servo: bool) -> np.ndarray:
+    """Holding still: the setpoints kept (zero increments or velocities, the same positions);
+    with ``servo``, moved to the angles ``held_rad`` instead. In torque mode (no servo) a
+    joint PD at :data:`TORQUE_HOLD_GAIN_FRACTION` of the robot's own impedance gains toward
+    ``held_rad`` (at 50 Hz decisions the full gains are unstable)."""
+    base = env.unwrapped
+    space = env.action_space
+    mode = base.control_mode
+    theta = base.data.qpos[base._qpos_adr]
+    if mode == "torque":
+        handles = getattr(base, "handles", None) or (base.handle,)
+        kp, kv = (TORQUE_HOLD_GAIN_FRACTION * np.concatenate(
+            [getattr(h.robot.default_gains, name) for h in handles])
+            for name in ("kp_nm_per_rad", "kv_nms_per_rad"))
+        dof = np.concatenate([h.dof_adr for h in handles])
+        limit = np.concatenate([h.robot.torque_limits() for h in handles])
+        torque = kp * (held_rad - theta) - kv * base.data.qvel[dof]
+        return np.clip(torque / limit, -1, 1).astype(space.dtype)
+    setpoint = np.asarray(base.controller.setpoint_rad, float)
+    target = held_rad if servo else setpoint
+    if mode == "joint_position":
+        return np.clip(target, space.low, space.high).astype(space.dtype)
+    change = target - setpoint
+    if mode == "joint_velocity":
+        change = change / base.dt_s
+    return np.clip(change, space.low, space.high).astype(space.dtype)
+
+
+def _returns_holding_from(env: gym.Env, seed: int, options: dict, actions: Sequence,
+                          servo: bool) -> tuple[list[float], str | None]:
+    """Replay ``actions`` from the seeded reset, then hold still to the end of the episode:
+    the rewards after the replay and the rule that stopped the hold (None: none)."""
+    env.reset(seed=seed, options=options)
+    for action in actions:
+        env.step(action)
+    base = env.unwrapped
+    held = np.array(base.data.qpos[base._qpos_adr])
+    rewards = []
+    while True:
+        _obs, reward, terminated, truncated, info = env.step(hold_action(env, held, servo))
+        rewards.append(reward)
+        if terminated or truncated:
+            return rewards, info["safety_violation"] if terminated else None
+
+
+def push_audit(env_id: str, control_mode: str, joint: int, sign: int, fraction: float = 1.0,
+               seed: int = 0, exercise: int = 0, weight_level: int = 0,
+               states: Sequence[int] | None = None, max_steps: int = 400,
+               gammas: Sequence[float | None] = AUDIT_GAMMAS, **env_kwargs) -> PushAudit:
+    """Drive one joint into a safety stop, then compare the episode's return from some of its
+    states (``states``: step counts; default the start, the middle and the step just before
+    the stop) with holding still from there: keeping the setpoints (zero actions), or, where
+    that cannot avoid a stop either, servoing the setpoints to the angles of that state."""
+    options = {"exercise": exercise, "weight_level": weight_level}
+    env = gym.make(env_id, control_mode=control_mode, **env_kwargs)
+    try:
+        env.reset(seed=seed, options=options)
+        actions, rewards = [], []
+        for _ in range(max_steps):
+            action = push_action(env, joint, sign, fraction)
+            actions.append(action)
+            _obs, reward, terminated, truncated, info = env.step(action)
+            rewards.append(reward)
+            if terminated or truncated:
+                break
+        violation = info["safety_violation"] if terminated else None
+        stop = len(rewards)
+        comparisons: list[HoldComparison] = []
+        if violation is not None:
+            chosen = sorted({0, stop // 2, stop - 1} if states is None
+                            else {s for s in states if 0 <= s < stop})
+            for state in chosen:
+                held, hold_stop = _returns_holding_from(env, seed, options, actions[:state],
+                                                        servo=False)
+                if hold_stop is not None:
+                    held, hold_stop = _returns_holding_from(env, seed, options,
+                                                            actions[:state], servo=True)
+                before_stop = rewards[state:stop - 1]
+                headway = any(r > h for r, h in zip(before_stop, held, strict=False))
+                for gamma in gammas:
+                    comparisons.append(HoldComparison(
+                        state, gamma, _value(rewards[state:], gamma), _value(held, gamma),
+                        hold_stop, headway))
+        return PushAudit(env_id, control_mode, joint, sign, fraction, violation, stop,
+                         tuple(comparisons))
+    finally:
+        env.close()
+
+
+def _value(rewards: Sequence[float], gamma: float | None) -> float:
+    return float(sum(rewards)) if gamma is None else _discounted(rewards, gamma)

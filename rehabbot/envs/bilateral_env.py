@@ -85,7 +85,7 @@ from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import WorkMeter
 from rehabbot.tasks.bilateral import arm_view
 from rehabbot.tasks.bilateral_reward import segment_fraction, sync_gap
-from rehabbot.tasks.reward import StepOutcome, total
+from rehabbot.tasks.reward import StepOutcome, next_hold_gap, total
 
 
 class BilateralEnv(RehabEnvBase):
@@ -136,6 +136,10 @@ class BilateralEnv(RehabEnvBase):
         self._path_left = 0.0
         self._fractions = np.ones(2)
         self._gap = 0.0  # the arms' sync gap in the active target's segment, at this state
+        # G of StepOutcome.hold_gap: the most that holding still from a state of the episode
+        # could cost beyond what the episode earned since (rehabbot.tasks.reward).
+        self._hold_gap = 0.0
+        self._uses_hold_gap = self.reward_function.uses_hold_gap
         self._needs_reset = True
         self._closed = False
         self._rendering = EnvRendering(self.model, self.render_mode, config.width,
@@ -167,6 +171,7 @@ class BilateralEnv(RehabEnvBase):
         distances = self._arm_distances()
         self._path_left = self._path(distances, self._target_index)
         self._fractions[:], self._gap = self._progress_in_segment(distances)
+        self._hold_gap = self._hold_cost(distances)
         info = self._info(None, False, self.reward_function.zero_terms(), 0, 0.0)
         self._needs_reset = False
         if self.render_mode == "human":
@@ -215,8 +220,11 @@ class BilateralEnv(RehabEnvBase):
         outcome.reached, outcome.last_target = reached, last
         outcome.safety_stop, outcome.steps_done = safety_stop, self._steps
         outcome.action, outcome.torque_nm = action, data.qfrc_actuator[self._dof_adr]
+        outcome.hold_gap = self._hold_gap
         terms = self.reward_function(outcome)
         reward = total(terms)
+        if self._uses_hold_gap and not safety_stop:
+            self._hold_gap = next_hold_gap(self._hold_gap, reward, self._hold_cost(distances))
         if self.reward_function.uses_previous_action:
             self._prev_action[:] = action
         self._fractions[:] = fractions
@@ -279,6 +287,27 @@ class BilateralEnv(RehabEnvBase):
         error = theta - self._sequence.robot_rad[self._target_index]
         return np.array([math.sqrt(float(error[:n] @ error[:n])),
                          math.sqrt(float(error[n:] @ error[n:]))])
+
+    def _hold_cost(self, distances: np.ndarray) -> float:
+        """``B(s)`` of the current state (:meth:`BilateralReward.hold_cost`): each arm's joints
+        may still travel ``lead`` [rad] while it holds still
+        (:meth:`rehabbot.envs.control.Controller.hold_travel_rad`), and the sync gap may grow
+        by the share of its segment that each arm's travel covers."""
+        if not self._uses_hold_gap:
+            return 0.0
+        n = self.n_joints_per_robot
+        theta = self._dynamic_values[:2 * n].tolist()
+        velocity = self.data.qvel[self._dof_adr].reshape(2, n)
+        lead = np.array([controller.hold_travel_rad(theta[k * n:(k + 1) * n],
+                                                    float(np.linalg.norm(velocity[k])))
+                         for k, controller in enumerate(self.controller.controllers)])
+        lengths = self._segments[self._exercise][self._target_index]
+        moving = lengths > self._tolerance
+        gap = 0.0
+        if moving.all():
+            gap = min(self._gap + float((lead / lengths).sum()), 1.0)
+        return self.reward_function.hold_cost(float(distances.sum()), float(lead.sum()),
+                                              max(self.max_episode_steps - self._steps, 0), gap)
 
     def _path(self, distances: np.ndarray, index: int) -> float:
         """The path both arms still have to travel [rad] (the reward's D)."""

@@ -42,6 +42,15 @@ FLOAT32 = np.dtype(np.float32)
 # setpoint bounds add 0.1 rad around the workspace, and the load-carrying setpoints of a
 # joint near its range can lie a little beyond it).
 SETPOINT_SPACE_MARGIN_RAD = 0.5
+# How far [rad] the joints may still travel when the agent holds still in ``torque`` mode,
+# where no servo holds them (the safety penalty counts it: rehabbot.tasks.reward): the sag of
+# a hold under the limb's weight plus a braking distance of the joints' speed times
+# TORQUE_HOLD_BRAKE_S. Measured with a PD at 0.3 x the robot's gains (the audit's torque-mode
+# hold, rehabbot.analysis.reward_audit) after pushes of every joint at 0.3 and 1.0 of the
+# torque bound on the four -v0 ids: at most 0.148 rad at rest and 0.1 + 0.04 s x speed moving
+# (benchmarks/stop_audit.py --drift).
+TORQUE_HOLD_SAG_RAD = 0.15
+TORQUE_HOLD_BRAKE_S = 0.05
 
 
 class Controller:
@@ -90,6 +99,16 @@ class Controller:
     def apply(self, action: np.ndarray, data: mujoco.MjData) -> None:
         """Write the controls for ``action`` (already checked and clipped to the space)."""
         raise NotImplementedError
+
+    def hold_travel_rad(self, theta_rad: list[float], speed_rad_s: float) -> float:
+        """How far [rad] the joints at ``theta_rad`` (moving at ``speed_rad_s``, the norm of
+        their velocities) may still travel if the agent holds still: to the setpoints,
+        which a hold keeps (:class:`TorqueController`: a sag and braking allowance)."""
+        del speed_rad_s  # the servo brakes toward its setpoint
+        travel = 0.0
+        for angle, setpoint in zip(theta_rad, self.setpoint_rad.tolist(), strict=True):
+            travel += (setpoint - angle) * (setpoint - angle)
+        return math.sqrt(travel)
 
     def apply_fast(self, action: object) -> bool:
         """Apply ``action`` if it is a float32 array of the right shape inside the box
@@ -207,6 +226,12 @@ class TorqueController(Controller):
 
     def apply(self, action, data):
         self._ctrl[self._motor] = self._torque_limit_nm * np.asarray(action, dtype=float)
+
+    def hold_travel_rad(self, theta_rad, speed_rad_s):
+        """No setpoint holds the joints: :data:`TORQUE_HOLD_SAG_RAD` plus the speed times
+        :data:`TORQUE_HOLD_BRAKE_S`."""
+        del theta_rad
+        return TORQUE_HOLD_SAG_RAD + TORQUE_HOLD_BRAKE_S * speed_rad_s
 
 
 def make_controller(mode: str, handle: RobotHandle, low_rad: np.ndarray, high_rad: np.ndarray,

@@ -109,15 +109,15 @@ takes a config instead.
 | ``task_type`` | ``"reaching"`` | ``"reaching"`` (the key poses) or ``"trajectory"`` (dense min-jerk waypoints) |
 | ``control_mode`` | ``"joint_delta"`` | see Action space |
 | ``profile`` | ``None`` | :class:`PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
-| ``condition`` | ``None`` | :class:`PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive |
+| ``condition`` | ``None`` | :class:`PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive. A condition variant id (``rehab-reach-spastic-v1``, ...) refuses a ``condition=`` that would replace its own: use the base id |
 | ``weight_level`` | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
 | ``exercise`` | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
 | ``exercises`` | ``None`` | the exercise table: :class:`Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
 | ``robot`` | ``"ur5e"`` | the robot on the cuff: ``"ur5e"`` (the paper's) or ``"fr3"`` (Franka Research 3, 7 joints) |
 | ``cuff`` | ``"connect"`` | ``"connect"`` (strap: position only) or ``"weld"`` |
-| ``base_reorientation_deg`` | 0.0 | rotation of the robot base about its vertical axis |
+| ``base_reorientation_deg`` | 0.0 | rotation of the robot base about its vertical axis, in [-180, 180] |
 | ``frame_skip`` | 10 | physics steps per decision |
-| ``timestep_s`` | 0.002 | physics step; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
+| ``timestep_s`` | 0.002 | physics step in [1e-4, 0.005] s; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
 | ``target_tolerance_rad`` | 0.05 | epsilon of eq. (5) |
 | ``reward`` | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
 | ``progress_weight`` | 10.0 | progress reward: paid per rad of path travelled |
@@ -129,10 +129,10 @@ takes a config instead.
 | ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
 | ``safety_penalty`` | ``"hold"`` | paper reward: ``"hold"`` (the gap to holding still) or ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
 | ``safety_penalty_steps`` | None | charge at most this many steps at the current hold cost instead (0.2.0's default was 100; with a cap a stop can pay) |
-| ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range |
-| ``cuff_force_limit_n`` | None | cuff force rule: limit in N for every cuff (None = ISO/TS 15066 quasi-static limit of the region each cuff holds) |
-| ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact |
-| ``max_episode_steps`` | 1000 | horizon used by the safety penalty (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` takes the name for its TimeLimit and never passes it to the env, which keeps 1000: the safety penalties then count steps to 1000, not m (over-counting, never under-counting). Build ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` to change both |
+| ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range, in [0, 10] deg (10: the knee hyperextension a CPM device allows, domain-facts §4.2) |
+| ``cuff_force_limit_n`` | None | cuff force rule: limit in N for every cuff, in [1, 880] N (880 = 4 x the largest ISO/TS 15066 quasi-static limit, thighs 220 N); None = the quasi-static limit of the region each cuff holds |
+| ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact, in [0, 0.01] m (2 x the deepest limb compression at an ISO/TS 15066 quasi-static limit, upper arm 150 N / 30 N/mm = 5 mm) |
+| ``max_episode_steps`` | 1000 | horizon used by the safety penalty, in [1, 10**6] (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` sets both: the env takes its TimeLimit's ``m`` as its horizon; ``m <= 0`` (Gymnasium's ``-1`` = no time limit included) is refused (:mod:`rehabbot.envs.registration`). A ``RehabEnv`` built directly never truncates: wrap it as ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` |
 | ``segment_s`` | 3.0 | trajectory: duration of each min-jerk segment between key poses |
 | ``waypoint_dt_s`` | 0.1 | trajectory: sampling period of the min-jerk path |
 | ``min_waypoint_spacing_rad`` | 0.1 | trajectory: minimum distance (inf-norm, robot joints) between waypoints |
@@ -162,7 +162,7 @@ from rehabbot.envs.env_base import RehabEnvBase
 from rehabbot.envs.env_rendering import EnvRendering
 from rehabbot.sim.patient_drive import LimbPhysics
 from rehabbot.tasks.exercises import Exercise
-from rehabbot.tasks.reward import StepOutcome, joint_distance, total
+from rehabbot.tasks.reward import StepOutcome, joint_distance, next_hold_gap, total
 
 # A value this far inside a bound of the healthy box is inside whatever float32 rounding does
 # (the bounds are below 10 in magnitude; float32 rounds them by at most 5e-7).
@@ -275,8 +275,8 @@ class RehabEnv(RehabEnvBase):
         self._hold_distance = joint_distance(self._theta, self._target)
         self._path_left = self._hold_distance + self._rest[0]
         if self._uses_hold_gap:
-            self._hold_gap = self.max_episode_steps * self.reward_function.hold_step_cost(
-                self._hold_distance)
+            self._hold_gap = self.reward_function.hold_cost(
+                self._hold_distance, self._hold_travel(), self.max_episode_steps)
         info = self._info(None, False, self.safety.cuff_force_n(data),
                           self.reward_function.zero_terms(), 0)
         self._needs_reset = False
@@ -345,9 +345,8 @@ class RehabEnv(RehabEnvBase):
         terms = self.reward_function(outcome)
         reward = total(terms)
         if self._uses_hold_gap and not safety_stop:
-            self._hold_gap = max(self._hold_gap + reward, max(
-                self.max_episode_steps - self._steps, 0) * self.reward_function.hold_step_cost(
-                hold))
+            self._hold_gap = next_hold_gap(self._hold_gap, reward, self.reward_function.hold_cost(
+                hold, self._hold_travel(), max(self.max_episode_steps - self._steps, 0)))
         if self._keep_previous_action:
             self._prev_action[:] = action
 
@@ -389,6 +388,14 @@ class RehabEnv(RehabEnvBase):
     # ------------------------------------------------------------------------------------------
     # Helpers
     # ------------------------------------------------------------------------------------------
+    def _hold_travel(self) -> float:
+        """How far [rad] the joints may still travel if the agent holds still from here
+        (:meth:`rehabbot.envs.control.Controller.hold_travel_rad`)."""
+        speed = 0.0
+        for velocity in self._qvel[self._dof_adr].tolist():
+            speed += velocity * velocity
+        return self.controller.hold_travel_rad(self._theta, math.sqrt(speed))
+
     def _write_target(self) -> None:
         """The active target's fields of the observation (theta*, p*)."""
         obs, i = self._obs, self._target_index
@@ -463,6 +470,7 @@ class RehabEnv(RehabEnvBase):
         survive a pickle round trip)."""
         data = self.data
         self._qpos = data.qpos
+        self._qvel = data.qvel
         self._tool_xpos = data.site_xpos[self._tool_site]  # a view
         self._qfrc_actuator = data.qfrc_actuator
         self.controller.bind(data)

@@ -19,13 +19,14 @@ so arms that move in step within ``sync_tolerance`` (10 % of the segment by defa
 nothing, and an arm that lags a whole segment costs ``sync_weight x (1 - sync_tolerance)`` a
 step. In the alternating pattern only one arm moves per segment, so the term is 0.
 
-A stop never pays: the safety penalty of the ``-v1`` reward charges, for every step left,
-what a step of holding still costs (``time_cost``, plus the optional terms' maxima), and here
-also what holding still would pay in synchronisation from where the arms are: ``sync_weight``
-times the larger of the gaps before and after the stopping step (holding still keeps the gap).
-So a stop pays less than holding still from the state before it and from the state it stops
-in. An earlier design charged ``sync_weight`` a step whatever the gap (the worst case): a stop
-then cost about 550, twice what a whole successful episode earns, and SAC backed away from the
+A stop never pays: the safety penalty of the ``-v1`` reward (the gap ``G`` to the best hold of
+the episode, :mod:`rehabbot.tasks.progress_reward`) counts here also what holding still would
+pay in synchronisation: each step of a hold at most ``sync_weight`` times the gap the arms can
+reach while their joints travel to their setpoints (:meth:`BilateralReward.hold_cost`, bounded
+by the env), and the stopping step one step more at the larger of the gaps before and after
+it. So a stop pays less than holding still from any state the episode passed. An earlier
+design charged ``sync_weight`` a step whatever the gap (the worst case): a stop then cost
+about 550, twice what a whole successful episode earns, and SAC backed away from the
 arms and learned nothing in 200 000 steps (README, "Both arms").
 """
 
@@ -81,16 +82,30 @@ class BilateralReward:
         """The terms of one step, ``{"reward_progress": ..., "reward_sync": ...}``."""
         terms = self.progress(outcome)
         if outcome.safety_stop:
-            steps_left = max(self.progress.max_episode_steps - outcome.steps_done, 0) + 1
-            if self.progress.safety_penalty_steps is not None:
-                steps_left = min(steps_left, self.progress.safety_penalty_steps)
             gap = max(outcome.sync_gap, outcome.sync_gap_before)
-            terms["reward_safety"] -= steps_left * self.sync_weight * gap
+            if self.progress.safety_penalty_steps is not None:  # 0.2.0's capped count
+                steps_left = min(max(self.progress.max_episode_steps - outcome.steps_done, 0)
+                                 + 1, self.progress.safety_penalty_steps)
+                terms["reward_safety"] -= steps_left * self.sync_weight * gap
+            else:  # the hold gap G already holds the sync costs; one step's more
+                terms["reward_safety"] -= self.sync_weight * gap
             terms["reward_sync"] = 0.0
         else:
             terms["reward_sync"] = -self.sync_weight * outcome.sync_gap if outcome.sync_gap \
                 else 0.0
         return terms
+
+    @property
+    def uses_hold_gap(self) -> bool:
+        """Whether the safety penalty needs :attr:`StepOutcome.hold_gap` (uncapped)."""
+        return self.progress.uses_hold_gap
+
+    def hold_cost(self, distance_rad: float, lead_rad: float, steps_left: int,
+                  sync_gap: float = 0.0) -> float:
+        """``B(s)`` of :class:`ProgressReward` plus the synchronisation term of every step at
+        ``sync_gap`` (the most the gap can reach while the arms hold: the env's bound)."""
+        return (self.progress.hold_cost(distance_rad, lead_rad, steps_left)
+                + steps_left * self.sync_weight * sync_gap)
 
     def zero_terms(self) -> dict[str, float]:
         """Every term at 0 (the ``info`` of ``reset``)."""

@@ -21,12 +21,16 @@ term                value
 ``bonus``           ``intermediate_bonus`` (10) or ``final_bonus`` (100) when a target is
                     reached, as in eq. (5)
 ``time``            ``-time_cost`` every step (0.05): holding still costs this, and only this
-``safety``          on a safety stop: ``-(progress_weight x max(D_before - D_after, 0) +
-                    (steps left + 1) x (time_cost + extra maxima))``: the step's progress is
-                    taken back and the time cost is paid to the time limit and one step more.
-                    From the state before the stop, holding still instead costs ``time_cost`` a
-                    step to the limit, so the stop pays less, by at least one step's cost. The
-                    penalty stays small (at most about 50) because holding still costs little
+``safety``          on a safety stop: ``-(max(G + r, 0) + time_cost + extra maxima +
+                    STOP_MARGIN)`` as eq. (5)'s ``"hold"`` penalty
+                    (:mod:`rehabbot.tasks.reward`), with this reward's hold bound ``B(s) =
+                    (H - s) x (time_cost + extra maxima) + progress_weight x lead``: holding
+                    still costs the time cost a step, and the joints may still travel the
+                    ``lead`` [rad] by which the setpoints lead them, at most undoing that much
+                    progress. So every gain of the episode since the best state to hold is
+                    taken back (before issue 25 only the stopping step's was, and a stop after a
+                    gain could pay: issue 25). The penalty stays small (about 50 plus the
+                    episode's gains) because holding still costs little
 ``smoothness``      as eq. (5)'s optional term (0 by default)
 ``effort``          as eq. (5)'s optional term (0 by default)
 ==================  ===========================================================================
@@ -44,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rehabbot.tasks.reward import StepOutcome, optional_terms
+from rehabbot.tasks.reward import StepOutcome, optional_terms, stop_penalty
 
 PROGRESS_WEIGHT_PER_RAD = 10.0
 TIME_COST_PER_STEP = 0.05
@@ -91,8 +95,12 @@ class ProgressReward:
             if self.safety_penalty_steps is not None:
                 steps_left = min(steps_left, self.safety_penalty_steps)
             per_step = self.time_cost + self.smoothness_weight + self.effort_weight
-            gained = max(outcome.path_left_before_rad - outcome.path_left_rad, 0.0)
-            safety = -(self.progress_weight * gained + steps_left * per_step)
+            if self.safety_penalty_steps is not None:  # 0.2.0's capped count: a stop can pay
+                gained = max(outcome.path_left_before_rad - outcome.path_left_rad, 0.0)
+                safety = -(self.progress_weight * gained + steps_left * per_step)
+            else:
+                safety = stop_penalty(outcome.hold_gap,
+                                      progress - self.time_cost + smoothness + effort, per_step)
         elif outcome.reached:
             bonus = self.final_bonus if outcome.last_target else self.intermediate_bonus
         return {"reward_progress": progress, "reward_bonus": bonus,
@@ -108,6 +116,19 @@ class ProgressReward:
     def uses_path(self) -> bool:
         """The progress term needs the path still to travel."""
         return True
+
+    @property
+    def uses_hold_gap(self) -> bool:
+        """Whether the safety penalty needs :attr:`StepOutcome.hold_gap` (uncapped)."""
+        return self.safety_penalty_steps is None
+
+    def hold_cost(self, distance_rad: float, lead_rad: float, steps_left: int,
+                  sync_gap: float = 0.0) -> float:
+        """``B(s)``: the most that holding still for ``steps_left`` steps costs (module
+        docstring); ``distance_rad`` does not enter (holding still makes no progress)."""
+        del distance_rad, sync_gap
+        return (steps_left * (self.time_cost + self.smoothness_weight + self.effort_weight)
+                + self.progress_weight * lead_rad)
 
     def zero_terms(self) -> dict[str, float]:
         """Every term at 0 (the ``info`` of ``reset``)."""

@@ -12,17 +12,20 @@ term                value
 ``bonus``           ``B_i`` when ``||theta - theta*_i||_inf < target_tolerance_rad``:
                     ``intermediate_bonus`` (10), or ``final_bonus`` (100) for the last target
 ``safety``          on a safety stop, ``safety_penalty="hold"`` (default): ``-(max(G + r, 0) +
-                    c)``. ``G = max_s [(H - s) x h_s + R(s)]`` over the episode's states
-                    ``s`` so far: ``h_s`` is what a step of holding still at ``s`` costs (its
-                    distance to its active target plus the extra terms' maxima), ``H - s`` the
-                    steps left from ``s`` to the time limit, ``R(s)`` the rewards earned after
-                    ``s``; ``r`` is this step's other terms; ``c`` the larger of this step's
-                    and the previous state's hold cost. The episode that stops thus earns less
-                    than holding still from any state it passed through would have (tracked in
-                    O(1) a step). ``"worst_case"``: ``-(steps left + 1) x`` the worst per-step
-                    loss the bounds allow. ``safety_penalty_steps=K`` instead charges ``K``
-                    steps at ``c`` at most (0.2.0's default, 100): smaller, and a stop can then
-                    pay
+                    c + STOP_MARGIN)``. ``G = max_s [B(s) + R(s)]`` over the episode's states
+                    ``s`` so far: ``B(s)`` is the most that holding still from ``s`` to the
+                    time limit can cost (:meth:`PaperReward.hold_cost`: each of the ``H - s``
+                    steps at most the distance to the active target plus how far the setpoint
+                    leads the joints, where holding the setpoint takes them, plus the extra
+                    terms' maxima), ``R(s)`` the rewards earned after ``s``; ``r`` is this
+                    step's other terms; ``c`` the larger of this step's and the previous
+                    state's hold cost and ``STOP_MARGIN`` (1.0) a margin. The episode that
+                    stops thus earns less than holding still from any state it passed through
+                    would have, by ``c + STOP_MARGIN`` at least (tracked in O(1) a step:
+                    :func:`next_hold_gap`). ``"worst_case"``: ``-(steps left + 1) x`` the
+                    worst per-step loss the bounds allow. ``safety_penalty_steps=K`` instead
+                    charges ``K`` steps at ``c`` at most (0.2.0's default, 100): smaller, and a
+                    stop can then pay
 ``smoothness``      ``-smoothness_weight x mean(((a_t - a_{t-1}) / (high - low))^2)`` (0 by default)
 ``effort``          ``-effort_weight x mean((tau / tau_limit)^2)`` (0 by default)
 ==================  ===========================================================================
@@ -39,6 +42,9 @@ SAFETY_PENALTIES = ("hold", "worst_case")
 # Steps the safety penalty counts by default: None = every step left to the time limit, the
 # only count with which a stop never pays better than holding still (0.2.0 capped it at 100).
 SAFETY_PENALTY_STEPS: int | None = None
+# What a stop costs beyond the best hold of its episode (reward units, on top of one step's
+# hold cost): the margin by which a stop never pays (issue 25; 20 x the -v1 time cost).
+STOP_MARGIN = 1.0
 
 
 @dataclass
@@ -55,9 +61,10 @@ class StepOutcome:
     # from the next target). Filled only for reward functions with ``uses_path``.
     path_left_before_rad: float = 0.0
     path_left_rad: float = 0.0
-    # G: the most that holding still from some earlier state of the episode would have paid
-    # beyond what the episode earned since (``max_s [(H - s) x h_s + R(s, t-1)]``, h_s the
-    # per-step cost of holding at s, R the rewards since s). Filled for ``uses_hold_gap``.
+    # G: the most that holding still from some earlier state of the episode could have cost
+    # beyond what the episode earned since (``max_s [B(s) + R(s, t-1)]``, B(s) the reward
+    # function's ``hold_cost`` bound at s, R the rewards since s). Filled for
+    # ``uses_hold_gap``.
     hold_gap: float = 0.0
     reached: bool = False  # the target was reached (and no safety rule ended the episode)
     last_target: bool = False  # the target is the sequence's last
@@ -107,8 +114,8 @@ class PaperReward:
                 safety = steps_left * self.worst_step_reward
             elif self.safety_penalty_steps is not None:
                 safety = -steps_left * hold
-            else:  # the gap to the best hold of the episode, and one step more
-                safety = -(max(outcome.hold_gap + distance + smoothness + effort, 0.0) + hold)
+            else:  # the gap to the best hold of the episode, one step more and the margin
+                safety = stop_penalty(outcome.hold_gap, distance + smoothness + effort, hold)
         elif outcome.reached:
             bonus = self.final_bonus if outcome.last_target else self.intermediate_bonus
         return {"reward_distance": distance, "reward_bonus": bonus, "reward_safety": safety,
@@ -130,14 +137,33 @@ class PaperReward:
         uncapped ``"hold"`` penalty)."""
         return self.safety_penalty == "hold" and self.safety_penalty_steps is None
 
-    def hold_step_cost(self, hold_distance_rad: float) -> float:
-        """What one step of holding still costs at most in a state at ``hold_distance_rad``
-        from its active target: the distance plus the extra terms' maxima."""
-        return hold_distance_rad + self.smoothness_weight + self.effort_weight
+    def hold_cost(self, distance_rad: float, lead_rad: float, steps_left: int,
+                  sync_gap: float = 0.0) -> float:
+        """``B(s)``: the most that holding still for ``steps_left`` steps costs from a state at
+        ``distance_rad`` from its active target whose setpoints lead its joints by
+        ``lead_rad`` (holding the setpoints takes the joints there, so no step of the hold is
+        farther than the sum): each step the distance plus the extra terms' maxima."""
+        del sync_gap  # one arm: no synchronisation term
+        return steps_left * (distance_rad + lead_rad + self.smoothness_weight
+                             + self.effort_weight)
 
     def zero_terms(self) -> dict[str, float]:
         """Every term at 0 (the ``info`` of ``reset``)."""
         return dict.fromkeys(info_keys(self.names), 0.0)
+
+
+def stop_penalty(hold_gap: float, other_terms: float, hold_step: float) -> float:
+    """The ``"hold"`` safety penalty of a stopping step: the gap ``G`` to the best hold of the
+    episode (with this step's ``other_terms`` added, never below 0), one step's hold cost
+    ``hold_step`` more and :data:`STOP_MARGIN`, negated."""
+    return -(max(hold_gap + other_terms, 0.0) + hold_step + STOP_MARGIN)
+
+
+def next_hold_gap(hold_gap: float, reward: float, hold_bound: float) -> float:
+    """``G`` after a step that did not stop: the holds of the earlier states fell behind by
+    the step's ``reward``; holding from the new state may cost ``hold_bound`` (its
+    ``hold_cost``)."""
+    return max(hold_gap + reward, hold_bound)
 
 
 def info_keys(names: tuple[str, ...]) -> tuple[str, ...]:
