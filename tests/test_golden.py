@@ -85,19 +85,27 @@ def test_a_rollout_perturbed_by_1e_12_passes(golden, env_id, mode):
         env.close()
 
 
-def test_the_perturbation_reaches_the_rollout(golden):
-    """The nudge of the test above is real: it changes the rollout (here a torque-mode one
-    that issue 25 saw fail on another machine), and the comparison still accepts it."""
-    env_id, mode, exercise, level = "rehabbot/rehab-reach-v1", "torque", 1, 4
+@pytest.mark.slow
+def test_the_perturbation_reaches_the_rollout_and_the_second_tier_absorbs_more(golden):
+    """The nudge of the test above is real (it changes the rollout), and the second tier is
+    needed and works: under the shadow runs' own noise level (1e-10 rad/s a step) some
+    torque-mode rollout of reach-v1 leaves the 1e-6 tolerance (issue 25's failing id), and the
+    comparison still accepts every one of them."""
+    env_id, mode = "rehabbot/rehab-reach-v1", "torque"
     env = gym.make(env_id, control_mode=mode)
     try:
-        plain = record_rollout(env, env_id, mode, exercise, level)
-        perturbed = record_rollout(env, env_id, mode, exercise, level, MACHINE_NOISE)
+        plain = record_rollout(env, env_id, mode, 1, 4)
+        perturbed = record_rollout(env, env_id, mode, 1, 4, MACHINE_NOISE)
         assert not np.array_equal(plain["robot_torque_nm"], perturbed["robot_torque_nm"])
-        assert first_difference(perturbed, plain) is not None  # tier 1 alone would fail it
-        assert compare_rollout(env, env_id, mode, exercise, level,
-                               golden[rollout_key(env_id, mode, exercise, level)],
-                               actual=perturbed) is None
+        needs_tier_two = 0
+        for exercise, level in _cells(env_id):
+            key = rollout_key(env_id, mode, exercise, level)
+            noisy = record_rollout(env, env_id, mode, exercise, level,
+                                   Perturbation(per_step=1e-10, seed=202))
+            needs_tier_two += first_difference(noisy, golden[key]) is not None
+            assert compare_rollout(env, env_id, mode, exercise, level, golden[key],
+                                   actual=noisy) is None, key
+        assert needs_tier_two >= 1
     finally:
         env.close()
 

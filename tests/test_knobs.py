@@ -258,12 +258,13 @@ def test_a_non_positive_time_limit_is_refused(limit):
         gym.make(REACH, max_episode_steps=limit)
 
 
-def test_a_spec_without_a_time_limit_is_refused_unless_the_env_has_its_own():
+def test_a_spec_without_a_time_limit_keeps_the_envs_own_horizon():
     made = gym.make(REACH, max_episode_steps=40)
     spec = made.unwrapped.spec  # gym.make leaves max_episode_steps=None in it
     assert spec.max_episode_steps is None
-    with pytest.raises(ValueError, match=r"max_episode_steps=None gives no time limit"):
-        gym.make(spec)
+    again = gym.make(spec)  # as Gymnasium's env checker and vector envs do
+    assert again.unwrapped.max_episode_steps == 1000
+    again.close()
     own = gym.make(gym.envs.registration.EnvSpec(
         id="rehabbot-own-horizon", entry_point=spec.entry_point,
         kwargs={**spec.kwargs, "max_episode_steps": 40}, max_episode_steps=None))

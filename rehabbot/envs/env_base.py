@@ -6,7 +6,6 @@ as read-only properties, the config's settings read as attributes, and the error
 from __future__ import annotations
 
 import dataclasses
-import sys
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -16,7 +15,7 @@ import numpy as np
 from rehabbot.common.checks import check_number, check_options
 from rehabbot.envs.build import reward_with_horizon
 from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES, kwarg_names
-from rehabbot.envs.registration import check_make
+from rehabbot.envs.time_limit import MakeTimeLimit
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
 from rehabbot.tasks import feasibility
 from rehabbot.tasks.targets import TargetSequence
@@ -24,7 +23,7 @@ from rehabbot.tasks.targets import TargetSequence
 RESET_OPTIONS = ("exercise", "weight_level")
 
 
-class RehabEnvBase(gym.Env):
+class RehabEnvBase(MakeTimeLimit, gym.Env):
     """The shared part of the RehabBot envs. A subclass sets :attr:`config_class` and, in its
     constructor, ``config``, calls :meth:`_adopt_parts` on its built parts, and sets
     ``_rendering``, ``_healthy_low`` and ``_healthy_high``; ``reset`` and ``step`` keep
@@ -91,24 +90,6 @@ class RehabEnvBase(gym.Env):
     def target_sequence(self) -> TargetSequence:
         """The episode's targets (patient and robot joint space)."""
         return self._sequence
-
-    @property
-    def spec(self) -> gym.envs.registration.EnvSpec | None:
-        """The spec ``gym.make`` gave the env (None when built directly)."""
-        return self.__dict__.get("_spec")
-
-    @spec.setter
-    def spec(self, spec: gym.envs.registration.EnvSpec | None) -> None:
-        # gym.make sets the spec right after building the env, then wraps it in its TimeLimit:
-        # the env takes that limit as its own (rehabbot.envs.registration).
-        try:
-            limit = None if spec is None else check_make(spec, sys._getframe(1))
-            if limit is not None:
-                self.set_time_limit(limit)
-        except ValueError:
-            self.close()
-            raise
-        self.__dict__["_spec"] = spec
 
     def set_time_limit(self, max_episode_steps: int) -> None:
         """Make ``max_episode_steps`` the env's horizon everywhere it is used: the config, the

@@ -28,7 +28,6 @@ every patient at once to check a population up front.
 from __future__ import annotations
 
 import dataclasses
-import sys
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -36,14 +35,14 @@ import gymnasium as gym
 from rehabbot.common.checks import check_number, check_options
 from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES, RehabEnvConfig
 from rehabbot.envs.env_base import RESET_OPTIONS
-from rehabbot.envs.registration import check_make
 from rehabbot.envs.rehab_env import RehabEnv
+from rehabbot.envs.time_limit import MakeTimeLimit
 from rehabbot.sim.populations import PatientPopulation, as_population
 
 POPULATION_RESET_OPTIONS = (*RESET_OPTIONS, "patient")
 
 
-class PopulationEnv(gym.Env):
+class PopulationEnv(MakeTimeLimit, gym.Env):
     """A patient drawn from ``patients`` every episode (see the module docstring)."""
 
     metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
@@ -96,23 +95,6 @@ class PopulationEnv(gym.Env):
             env.close()
 
     # -- time limit ----------------------------------------------------------------------
-    @property
-    def spec(self) -> gym.envs.registration.EnvSpec | None:
-        """The spec ``gym.make`` gave the env (None when built directly)."""
-        return self.__dict__.get("_spec")
-
-    @spec.setter
-    def spec(self, spec: gym.envs.registration.EnvSpec | None) -> None:
-        # As RehabEnvBase.spec: gym.make's TimeLimit becomes every patient's horizon.
-        try:
-            limit = None if spec is None else check_make(spec, sys._getframe(1))
-            if limit is not None:
-                self.set_time_limit(limit)
-        except ValueError:
-            self.close()
-            raise
-        self.__dict__["_spec"] = spec
-
     def set_time_limit(self, max_episode_steps: int) -> None:
         """Make ``max_episode_steps`` the horizon of every patient's env (built or not)."""
         low, high, _integer = NUMBER_RANGES["max_episode_steps"]

@@ -16,9 +16,10 @@ when ``gym.make`` hands it its spec (:func:`time_limit_from_make`) and uses ``m`
 it uses ``max_episode_steps``: the safety penalties' steps left, ``config`` and the rendering's
 trace. A non-positive ``m`` is refused (``ValueError`` naming it), and so is Gymnasium's
 ``m=-1`` ("no ``TimeLimit``"): the safety penalty needs a horizon. A spec without a time limit
-(``gym.make(spec)`` of a spec whose ``max_episode_steps`` is None) is refused too unless the
-env's own ``max_episode_steps=`` keyword is in its kwargs (then that is the horizon, and
-nothing truncates the episodes). Gymnasium offers no hook for this: the env's ``spec`` setter
+(``gym.make(spec)`` of a spec whose ``max_episode_steps`` is None, as ``env.unwrapped.spec``
+is: Gymnasium's env checker and vector envs make envs again from it) keeps the env's own
+horizon (its ``max_episode_steps=`` keyword, 1000 by default), and nothing truncates the
+episodes. Gymnasium offers no hook for this: the env's ``spec`` setter
 reads ``max_episode_steps``, ``env_spec`` and ``kwargs`` from the frame of
 ``gymnasium.make`` that sets it (Gymnasium 1.x; ``tests/test_knobs.py`` fails if a new
 version moves them).
@@ -163,8 +164,7 @@ def time_limit_from_make(spec: Any, caller: types.FrameType | None) -> int | Non
 
     Raises:
         ValueError: a ``max_episode_steps`` that is not a positive integer (``-1``, Gymnasium's
-            "no time limit", included), or a spec without a time limit whose kwargs do not
-            set the env's own ``max_episode_steps``.
+            "no time limit", included).
     """
     if _made_by_gym(caller):
         given = caller.f_locals.get("max_episode_steps")
@@ -176,14 +176,7 @@ def time_limit_from_make(spec: Any, caller: types.FrameType | None) -> int | Non
                     "time limit; -1, Gymnasium's 'no time limit', is refused: the safety "
                     "penalty counts the steps left to the limit)")
             return given
-        if registered is not None:
-            return registered
-        kwargs = getattr(spec, "kwargs", None) or {}
-        if "max_episode_steps" in kwargs:
-            return None  # the env's own horizon; nothing truncates
-        raise ValueError(f"{getattr(spec, 'id', 'this env')}: max_episode_steps=None gives no "
-                         "time limit; pass max_episode_steps=<a positive integer> (the safety "
-                         "penalty counts the steps left to the limit)")
+        return registered  # None: no TimeLimit; the env keeps its own horizon
     limit = getattr(spec, "max_episode_steps", None)
     if isinstance(limit, int) and not isinstance(limit, bool) and limit > 0:
         return limit
