@@ -274,24 +274,29 @@ def rollout_key(env_id: str, mode: str, exercise: int, level: int) -> str:
     return f"{env_id.split('/', 1)[-1]}|{mode}|e{exercise}|l{level}"
 
 
-def record_all(ids=IDS, modes=MODES) -> dict[str, dict[str, np.ndarray]]:
-    """Every rollout of ``ids`` x ``modes`` x exercises x weight levels."""
+def each_rollout(ids=IDS, modes=MODES):
+    """``(env, env_id, mode, exercise, level)`` of every rollout of ``ids`` x ``modes`` x
+    exercises x weight levels, one env per id and mode (closed after its rollouts)."""
     import gymnasium as gym
 
     import rehabbot  # noqa: F401  (registers the ids)
 
-    rollouts = {}
     for env_id in ids:
         for mode in modes:
             env = gym.make(env_id, control_mode=mode)
             try:
                 for exercise in exercises_of(env_id):
                     for level in WEIGHT_LEVELS:
-                        rollouts[rollout_key(env_id, mode, exercise, level)] = record_rollout(
-                            env, env_id, mode, exercise, level)
+                        yield env, env_id, mode, exercise, level
             finally:
                 env.close()
-    return rollouts
+
+
+def record_all(ids=IDS, modes=MODES) -> dict[str, dict[str, np.ndarray]]:
+    """Every rollout of ``ids`` x ``modes`` x exercises x weight levels."""
+    return {rollout_key(env_id, mode, exercise, level):
+            record_rollout(env, env_id, mode, exercise, level)
+            for env, env_id, mode, exercise, level in each_rollout(ids, modes)}
 
 
 def flatten(rollouts: dict[str, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -341,35 +346,20 @@ def load_golden(path: Path = GOLDEN_PATH) -> dict[str, dict[str, np.ndarray]]:
 def _rerecord_stops() -> dict[str, dict[str, np.ndarray]]:
     """The stored rollouts with those that stop re-recorded (fresh or stored, either way);
     ``SystemExit`` if a rollout without a stop is not reproduced."""
-    import gymnasium as gym
-
-    import rehabbot  # noqa: F401  (registers the ids)
-
     stored = load_golden()
     rollouts, renewed = {}, 0
-    for env_id in IDS:
-        for mode in MODES:
-            env = gym.make(env_id, control_mode=mode)
-            try:
-                for exercise in exercises_of(env_id):
-                    for level in WEIGHT_LEVELS:
-                        key = rollout_key(env_id, mode, exercise, level)
-                        old = stored[key]
-                        fresh = record_rollout(env, env_id, mode, exercise, level)
-                        stops = (old["safety_violation"] > 0).any() or (
-                            fresh["safety_violation"] > 0).any()
-                        if stops:
-                            rollouts[key] = fresh
-                            renewed += 1
-                            continue
-                        difference = compare_rollout(env, env_id, mode, exercise, level, old,
-                                                     actual=fresh)
-                        if difference is not None:
-                            raise SystemExit(f"{key} has no safety stop but changed: "
-                                             f"{difference}")
-                        rollouts[key] = old
-            finally:
-                env.close()
+    for env, env_id, mode, exercise, level in each_rollout():
+        key = rollout_key(env_id, mode, exercise, level)
+        old = stored[key]
+        fresh = record_rollout(env, env_id, mode, exercise, level)
+        if (old["safety_violation"] > 0).any() or (fresh["safety_violation"] > 0).any():
+            rollouts[key] = fresh
+            renewed += 1
+            continue
+        difference = compare_rollout(env, env_id, mode, exercise, level, old, actual=fresh)
+        if difference is not None:
+            raise SystemExit(f"{key} has no safety stop but changed: {difference}")
+        rollouts[key] = old
     print(f"re-recorded {renewed} rollouts with a safety stop")
     return rollouts
 
