@@ -127,7 +127,7 @@ takes a config instead.
 | ``smoothness_weight`` | 0.0 | weight of ``reward_smoothness`` |
 | ``effort_weight`` | 0.0 | weight of ``reward_effort`` |
 | ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
-| ``safety_penalty`` | ``"hold"`` | paper reward: ``"hold"`` (the gap to holding still) or ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
+| ``safety_penalty`` | ``"hold"`` | ``"hold"`` (every reward: the gap to the best hold of the episode, one step more and a margin of 1.0, so a stop never pays) or, paper reward only, ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
 | ``safety_penalty_steps`` | None | charge at most this many steps at the current hold cost instead (0.2.0's default was 100; with a cap a stop can pay) |
 | ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range, in [0, 10] deg (10: the knee hyperextension a CPM device allows, domain-facts §4.2) |
 | ``cuff_force_limit_n`` | None | cuff force rule: limit in N for every cuff, in [1, 880] N (880 = 4 x the largest ISO/TS 15066 quasi-static limit, thighs 220 N); None = the quasi-static limit of the region each cuff holds |
