@@ -29,7 +29,6 @@ import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.analysis.reward_audit import AUDIT_GAMMAS, hold_action, push_action, push_audit
 from rehabbot.common.files import atomic_write_json
 from rehabbot.envs.registration import ENV_SPECS, resolve_env_id
-from rehabbot.tasks.reward import STOP_MARGIN
 
 MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 
@@ -52,9 +51,7 @@ def audit(ids: list[str], modes: list[str], seed: int) -> tuple[Counter, list[di
                                 "discounted, with headway" if c.gamma is not None and c.headway
                                 else "asserted")
                         counts[kind] += 1
-                        gamma = 1.0 if c.gamma is None else c.gamma
-                        margin = 0.5 * STOP_MARGIN * gamma ** (result.stop_step - c.state - 1)
-                        pays = not c.stop_value < c.hold_value - margin
+                        pays = result.stop_pays(c)
                         if pays:
                             counts[f"{kind}: stop pays"] += 1
                         rows.append({"env_id": env_id, "control_mode": mode, "joint": joint,

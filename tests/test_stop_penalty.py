@@ -21,7 +21,6 @@ from hypothesis import strategies as st
 import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.analysis.reward_audit import push_audit
 from rehabbot.envs.registration import ENV_SPECS
-from rehabbot.tasks.reward import STOP_MARGIN
 
 MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")
 GAMMAS = (None, 0.95, 0.99, 0.999)
@@ -59,10 +58,7 @@ def check_stop_never_pays(push: dict) -> list:
             continue  # both episodes stop: no hold to compare with
         if comparison.gamma is not None and comparison.headway:
             continue  # discounted, the progress made first can pay (module docstring)
-        # The margin, discounted from the stop back to the state compared.
-        gamma = 1.0 if comparison.gamma is None else comparison.gamma
-        margin = 0.5 * STOP_MARGIN * gamma ** (audit.stop_step - comparison.state - 1)
-        if not comparison.stop_value < comparison.hold_value - margin:
+        if audit.stop_pays(comparison):  # by less than half the margin, discounted
             failures.append((audit.violation, audit.stop_step, comparison))
     return failures
 

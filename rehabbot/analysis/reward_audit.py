@@ -18,6 +18,7 @@ import numpy as np
 from rehabbot.envs.control import PAPER_DELTA_RAD
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.tasks.observation import tracking_slices
+from rehabbot.tasks.reward import STOP_MARGIN
 
 
 def _joint_slices(env: gym.Env) -> tuple[slice, slice]:
@@ -213,10 +214,6 @@ class HoldComparison:
     hold_stop: str | None
     headway: bool
 
-    @property
-    def stop_pays(self) -> bool:
-        return self.hold_stop is None and not self.stop_value < self.hold_value
-
 
 @dataclass(frozen=True)
 class PushAudit:
@@ -232,6 +229,17 @@ class PushAudit:
     violation: str | None
     stop_step: int
     comparisons: tuple[HoldComparison, ...]
+
+    def margin(self, comparison: HoldComparison) -> float:
+        """The margin a stop must lose by: half of ``STOP_MARGIN``, discounted from the stop
+        back to the compared state (the penalty pays the whole margin at the stop)."""
+        gamma = 1.0 if comparison.gamma is None else comparison.gamma
+        return 0.5 * STOP_MARGIN * gamma ** (self.stop_step - comparison.state - 1)
+
+    def stop_pays(self, comparison: HoldComparison) -> bool:
+        """Whether the stop earns more than holding still less :meth:`margin` (whatever
+        ``hold_stop`` and ``headway`` say: the caller decides which comparisons count)."""
+        return not comparison.stop_value < comparison.hold_value - self.margin(comparison)
 
 
 def push_action(env: gym.Env, joint: int, sign: int, fraction: float) -> np.ndarray:
