@@ -234,9 +234,11 @@ def test_list_shows_every_id_with_its_spaces(capsys) -> None:
     for env_id, (kwargs, description) in ENV_SPECS.items():
         line = next(line for line in lines if line.startswith(env_id))
         assert kwargs["limb"] in line and kwargs["task_type"] in line
-        obs, act = ("(44,)", "(12,)") if env_id in BILATERAL_IDS else ("(23,)", "(6,)")
+        v2 = env_id.endswith("-v2")
+        obs, act = (("(98,)" if v2 else "(44,)", "(12,)") if env_id in BILATERAL_IDS else
+                    ("(50,)" if v2 else "(23,)", "(6,)"))
         assert obs in line and act in line and description in line
-        assert "0.00785" in line  # pi/400
+        assert ("1.00000" if v2 else "0.00785") in line  # Box(-1, 1) or pi/400
 
 
 # --------------------------------------------------------------------------- listings

@@ -32,9 +32,10 @@ from rehabbot.rl.sweep_config import (
 ROOT = Path(__file__).resolve().parents[1]
 ENV = "rehab-reach-v0"
 FULL_ID = "rehabbot/rehab-reach-v0"
-# Tiny networks, no gradient step before step 1000: a 200-step run takes about a second
-# (on Stable-Baselines3: SBX compiles its networks first, which takes longer).
-SMALL_SAC = {"learning_starts": 1000, "buffer_size": 2000, "batch_size": 32,
+# Tiny networks, no gradient step before step 40 (a run must update its model:
+# rehabbot.rl.planning.check_run_updates): a 200-step run takes about a second (on
+# Stable-Baselines3: SBX compiles its networks first, which takes longer).
+SMALL_SAC = {"learning_starts": 40, "buffer_size": 2000, "batch_size": 32,
              "policy_kwargs": "dict(net_arch=[16, 16])"}
 
 

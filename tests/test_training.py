@@ -225,7 +225,7 @@ def test_resume_from_a_damaged_file_is_refused_and_changes_nothing(tmp_path: Pat
 @pytest.mark.slow
 def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
     out = tmp_path / "runs"
-    hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})
+    hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 999_999})
     argv = [ENV, "--algo", "sac", "--timesteps", "1000000", "--hyperparams", str(hp_file),
             "--out", str(out), "--checkpoint-freq", "500", "--eval-freq", "0",
             "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress", "--backend", "sb3"]
@@ -278,7 +278,7 @@ def test_sigint_saves_a_checkpoint_that_resumes(tmp_path: Path, capsys) -> None:
 @pytest.mark.slow
 def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path) -> None:
     out = tmp_path / "runs"
-    hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 1_000_000})
+    hp_file = _yaml(tmp_path / "sac.yml", {**SMALL["sac"], "learning_starts": 999_999})
     argv = [ENV, "--algo", "sac", "--timesteps", "1000000", "--hyperparams", str(hp_file),
             "--out", str(out), "--checkpoint-freq", "1000", "--eval-freq", "500",
             "--eval-episodes", "1", "--env-kwargs", json.dumps(ENV_KWARGS), "--no-progress",
@@ -335,7 +335,7 @@ def test_sigterm_in_process_stops_and_restores_the_handlers(tmp_path: Path) -> N
     with pytest.raises(TrainingInterrupted) as caught:
         train_run(ENV, "td3", 0, 1_000_000, out, env_kwargs=ENV_KWARGS, checkpoint_freq=300,
                   eval_freq=0, progress_bar=False, backend="sb3",
-                  hyperparams={**SMALL["td3"], "learning_starts": 1_000_000})
+                  hyperparams={**SMALL["td3"], "learning_starts": 999_999})
     killer.join()
     assert caught.value.exit_code == 143
     assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
@@ -531,3 +531,57 @@ def test_module_import_is_cheap() -> None:
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True, timeout=60)
     assert result.stdout.strip() == "[]"
+
+
+# --------------------------------------------------------------------------- too-short runs
+
+
+@pytest.mark.parametrize(("algo", "timesteps", "hp", "words"), [
+    ("ppo", 64, {}, "shorter than one ppo rollout (n_steps=2048 x 1 env = 2048 steps)"),
+    ("ppo", 2000, {"n_steps": 256, "n_envs": 8},
+     "(n_steps=256 x 8 envs = 2048 steps): the model would never update"),
+    ("sac", 100, {}, "total_timesteps=100 ends before learning_starts=100"),
+    ("td3", 500, {"learning_starts": 500}, "ends before learning_starts=500"),
+])
+def test_a_run_too_short_to_update_is_refused_before_anything_is_written(
+        tmp_path: Path, algo: str, timesteps: int, hp: dict, words: str) -> None:
+    """PPO shorter than one rollout, or an off-policy run that ends before learning_starts,
+    would exit 0 with an untrained model: refused by name, nothing written."""
+    out = tmp_path / "runs"
+    with pytest.raises(CliError) as caught:
+        cmd_train(_parse(FULL_ID, "--algo", algo, "--timesteps", str(timesteps), "--hyperparams",
+                         str(_yaml(tmp_path / "hp.yml", hp)), "--out", str(out)))
+    assert words in str(caught.value) and caught.value.exit_code == 2
+    assert not out.exists()
+
+
+def test_one_update_is_enough_to_run() -> None:
+    from rehabbot.rl.hyperparams import as_hyperparameters
+    from rehabbot.rl.planning import check_run_updates
+
+    check_run_updates("ppo", 2048, 1, as_hyperparameters({}, FULL_ID, "ppo"))
+    check_run_updates("sac", 101, 1, as_hyperparameters({}, FULL_ID, "sac"))
+
+
+def test_train_without_hyperparams_uses_the_shipped_file_and_says_so(tmp_path: Path,
+                                                                      capsys) -> None:
+    """``rehabbot train ID --algo A`` trains with the shipped settings of that id and algorithm
+    (not the library's defaults, which learn nothing on RehabBot) and prints which."""
+    from rehabbot.rl.training import plan_seeds
+
+    out = tmp_path / "runs"
+    plan = plan_seeds("rehab-knee-v2", "ppo", [0], None, out, hyperparams="ppo")[0]
+    assert plan.hp.entry == "rehabbot/rehab-knee-v2" and plan.hp.policy == "MlpPolicy"
+    assert plan.n_envs == 8 and plan.total_timesteps == 1_000_000
+    # The shipped rollout (8 envs x 256 steps), not the library's 2048 x 1, is the one refused.
+    assert "rollout (n_steps=256 x 8 envs = 2048 steps)" in str(_cli_error(_parse(
+        "rehab-knee-v2", "--algo", "ppo", "--timesteps", "64", "--out", str(out))))
+    capsys.readouterr()
+    assert cmd_train(_parse("rehab-reach-v2", "--algo", "ppo", "--timesteps", "2048",
+                            "--out", str(out), "--eval-freq", "0", "--checkpoint-freq", "0",
+                            "--no-progress")) == 0
+    err = capsys.readouterr().err
+    assert "settings: the shipped 'ppo' file, entry 'rehabbot/rehab-reach-v2'" in err
+    assert "sb3-defaults/ppo trains with the library's defaults" in err
+    manifest = _manifest(out / "rehab-reach-v2" / "ppo" / "seed0")
+    assert manifest["hyperparameters"]["policy"] == "MlpPolicy"

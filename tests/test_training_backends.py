@@ -34,8 +34,9 @@ FULL_ID = "rehabbot/rehab-reach-v0"
 SHORT = {"max_episode_steps": 60}
 SAC_SMALL = {"learning_starts": 100, "buffer_size": 5000, "batch_size": 32, "train_freq": 4,
              "gradient_steps": 4, "policy_kwargs": "dict(net_arch=[16, 16])"}
-# No gradient updates: the buffer holds exactly what was collected.
-NO_UPDATES = {"learning_starts": 100_000, "buffer_size": 5000,
+# Few gradient updates (a run must update its model: rehabbot.rl.planning.check_run_updates);
+# updates never change the buffer, which holds exactly what was collected.
+NO_UPDATES = {"learning_starts": 5, "batch_size": 8, "buffer_size": 5000,
               "policy_kwargs": "dict(net_arch=[16, 16])"}
 # One PPO update of a negligible size (a learning rate must be > 0): after --bc, the cloned
 # policy is what the run saves, give or take 1e-12 (Adam steps by about the learning rate).
@@ -161,11 +162,11 @@ def test_backend_sb3_is_honoured_and_auto_prefers_sbx(tmp_path: Path, monkeypatc
 
     assert stable_baselines3.PPO.load(run_dir / "model.zip").num_timesteps == 64
 
-    plan = plan_seeds(ENV, "sac", [0], 100, tmp_path / "plans")[0]
+    plan = plan_seeds(ENV, "sac", [0], 101, tmp_path / "plans")[0]
     assert plan.backend == ("sbx" if backends.sbx_available() else "sb3")
     assert plan.hp.backend == plan.backend
     monkeypatch.setattr(backends, "sbx_available", lambda: False)
-    plan = plan_seeds(ENV, "sac", [0], 100, tmp_path / "plans")[0]
+    plan = plan_seeds(ENV, "sac", [0], 101, tmp_path / "plans")[0]
     assert plan.backend == "sb3" and plan.hp.source == "sb3 defaults"
     assert not (tmp_path / "plans").exists()
 

@@ -15,7 +15,7 @@ from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_
 from rehabbot.envs.registration import ENV_SPECS, env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
-from rehabbot.rl.hyperparams import coerce_number, settings_names
+from rehabbot.rl.hyperparams import coerce_number, settings_names, settings_path, shipped_settings
 from rehabbot.rl.planning import (
     DEFAULT_BC_EPISODES,
     DEFAULT_CHECKPOINT_FREQ,
@@ -134,7 +134,9 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--hyperparams", metavar="FILE.yml|NAME",
                         help="RL-Zoo-style hyperparameter file, or the name of one shipped "
                              f"with rehabbot ({', '.join(settings_names())}); default: "
-                             "the library's defaults")
+                             "the shipped file named after the algorithm (sac, td3, ppo, tqc, "
+                             "crossq: the settings of the published results, printed); "
+                             "sb3-defaults/<algo> for the library's defaults")
     parser.add_argument("--env-kwargs", metavar="JSON",
                         help="keyword arguments for the env, as a JSON object")
     parser.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
@@ -185,14 +187,24 @@ def cmd_train(args: argparse.Namespace) -> int:
     from rehabbot.rl import runs
     from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
 
+    hyperparams = args.hyperparams
+    if hyperparams is None and not args.resume:
+        hyperparams = shipped_settings(args.algo)
     plans = plan_seeds(args.env, args.algo, args.seeds or DEFAULT_SEEDS, args.timesteps,
-                       args.out, hyperparams=args.hyperparams,
+                       args.out, hyperparams=hyperparams,
                        env_kwargs=parse_env_kwargs(args.env_kwargs), resume=args.resume,
                        overwrite=args.overwrite, n_envs=args.n_envs,
                        checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq,
                        eval_episodes=args.eval_episodes, progress_bar=not args.no_progress,
                        vec=args.vec, backend=args.backend, demos=args.demos, bc=args.bc)
     new_runs = [plan for plan in plans if plan.skip is None and plan.resume is None]
+    if args.hyperparams is None and new_runs and hyperparams is not None:
+        library = (f"--hyperparams sb3-defaults/{args.algo}" if
+                   f"sb3-defaults/{args.algo}" in settings_names() else
+                   "a --hyperparams file without entries")
+        print(f"settings: the shipped {hyperparams!r} file, entry {new_runs[0].hp.entry!r} "
+              f"({settings_path(hyperparams)}); {library} trains with the library's defaults "
+              "instead", file=sys.stderr, flush=True)
     for change in new_runs[0].hp.backend_changes if new_runs else ():
         used = "dropped" if change["used"] is None else f"-> {change['used']}"
         print(f"note: {new_runs[0].backend} backend: {change['key']} {change['given']!r} "

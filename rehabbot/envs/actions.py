@@ -41,3 +41,31 @@ def checked_action(action, space: spaces.Box, clip_low: np.ndarray, clip_high: n
     if clipped:
         a = np.clip(a, clip_low, clip_high)
     return a, clipped
+
+
+class UnitActions:
+    """Actions in ``Box(-1, 1)`` (the ``-v2`` ids, ``action_scale="unit"``), mapped linearly
+    onto the controller's box ``[clip_low, clip_high]``: -1 is the lower and +1 the upper
+    bound of each joint's action (``-pi/400 .. pi/400`` rad in ``joint_delta`` mode; the
+    patient's setpoint bounds in ``joint_position`` mode). The checks and the clipping count of
+    :func:`checked_action` apply to the unit action."""
+
+    def __init__(self, clip_low: np.ndarray, clip_high: np.ndarray) -> None:
+        low = np.asarray(clip_low, dtype=np.float64)
+        high = np.asarray(clip_high, dtype=np.float64)
+        if low.shape != high.shape or not np.all(high > low):
+            raise ValueError(f"a unit action needs a bounded box, got {low} .. {high}")
+        self.space = spaces.Box(-1.0, 1.0, low.shape, np.float32)
+        self._center, self._half = (high + low) / 2, (high - low) / 2
+        self._low, self._high = low.astype(np.float32), high.astype(np.float32)
+        self._ones = np.ones(low.shape)
+        self._bounds = ((-1.0, 1.0),) * low.size
+
+    def native(self, action) -> tuple[np.ndarray, int]:
+        """``(the controller's action (float32, inside its box), how many values were
+        clipped to [-1, 1])``; ``ValueError`` as :func:`checked_action`."""
+        unit, clipped = checked_action(action, self.space, -self._ones, self._ones,
+                                       self._bounds)
+        native = (self._center + self._half * unit).astype(np.float32)
+        np.clip(native, self._low, self._high, out=native)  # float32 rounding at the ends
+        return native, clipped

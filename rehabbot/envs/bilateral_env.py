@@ -1,6 +1,7 @@
 """``BilateralEnv``: two robots, one strapped to each hand of the seated patient, move both arms
 through a therapy exercise together or in turns (Gymnasium API). Registered as
-``rehabbot/rehab-bilateral-v1`` (:mod:`rehabbot.envs.registration`).
+``rehabbot/rehab-bilateral-v1`` and, with the agent observation and actions in [-1, 1],
+``rehabbot/rehab-bilateral-v2`` (:mod:`rehabbot.envs.registration`).
 
 ## Description
 The paper's two-arm scene (its Figs. 2-3): the ``upper_bilateral`` preset, a robot on a stand
@@ -33,6 +34,16 @@ for both arms, right first, then ``e`` and ``l`` (44 values for two UR5e):
 | l | 1: weight level 0..4 (both arms' masses x1.0 .. x2.0) | - |
 
 The bounds are each arm's one-arm bounds; they do not depend on the patient.
+
+``rehab-bilateral-v2`` (``observation="agent"``, ``action_scale="unit"``): the action is
+``Box(-1, 1, (2 n,))``, each half mapped onto its robot's box; the observation is
+``Box(-2, 2, (98,))`` for two UR5e (110 for two FR3): the fields of
+:mod:`rehabbot.tasks.agent_observation`, each per-arm field right arm first
+(``joint_error_fine`` 12, ``joint_error`` 12, ``tool_error_fine`` 6, ``tool_error`` 6,
+``next_target`` 12, ``setpoint_lead`` 12, ``joint_velocity`` 12, ``theta_in_bounds`` 12,
+``phi_in_range`` 6, ``cuff_force`` 2), then ``exercise`` (one-hot over the 4 entries of the
+bilateral table), ``weight_level`` and ``target_progress``. The paper's fields are in
+``info["paper_observation"]``.
 
 ## Rewards
 :mod:`rehabbot.tasks.bilateral_reward`: the ``-v1`` terms with the path summed over both arms
@@ -148,6 +159,7 @@ class BilateralEnv(RehabEnvBase):
                                        self._base_rot[0])
         self._record = self.render_mode is not None
         self._bind_views()
+        self._adopt_agent_interface(n_arms=2)
         scene.reset_data(self.data)
 
     # ------------------------------------------------------------------------------------------
@@ -176,13 +188,17 @@ class BilateralEnv(RehabEnvBase):
         self._needs_reset = False
         if self.render_mode == "human":
             self.render()
-        return obs.copy(), info
+        return self._observation_out(info), info
 
     def step(self, action):
         if self._needs_reset:
             self._refuse_step()
-        action, clipped = checked_action(action, self.action_space, self._clip_low,
+        unit_clipped = 0
+        if self._unit_actions is not None:  # -v2: Box(-1, 1) onto the controllers' box
+            action, unit_clipped = self._unit_actions.native(action)
+        action, clipped = checked_action(action, self.controller.action_space, self._clip_low,
                                          self._clip_high, self._clip_bounds)
+        clipped += unit_clipped
         data, model = self.data, self.model
         self.controller.apply(action, data)
         for _ in range(self.frame_skip):
@@ -235,7 +251,7 @@ class BilateralEnv(RehabEnvBase):
         info = self._info(violation, reached and last, terms, clipped, outcome.sync_gap)
         if self.render_mode == "human":
             self.render()
-        return self._obs.copy(), reward, terminated, False, info
+        return self._observation_out(info), reward, terminated, False, info
 
     # ------------------------------------------------------------------------------------------
     # Properties

@@ -29,6 +29,11 @@ RENDER_MODES = ("human", "rgb_array", "depth_array")
 # "paper": eq. (5) (the -v0 ids); "progress": the learnable -v1 reward
 # (rehabbot.tasks.progress_reward).
 REWARDS = ("paper", "progress")
+# What the agent sees and how its actions are scaled: "paper" / "native" (the -v0 and -v1 ids:
+# the paper's 23 fields, actions in the control mode's units); "agent" / "unit" (the -v2 ids:
+# rehabbot.tasks.agent_observation, actions in Box(-1, 1), rehabbot.envs.actions.UnitActions).
+OBSERVATIONS = ("paper", "agent")
+ACTION_SCALES = ("native", "unit")
 
 PRESET_OF: dict[tuple[str, str], str] = {
     ("arm", "right"): "upper_right", ("arm", "left"): "upper_left",
@@ -98,6 +103,8 @@ class RehabEnvConfig:
     timestep_s: float = 0.002
     target_tolerance_rad: float = 0.05
     reward: str = "paper"
+    observation: str = "paper"
+    action_scale: str = "native"
     progress_weight: float = PROGRESS_WEIGHT_PER_RAD
     time_cost: float = TIME_COST_PER_STEP
     intermediate_bonus: float = 10.0
@@ -153,6 +160,8 @@ class RehabEnvConfig:
             raise ValueError(f"terminate_on_safety={self.terminate_on_safety!r} must be a bool")
         check_choice("safety_penalty", self.safety_penalty, SAFETY_PENALTIES)
         check_choice("reward", self.reward, REWARDS)
+        check_choice("observation", self.observation, OBSERVATIONS)
+        check_choice("action_scale", self.action_scale, ACTION_SCALES)
         if self.reward == "progress" and self.safety_penalty != "hold":
             raise ValueError(f"safety_penalty={self.safety_penalty!r} applies to the paper's "
                              "reward only (reward='paper'); the progress reward has one penalty")

@@ -13,11 +13,13 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.checks import check_number, check_options
+from rehabbot.envs.actions import UnitActions
 from rehabbot.envs.build import reward_with_horizon
 from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES, kwarg_names
 from rehabbot.envs.time_limit import MakeTimeLimit
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
 from rehabbot.tasks import feasibility
+from rehabbot.tasks.agent_observation import AgentObservation
 from rehabbot.tasks.targets import TargetSequence
 
 RESET_OPTIONS = ("exercise", "weight_level")
@@ -141,6 +143,46 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         self.dt_s = self.frame_skip * self.model.opt.timestep
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
         self._unusable_levels = parts.unusable_levels
+
+    def _adopt_agent_interface(self, n_arms: int) -> None:
+        """The ``-v2`` interface, when the config asks for it: the agent observation
+        (``observation="agent"``, :mod:`rehabbot.tasks.agent_observation`) and actions in
+        ``Box(-1, 1)`` (``action_scale="unit"``, :class:`rehabbot.envs.actions.UnitActions`).
+        Call once the controller, safety rules and ``_dof_adr`` are set."""
+        config = self.config
+        self._agent_observation: AgentObservation | None = None
+        self._unit_actions: UnitActions | None = None
+        if config.action_scale == "unit":
+            self._unit_actions = UnitActions(self.controller.clip_low, self.controller.clip_high)
+            self.action_space = self._unit_actions.space
+        if config.observation == "agent":
+            model, adr = self.model, np.asarray(self.scene.exercised_qpos_adr).tolist()
+            joints = [int(np.flatnonzero(model.jnt_qposadr == a)[0]) for a in adr]
+            phi_range = model.jnt_range[joints]
+            agent = self._agent_observation = AgentObservation(
+                self.controller.n_joints, n_arms, len(self.targets),
+                self.setpoint_low_rad, self.setpoint_high_rad, phi_range[:, 0], phi_range[:, 1],
+                self.safety.force_limits_n, has_setpoints=config.control_mode != "torque")
+            self.agent_layout = agent.layout
+            low, high = agent.space_bounds
+            self.observation_space = gym.spaces.Box(low, high, (agent.layout.size,), np.float32)
+
+    def paper_observation(self) -> np.ndarray:
+        """The paper's observation of the current state (a copy; its fields in
+        :attr:`layout`), whatever the id's ``observation``."""
+        return self._obs.copy()
+
+    def _observation_out(self, info: dict) -> np.ndarray:
+        """What ``reset`` and ``step`` return: the paper's observation, or the agent
+        observation (with the paper's in ``info["paper_observation"]``)."""
+        agent = self._agent_observation
+        if agent is None:
+            return self._obs.copy()
+        info["paper_observation"] = self._obs.copy()
+        i, sequence = self._target_index, self._sequence
+        return agent(self._obs, sequence.robot_rad[i + 1] if i + 1 < len(sequence) else None,
+                     self.controller.setpoint_rad, self.data.qvel[self._dof_adr],
+                     self.safety.cuff_forces_n(self.data), i, len(sequence))
 
     def _start_episode(self, seed: int | None, options: dict | None) -> None:
         """The part of ``reset`` both env classes share: seed, check the options, draw the

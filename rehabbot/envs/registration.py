@@ -112,7 +112,7 @@ for _id, _base_id in POPULATION_VARIANTS.items():
 # Both arms, one robot per hand (rehabbot.envs.bilateral_env): the -v1 reward summed over the
 # arms with a synchronisation term; symmetric and alternating patterns.
 BILATERAL_ENTRY_POINT = "rehabbot.envs.bilateral_env:BilateralEnv"
-BILATERAL_IDS: tuple[str, ...] = ("rehabbot/rehab-bilateral-v1",)
+BILATERAL_IDS: tuple[str, ...] = ("rehabbot/rehab-bilateral-v1", "rehabbot/rehab-bilateral-v2")
 # 40 s: an alternating exercise makes every move twice, one arm at a time (the scripted expert
 # needs up to 847 steps of the UR5e; one-arm exercises up to 446 of 1000).
 BILATERAL_MAX_EPISODE_STEPS = 2000
@@ -121,6 +121,24 @@ ENV_SPECS["rehabbot/rehab-bilateral-v1"] = (
     "both arms, seated, a robot on each hand: reach shoulder or elbow key poses with both arms "
     "together (symmetric) or in turns (alternating); learnable progress reward with a "
     "synchronisation term")
+
+
+# The -v2 ids: every -v1 id (the same task and reward) with the agent observation
+# (rehabbot.tasks.agent_observation: tracking errors, next target, cuff force margin, ... every
+# entry in [-2, 2]) and actions in Box(-1, 1); what a plain network of any framework learns.
+V2_KWARGS = {"observation": "agent", "action_scale": "unit"}
+V1_IDS: tuple[str, ...] = tuple(i for i in ENV_SPECS if i.endswith("-v1"))
+for _v1_id in V1_IDS:
+    _v2_id = _v1_id.replace("-v1", "-v2")
+    _kwargs, _description = ENV_SPECS[_v1_id]
+    ENV_SPECS[_v2_id] = ({**_kwargs, **V2_KWARGS},
+                         f"{_description}; agent observation, actions in [-1, 1]")
+    if _v1_id in CONDITION_VARIANTS:
+        _base, _condition, _text = CONDITION_VARIANTS[_v1_id]
+        CONDITION_VARIANTS[_v2_id] = (_base.replace("-v1", "-v2"), _condition, _text)
+    if _v1_id in POPULATION_VARIANTS:
+        POPULATION_VARIANTS[_v2_id] = POPULATION_VARIANTS[_v1_id].replace("-v1", "-v2")
+V2_IDS: tuple[str, ...] = tuple(i.replace("-v1", "-v2") for i in V1_IDS)
 
 
 def entry_point_of(env_id: str) -> str:

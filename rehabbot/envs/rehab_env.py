@@ -52,6 +52,34 @@ weight level of an id (``r``: each robot joint's hardware range, 2 pi or pi for 
 | 21 | e: exercise (0, 1, ...) | - | [0, number of exercises - 1] |
 | 22 | l: weight level (0..4) | - | [0, 4] |
 
+### The -v2 ids: ``observation="agent"``, ``action_scale="unit"``
+The ``-v2`` ids are the ``-v1`` task and reward with an interface any learner can use: the
+action is ``Box(-1, 1, (n,), float32)``, mapped linearly onto the control mode's box
+(``joint_delta``: -1 .. +1 is -pi/400 .. +pi/400 rad; ``joint_position``: the patient's
+setpoint bounds; :class:`rehabbot.envs.actions.UnitActions`), and the observation is
+``Box(-2, 2, (50,), float32)`` (56 with the FR3), every entry scaled to about [-1, 1]
+(:mod:`rehabbot.tasks.agent_observation`, where the formulas are):
+
+| index | observation | scale |
+|---|---|---|
+| 0-5 | ``joint_error_fine``: theta* - theta, the active target's joint errors | tanh(./0.05 rad) |
+| 6-11 | ``joint_error``: the same, coarse | tanh(./0.5 rad) |
+| 12-14 | ``tool_error_fine``: p* - p, base frame | tanh(./0.05 m) |
+| 15-17 | ``tool_error``: the same, coarse | tanh(./0.2 m) |
+| 18-23 | ``next_target``: theta*_{i+1} - theta*_i (0 at the last target) | tanh(./0.5 rad) |
+| 24-29 | ``setpoint_lead``: servo setpoint - theta (0 in torque mode) | tanh(./0.05 rad) |
+| 30-35 | ``joint_velocity``: the robot joints' velocities | tanh(./0.5 rad/s) |
+| 36-41 | ``theta_in_bounds``: theta, -1 / +1 at the setpoint bounds | clipped to +-2 |
+| 42-44 | ``phi_in_range``: the patient's exercised joints, -1 / +1 at the ends of their range | clipped to +-2 |
+| 45 | ``cuff_force``: cuff force / its limit (the cuff-force rule fires above 1) | clipped to [0, 2] |
+| 46-47 | ``exercise``: one-hot | 0 or 1 |
+| 48 | ``weight_level``: l / 2 - 1 | [-1, 1] |
+| 49 | ``target_progress``: 2 i / (N - 1) - 1 for the active target i of N | [-1, 1] |
+
+The paper's 23 fields stay available: ``info["paper_observation"]`` (every step) and
+``env.unwrapped.paper_observation()``, in the layout above (``env.unwrapped.layout``;
+``env.unwrapped.agent_layout`` names the agent observation's fields).
+
 ## Rewards
 Named terms, each reported as ``info["reward_<name>"]``; the reward is their sum
 (``docs/envs.md``, Reward). ``reward="paper"`` (the -v0 ids): eq. (5),
@@ -120,6 +148,8 @@ takes a config instead.
 | ``timestep_s`` | 0.002 | physics step in [1e-4, 0.005] s; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
 | ``target_tolerance_rad`` | 0.05 | epsilon of eq. (5) |
 | ``reward`` | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
+| ``observation`` | ``"paper"`` | ``"paper"`` (the paper's 23 fields, -v0 and -v1) or ``"agent"`` (the -v2 ids; see Observation space) |
+| ``action_scale`` | ``"native"`` | ``"native"`` (actions in the control mode's units, -v0 and -v1) or ``"unit"`` (``Box(-1, 1)``, the -v2 ids) |
 | ``progress_weight`` | 10.0 | progress reward: paid per rad of path travelled |
 | ``time_cost`` | 0.05 | progress reward: cost of every step |
 | ``intermediate_bonus`` | 10.0 | B_i for i < N - 1 |
@@ -251,6 +281,7 @@ class RehabEnv(RehabEnvBase):
                                        self._base_rot)
         self._record = self.render_mode is not None
         self._bind_views()
+        self._adopt_agent_interface(n_arms=1)
         self.scene.reset_data(self.data)
 
     # ------------------------------------------------------------------------------------------
@@ -282,17 +313,19 @@ class RehabEnv(RehabEnvBase):
         self._needs_reset = False
         if self.render_mode == "human":
             self.render()
-        return obs.copy(), info
+        return self._observation_out(info), info
 
     def step(self, action):
         if self._needs_reset:
             self._refuse_step()
-        data = self.data
-        if self.controller.apply_fast(action):  # a float32 array inside the box: checked
-            clipped = 0
-        else:
-            action, clipped = checked_action(action, self.action_space, self._clip_low,
-                                             self._clip_high, self._clip_bounds)
+        data, clipped = self.data, 0
+        if self._unit_actions is not None:  # -v2: Box(-1, 1) onto the controller's box
+            action, clipped = self._unit_actions.native(action)
+        if not self.controller.apply_fast(action):  # a float32 array inside the box: checked
+            action, native_clipped = checked_action(action, self.controller.action_space,
+                                                    self._clip_low, self._clip_high,
+                                                    self._clip_bounds)
+            clipped += native_clipped
             self.controller.apply(action, data)
         self._physics.step(self.model, data, self._goal, self.np_random)
         self._steps += 1
@@ -361,7 +394,7 @@ class RehabEnv(RehabEnvBase):
         info = self._info(violation, is_success, force_n, terms, clipped)
         if self.render_mode == "human":
             self.render()
-        return obs.copy(), reward, terminated, False, info
+        return self._observation_out(info), reward, terminated, False, info
 
     # ------------------------------------------------------------------------------------------
     # Properties

@@ -15,6 +15,7 @@ import numpy as np
 from rehabbot.envs.config import RehabEnvConfig
 from rehabbot.envs.control import PAPER_DELTA_RAD
 from rehabbot.envs.rehab_env import RehabEnv
+from rehabbot.tasks.agent_observation import JOINT_FINE_SCALE_RAD, JOINT_SCALE_RAD, agent_layout
 from rehabbot.tasks.observation import paper_layout
 
 SUPPORTED_MODES = ("joint_delta", "joint_velocity", "joint_position")
@@ -52,28 +53,48 @@ class ScriptedExpert:
         self.gain = gain
         self.speed_fraction = speed_fraction
         self._base = base
-        space = env.single_action_space if hasattr(env, "single_action_space") \
-            else env.action_space
-        self._space = space
-        n_joints = int(space.shape[0])
-        layout = base.layout if base is not None else paper_layout(n_joints)
-        self._theta_star, self._theta = layout.slice("theta_star"), layout.slice("theta")
+        config = base.config if base is not None else _config_of(env)
+        # The controller's own action box (the env's space is Box(-1, 1) with unit actions).
+        low, high = native_action_box(base if base is not None else env, config)
+        self._native_low, self._native_high = low, high
+        self._unit = config.action_scale == "unit"
+        self._center, self._half = (high + low) / 2, (high - low) / 2
+        n_joints = low.size
+        self._agent = config.observation == "agent"
+        if self._agent:
+            n_arms = 2 if _is_bilateral(config) else 1
+            layout = agent_layout(n_joints // n_arms, n_arms, 1)
+            self._fine = layout.slice("joint_error_fine")
+            self._coarse = layout.slice("joint_error")
+        else:
+            layout = base.layout if base is not None else paper_layout(n_joints)
+            self._theta_star, self._theta = layout.slice("theta_star"), layout.slice("theta")
         # Largest setpoint change per decision [rad] that the mode allows.
         if mode == "joint_velocity":
             self._dt_s = base.dt_s if base is not None else _first_dt(env)
-            self._step_max = space.high.astype(float) * self._dt_s
+            self._step_max = high * self._dt_s
         elif mode == "joint_position":
             self._step_max = np.full(n_joints, PAPER_DELTA_RAD)
         else:
-            self._step_max = space.high.astype(float)
+            self._step_max = high.copy()
+
+    def joint_error(self, batch: np.ndarray) -> np.ndarray:
+        """``theta* - theta`` of each observation of ``batch``: read from the paper's fields,
+        or recovered from the agent observation's ``tanh`` errors (the fine one where it is
+        not saturated)."""
+        if not self._agent:
+            return batch[:, self._theta_star] - batch[:, self._theta]
+        fine = np.clip(batch[:, self._fine], -1.0, 1.0)
+        coarse = np.clip(batch[:, self._coarse], -1 + 1e-7, 1 - 1e-7)
+        from_fine = JOINT_FINE_SCALE_RAD * np.arctanh(np.clip(fine, -0.99, 0.99))
+        return np.where(np.abs(fine) < 0.99, from_fine, JOINT_SCALE_RAD * np.arctanh(coarse))
 
     def predict(self, observation: np.ndarray, state=None, episode_start=None,
                 deterministic: bool = True) -> tuple[np.ndarray, None]:
         """Action(s) for one observation or a batch of them; SB3's signature."""
         obs = np.asarray(observation, dtype=float)
         batch = obs.reshape(-1, obs.shape[-1])
-        error = batch[:, self._theta_star] - batch[:, self._theta]
-        step = self.gain * error
+        step = self.gain * self.joint_error(batch)
         limit = self.speed_fraction * self._step_max
         scale = np.max(np.abs(step) / limit, axis=1, keepdims=True)
         step = step / np.maximum(scale, 1.0)
@@ -83,7 +104,9 @@ class ScriptedExpert:
             action = step / self._dt_s
         else:
             action = self._base.controller.setpoint_rad + step[0]
-            action = np.clip(action, self._space.low, self._space.high)[None]
+            action = np.clip(action, self._native_low, self._native_high)[None]
+        if self._unit:
+            action = np.clip((action - self._center) / self._half, -1.0, 1.0)
         action = action.astype(np.float32)
         return (action[0] if obs.ndim == 1 else action), state
 
@@ -112,3 +135,30 @@ def _mode_of(env) -> str:
     if hasattr(env, "envs"):
         return _rehab_env(env.envs[0]).control_mode
     raise ValueError(f"cannot find the control mode of {env!r}")
+
+
+def _config_of(env) -> RehabEnvConfig:
+    """The config of a vector env's sub-envs (Gymnasium or SB3 vector env)."""
+    if hasattr(env, "get_attr"):
+        return env.get_attr("config")[0]
+    if hasattr(env, "envs"):
+        return _rehab_env(env.envs[0]).config
+    raise ValueError(f"cannot find the config of {env!r}")
+
+
+def _is_bilateral(config: RehabEnvConfig) -> bool:
+    return hasattr(config, "bilateral_table")
+
+
+def native_action_box(env, config: RehabEnvConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The controller's action box ``(low, high)`` (float64): the env's action space with
+    native actions, the box that ``Box(-1, 1)`` maps onto with unit actions."""
+    if config.action_scale == "native" or not hasattr(env, "controller"):
+        if config.action_scale == "unit":  # a vector env: ask a sub-env
+            controller = (env.get_attr("controller")[0] if hasattr(env, "get_attr")
+                          else _rehab_env(env.envs[0]).controller)
+            return (controller.clip_low.astype(float), controller.clip_high.astype(float))
+        space = env.single_action_space if hasattr(env, "single_action_space") \
+            else env.action_space
+        return space.low.astype(float), space.high.astype(float)
+    return env.controller.clip_low.astype(float), env.controller.clip_high.astype(float)

@@ -94,6 +94,14 @@ def settings_names() -> list[str]:
     return names
 
 
+def shipped_settings(algo: str) -> str | None:
+    """The name of the settings file shipped for ``algo`` (``"sac"`` for SAC: the file of the
+    published results, with an entry per id), or None when there is none. ``rehabbot train``
+    uses it when no ``--hyperparams`` is given."""
+    algo = _check_algo(algo)
+    return algo if algo in settings_names() else None
+
+
 def settings_path(name: str | Path) -> Path:
     """The file ``name`` stands for: an existing path, or the name of a settings file
     shipped with the package (``"sac"`` -> ``.../rehabbot/rl/hyperparams/sac.yml``).

@@ -134,6 +134,34 @@ def run_is_complete(run_dir: Path, manifest: dict[str, Any] | None, steps: int) 
     return not manifest.get("vecnormalize") or (run_dir / runs.VECNORMALIZE_NAME).is_file()
 
 
+# The library defaults the two checks below need (SB3 and SBX agree on both).
+PPO_DEFAULT_N_STEPS = 2048
+OFF_POLICY_DEFAULT_LEARNING_STARTS = 100
+
+
+def check_run_updates(algo: str, total_timesteps: int, n_envs: int,
+                      hp: Hyperparameters) -> None:
+    """Refuse (``TrainingUsageError``, naming the numbers) a run too short to update its
+    model: a PPO run shorter than one rollout (``n_steps x n_envs`` steps; PPO never trains on
+    a partial rollout), or an off-policy run that ends before ``learning_starts`` (expert
+    episodes in the buffer do not change when the first update comes)."""
+    if algo in OFF_POLICY:
+        starts = int(hp.kwargs.get("learning_starts", OFF_POLICY_DEFAULT_LEARNING_STARTS))
+        if total_timesteps <= starts:
+            raise TrainingUsageError(
+                f"total_timesteps={total_timesteps} ends before learning_starts={starts}: "
+                f"{algo} would save an untrained model; train for more than {starts} steps "
+                "or lower learning_starts")
+        return
+    rollout = int(hp.kwargs.get("n_steps", PPO_DEFAULT_N_STEPS)) * n_envs
+    if total_timesteps < rollout:
+        raise TrainingUsageError(
+            f"total_timesteps={total_timesteps} is shorter than one {algo} rollout (n_steps="
+            f"{rollout // n_envs} x {n_envs} env{'s' if n_envs > 1 else ''} = {rollout} "
+            f"steps): the model would never update; train for at least {rollout} steps or "
+            "lower n_steps")
+
+
 def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
              out_dir: str | Path, *, n_envs: int | None, hp: Hyperparameters,
              env_kwargs: dict[str, Any] | None, resume: bool, overwrite: bool,
@@ -244,9 +272,10 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
                             "continue it with --resume or start over with --overwrite")
     total = total_timesteps if total_timesteps is not None \
         else (hp.n_timesteps or DEFAULT_TIMESTEPS)
+    n_envs = n_envs if n_envs is not None else (hp.n_envs or 1)
     return RunPlan(
         env_id=env_id, algo=algo, seed=seed, total_timesteps=total, out_dir=out,
-        run_dir=run_dir, n_envs=n_envs if n_envs is not None else (hp.n_envs or 1),
+        run_dir=run_dir, n_envs=n_envs,
         env_kwargs=dict(env_kwargs or {}), hp=hp, normalize=hp.normalize,
         checkpoint_freq=DEFAULT_CHECKPOINT_FREQ if checkpoint_freq is None else checkpoint_freq,
         eval_freq=DEFAULT_EVAL_FREQ if eval_freq is None else eval_freq,

@@ -51,6 +51,7 @@ from rehabbot.rl.planning import (
     RunPlan,
     TrainingError,
     TrainingUsageError,
+    check_run_updates,
     plan_run,
 )
 from rehabbot.rl.replay_buffer_io import load_replay_buffer
@@ -102,8 +103,11 @@ def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
 
 
 def _check_run_inputs(plan: RunPlan) -> None:
-    """Build the env (and the expert, for demos) before anything is written."""
+    """Build the env (and the expert, for demos) and refuse a new run too short to update its
+    model (:func:`rehabbot.rl.planning.check_run_updates`) before anything is written."""
     check_env_kwargs(plan.env_id, plan.env_kwargs)
+    if plan.resume is None:
+        check_run_updates(plan.algo, plan.total_timesteps, plan.n_envs, plan.hp)
     if plan.demos and plan.resume is None:
         from rehabbot.rl.demonstrations import check_expert
 
