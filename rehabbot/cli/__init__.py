@@ -5,11 +5,11 @@ arguments, calls a library function and maps its exceptions to exit codes
 Examples::
 
     rehabbot list                                  # the registered env ids
-    rehabbot train rehab-reach-v0 --algo sac --hyperparams sac --seeds 0 1 2
+    rehabbot train rehab-reach-v2 --algo sac --seeds 0 1 2  # the shipped settings
     rehabbot sweep sweeps/example.yaml             # a grid of runs on Ray Tune, resumable
-    rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random
-    rehabbot plot runs/rehab-reach-v0               # Figs. 3-6 of the paper for your runs
-    rehabbot render expert --env rehab-reach-v0 --out expert.mp4
+    rehabbot evaluate runs/rehab-reach-v2/sac/seed0/model.zip expert random
+    rehabbot plot runs/rehab-reach-v2               # Figs. 3-6 of the paper for your runs
+    rehabbot render expert --env rehab-reach-v2 --out expert.mp4
     rehabbot demo                                  # train, evaluate, plot, render (make demo)
     rehabbot scenes
     rehabbot view upper_right --seconds 5
@@ -58,10 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="a typical session:\n"
                "  rehabbot list\n"
-               "  rehabbot train rehab-reach-v0 --algo sac --hyperparams sac --seeds 0 1 2\n"
-               "  rehabbot evaluate runs/rehab-reach-v0/sac/seed0/model.zip expert random\n"
-               "  rehabbot plot runs/rehab-reach-v0\n"
-               "  rehabbot render runs/rehab-reach-v0/sac/seed0/model.zip --out sac.mp4\n\n"
+               "  rehabbot train rehab-reach-v2 --algo sac --seeds 0 1 2  # the shipped settings\n"
+               "  rehabbot evaluate runs/rehab-reach-v2/sac/seed0/model.zip expert random\n"
+               "  rehabbot plot runs/rehab-reach-v2\n"
+               "  rehabbot render runs/rehab-reach-v2/sac/seed0/model.zip --out sac.mp4\n\n"
                "`rehabbot COMMAND --help` describes each command. Exit codes: 0 success, "
                "1 failure, 2 bad usage, 130 interrupted by Ctrl-C (training: resumable; "
                "143 for SIGTERM). Every failure is one line on stderr.",

@@ -26,8 +26,8 @@ command says so before it starts) unless --no-evaluate is given."""
 
 PLOT_EPILOG = """\
 examples:
-  rehabbot plot runs/rehab-reach-v0                  # all algorithms and seeds below it
-  rehabbot plot runs/rehab-reach-v0/sac/seed0 --out figures/
+  rehabbot plot runs/rehab-reach-v2                  # all algorithms and seeds below it
+  rehabbot plot runs/rehab-reach-v2/sac/seed0 --out figures/
   rehabbot plot runs/a runs/b --smooth 50 --formats png
   rehabbot plot runs --source eval --no-evaluate     # Fig. 4 from eval/evaluations.npz
 

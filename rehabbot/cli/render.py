@@ -32,9 +32,9 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
                     "failure (a full disk) exits 1 and keeps an earlier file of that name.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n"
-               "  rehabbot render expert --env rehab-reach-v0 --out expert.mp4\n"
+               "  rehabbot render expert --env rehab-reach-v2 --out expert.mp4\n"
                "  rehabbot render zoo:rehab-reach-v1/ppo --out ppo.mp4\n"
-               "  rehabbot render runs/rehab-reach-v0/sac/seed0/model.zip --out sac.gif "
+               "  rehabbot render runs/rehab-reach-v2/sac/seed0/model.zip --out sac.gif "
                "--width 480 --height 360")
     parser.add_argument("policy", metavar="MODEL|zoo:ENV/ALGO|expert|random",
                         help="a model .zip saved by `rehabbot train`, an agent shipped in the "

@@ -64,15 +64,23 @@ def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
 
 TRAIN_EPILOG = """\
 examples:
-  rehabbot train rehab-reach-v0 --algo sac
-  rehabbot train rehabbot/rehab-knee-v0 --algo td3 --timesteps 500000 --seeds 0 1 2 \\
-      --hyperparams td3
-  rehabbot train rehab-hip-v0 --algo ppo --n-envs 8 --vec subproc --hyperparams ppo \\
-      --out runs/ppo-sweep
-  rehabbot train rehab-reach-v0 --algo sac --env-kwargs '{"weight_level": 2}'
-  rehabbot train rehab-reach-v0 --algo sac --timesteps 400000 --resume   # continue a run
-  rehabbot train rehab-reach-v0 --algo tqc --hyperparams tqc --backend sbx --demos 20
-  rehabbot train rehab-reach-v0 --algo ppo --hyperparams ppo --bc --demos 50
+  rehabbot train rehab-reach-v2 --algo sac            # the shipped settings (printed)
+  rehabbot train rehabbot/rehab-knee-v2 --algo td3 --timesteps 500000 --seeds 0 1 2
+  rehabbot train rehab-hip-v2 --algo ppo --vec subproc --out runs/ppo-sweep
+  rehabbot train rehab-reach-v2 --algo sac --env-kwargs '{"weight_level": 2}'
+  rehabbot train rehab-reach-v2 --algo sac --timesteps 400000 --resume   # continue a run
+  rehabbot train rehab-knee-v2 --algo sac --demos 20  # 20 expert episodes in the buffer
+  rehabbot train rehab-reach-v2 --algo ppo --bc --demos 50  # a behaviour-cloned start
+  rehabbot train rehab-reach-v0 --algo sac --hyperparams sb3-defaults/sac  # the paper's id,
+      # the library's defaults
+
+Without --hyperparams a run uses the settings file shipped for the algorithm (sac, td3, ppo,
+tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id (or its default entry), and
+prints which. The -v2 ids are the ones to start with: their entries name only library
+options (MlpPolicy, n_steps, ...). The -v0 ids are the paper's reference (its reward traps
+agents); -v1 ids keep the settings of the 0.3 results. A run too short to update its model
+(PPO: fewer steps than one rollout, n_steps x n_envs; SAC/TD3/TQC/CrossQ: no more steps than
+learning_starts) is refused.
 
 Each seed writes OUT/<env>/<algo>/seed<k>/ with manifest.json, monitor/train_<i>.monitor.csv,
 eval/evaluations.npz, tb/ (tensorboard --logdir OUT), checkpoints/ and, at the end, model.zip.
