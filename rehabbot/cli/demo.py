@@ -1,31 +1,30 @@
-"""The main job (``make demo``, ``rehabbot demo``): train PPO with a behaviour-cloned start on
-``rehabbot/rehab-reach-v1``, evaluate it against the scripted expert and random actions, and
-write the paper's figures, a video and a summary.
+"""The main job (``make demo``, ``rehabbot demo``): train SAC with the library's own plain
+network on ``rehabbot/rehab-knee-v2``, evaluate it against the scripted expert and random
+actions, and write the paper's figures, a video and a summary.
 
 Usage::
 
-    rehabbot demo --out runs/demo [--timesteps 100000] [--demos 40] [--episodes 10] [--seed 0]
+    rehabbot demo --out runs/demo [--timesteps 100000] [--demos 0] [--episodes 10] [--seed 0]
 
 Steps, each with its output under ``OUT``:
 
-1. ``rehabbot train rehab-reach-v1 --algo ppo --hyperparams ppo --backend sb3 --bc --demos 40``
-   (the settings of the README's ``-v1`` results, shipped with the package, on
-   Stable-Baselines3 as measured there): PPO's actor is first cloned from 40 scripted-expert
-   episodes, then trained on the ``-v1`` reward → ``OUT/runs/rehab-reach-v1/ppo/seed<k>/``
-   (model, checkpoints, monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run
-   the demo again: it resumes from the last checkpoint.
+1. ``rehabbot train rehab-knee-v2 --algo sac`` (the shipped settings of ``-v2``: SBX's or
+   SB3's own ``MlpPolicy``, 10-step returns; SBX when it is installed) →
+   ``OUT/runs/rehab-knee-v2/sac/seed<k>/`` (model, checkpoints, monitor CSVs, TensorBoard
+   logs, manifest). ``--demos N`` puts N scripted-expert episodes into the replay buffer
+   first. Interrupted (Ctrl-C)? Run the demo again: it resumes from the last checkpoint.
 2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the
    same episode seeds → ``OUT/evaluation/<policy>/evaluation.json`` and ``trace.npz``.
 3. ``rehabbot plot`` → ``OUT/figures/`` (Fig. 3 tool path, Fig. 4 learning curve, Fig. 5
    kinematics, Fig. 6 torques; PNG and PDF).
-4. ``rehabbot render`` of one episode of the trained model → ``OUT/ppo.mp4``.
+4. ``rehabbot render`` of one episode of the trained model → ``OUT/sac.mp4``.
 5. ``OUT/summary.md`` and ``OUT/summary.json``: the comparison table, the wall-clock time of
    every step, and the commands that reproduce each step; the table is printed at the end.
 
-The default budget (100 000 steps) trains in about 6 minutes on one CPU core and ends with an
-agent that finishes most episodes (the README's Quickstart has the measured table). Before
-0.3.0 the demo trained SAC on ``rehab-reach-v0``, whose reward traps agents short of the
-targets (README, "Results"): it ended with a 0 % agent.
+The default budget (100 000 steps) trains in about 15 minutes on one CPU core (SBX) and ends
+with an agent that finishes most episodes of the knee exercises (the README has the measured
+table). Up to 0.3.0 the demo trained PPO through network code of ours on a ``-v1`` id; before
+that SAC on ``rehab-reach-v0``, whose reward traps agents (0 %).
 """
 
 from __future__ import annotations
@@ -37,37 +36,36 @@ from pathlib import Path
 from rehabbot.cli.errors import cli_command, non_negative_int
 from rehabbot.envs.registration import env_short_name
 
-ENV_ID = "rehabbot/rehab-reach-v1"
-ALGO = "ppo"
+ENV_ID = "rehabbot/rehab-knee-v2"
+ALGO = "sac"
 DEFAULT_TIMESTEPS = 100_000
-DEFAULT_DEMOS = 40  # scripted-expert episodes cloned into PPO's actor (--bc)
+DEFAULT_DEMOS = 0  # scripted-expert episodes put into the replay buffer (--demos)
 DEFAULT_EPISODES = 10
 EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
 VIDEO_WIDTH_PX, VIDEO_HEIGHT_PX, VIDEO_FRAME_EVERY = 480, 360, 3  # 16.7 fps, software GL
-HYPERPARAMS = "ppo"  # rehabbot/rl/hyperparams/ppo.yml
-BACKEND = "sb3"  # the README's -v1 results are Stable-Baselines3's (TrackingErrorFeatures)
+HYPERPARAMS = "sac"  # rehabbot/rl/hyperparams/sac.yml: plain MlpPolicy for the -v2 ids
+BACKEND = "auto"  # SBX (JAX) when installed (make demo installs it), else Stable-Baselines3
 
 
 def add_demo_parser(commands: argparse._SubParsersAction) -> None:
     """Add ``demo`` to the ``rehabbot`` subcommands."""
-    parser = commands.add_parser("demo", help="the main job: train PPO (cloned start), evaluate, "
+    parser = commands.add_parser("demo", help="the main job: train SAC (plain network), evaluate, "
                                  "plot, render, summarise (make demo)",
                                  description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("runs/demo"), metavar="DIR",
                         help="output folder (default: runs/demo)")
     parser.add_argument("--timesteps", type=int, default=DEFAULT_TIMESTEPS, metavar="N",
-                        help=f"PPO training steps, in whole rollouts of 2048 (default: "
-                        f"{DEFAULT_TIMESTEPS})")
+                        help=f"SAC training steps (default: {DEFAULT_TIMESTEPS})")
     parser.add_argument("--demos", type=int, default=DEFAULT_DEMOS, metavar="N",
-                        help=f"expert episodes cloned into PPO's actor before training "
-                        f"(default: {DEFAULT_DEMOS})")
+                        help=f"scripted-expert episodes put into the replay buffer before "
+                        f"training (default: {DEFAULT_DEMOS})")
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
                         help=f"evaluation episodes per policy (default: {DEFAULT_EPISODES})")
     parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
                         help="training seed (default: 0; S >= 0)")
     parser.add_argument("--hyperparams", default=HYPERPARAMS, metavar="FILE.yml|NAME",
-                        help="PPO hyperparameters (default: ppo, shipped with rehabbot)")
+                        help="SAC hyperparameters (default: sac, shipped with rehabbot)")
     parser.add_argument("--no-video", action="store_true", help="skip the video")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=cmd_demo)
@@ -109,20 +107,21 @@ def run_demo(args: argparse.Namespace) -> int:
     run_root = out / "runs"
     run_dir = runs.run_directory(run_root, ENV_ID, ALGO, args.seed)
     resume = (run_dir / runs.MANIFEST_NAME).is_file()
-    print(f"[1/5] cloning {args.demos} expert episodes into PPO's actor, then training PPO on "
-          f"{ENV_ID} for {args.timesteps} steps"
+    demos = f", {args.demos} expert episodes in the replay buffer" if args.demos else ""
+    print(f"[1/5] training SAC (the library's MlpPolicy) on {ENV_ID} for {args.timesteps} "
+          f"steps{demos}"
           f"{' (resuming)' if resume else ''} -> {run_dir}", flush=True)
     training.train_run(ENV_ID, ALGO, args.seed, args.timesteps, run_root,
                        hyperparams=args.hyperparams, resume=resume,
                        progress_bar=not args.no_progress, backend=BACKEND,
-                       demos=args.demos, bc=True)
+                       demos=args.demos or None)
     stages["train"] = time.perf_counter() - started
     commands["train"] = (f"rehabbot train {env_short_name(ENV_ID)} --algo {ALGO} --timesteps "
                          f"{args.timesteps} --seeds {args.seed} --hyperparams {args.hyperparams}"
-                         f" --backend {BACKEND} --bc --demos {args.demos} --out {run_root}")
+                         f"{f' --demos {args.demos}' if args.demos else ''} --out {run_root}")
 
     started = time.perf_counter()
-    print(f"[2/5] evaluating PPO, the scripted expert and random actions on "
+    print(f"[2/5] evaluating SAC, the scripted expert and random actions on "
           f"{args.episodes} episodes (seeds {EVAL_SEED}..{EVAL_SEED + args.episodes - 1})",
           flush=True)
     reports = []
@@ -146,7 +145,7 @@ def run_demo(args: argparse.Namespace) -> int:
     if not args.no_video:
         started = time.perf_counter()
         video_path = out / f"{ALGO}.mp4"
-        print(f"[4/5] rendering one PPO episode -> {video_path}", flush=True)
+        print(f"[4/5] rendering one SAC episode -> {video_path}", flush=True)
         video.render_episode(model, ENV_ID, video_path, seed=EVAL_SEED,
                              width=VIDEO_WIDTH_PX, height=VIDEO_HEIGHT_PX,
                              frame_every=VIDEO_FRAME_EVERY)
@@ -162,7 +161,7 @@ def run_demo(args: argparse.Namespace) -> int:
         "env_id": ENV_ID,
         "algo": ALGO,
         "train_seed": args.seed,
-        "bc_expert_episodes": args.demos,
+        "expert_episodes_in_buffer": args.demos,
         "train_timesteps": manifest.get("timesteps_done"),
         "train_wall_clock_s": manifest.get("wall_clock_s"),
         "eval_seeds": reports[0]["episode_seeds"],
@@ -174,9 +173,11 @@ def run_demo(args: argparse.Namespace) -> int:
     }
     atomic_write_json(out / "summary.json", summary)
     timing = ", ".join(f"{name} {seconds:.0f} s" for name, seconds in stages.items())
-    text = (f"# RehabBot demo: PPO (behaviour-cloned start) on {ENV_ID}\n\n"
-            f"PPO cloned {args.demos} expert episodes, then trained "
-            f"{summary['train_timesteps']} steps (seed {args.seed}); evaluated on "
+    text = (f"# RehabBot demo: SAC with a plain network on {ENV_ID}\n\n"
+            f"SAC (the library's MlpPolicy, the shipped settings) trained "
+            f"{summary['train_timesteps']} steps (seed {args.seed}"
+            f"{f', {args.demos} expert episodes in its buffer' if args.demos else ''}); "
+            "evaluated on "
             f"{args.episodes} episodes with seeds {EVAL_SEED}..{EVAL_SEED + args.episodes - 1}"
             f" (mean ± std over episodes).\n\n{table}\n\nWall clock: {timing}.\n\n"
             "Reproduce each step:\n\n"
