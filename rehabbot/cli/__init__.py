@@ -11,6 +11,7 @@ Examples::
     rehabbot plot runs/rehab-reach-v2               # Figs. 3-6 of the paper for your runs
     rehabbot render expert --env rehab-reach-v2 --out expert.mp4
     rehabbot demo                                  # train, evaluate, plot, render (make demo)
+    rehabbot zoo list                              # the trained agents shipped with rehabbot
     rehabbot scenes
     rehabbot view upper_right --seconds 5
     rehabbot snapshot upper_right --out front.png --width 1280 --height 720
@@ -49,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     from rehabbot.cli.scenes import add_scene_parsers
     from rehabbot.cli.sweep import add_sweep_parser
     from rehabbot.cli.train import add_train_parser
+    from rehabbot.cli.zoo import add_zoo_parser
     from rehabbot.common.version import VERSION
 
     parser = argparse.ArgumentParser(
@@ -75,6 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_plot_parser(commands)
     add_render_parser(commands)
     add_demo_parser(commands)
+    add_zoo_parser(commands)
     add_scene_parsers(commands)
     return parser
 
