@@ -142,3 +142,24 @@ def test_critic_probe_reads_the_critic_and_scores_its_ranking(tmp_path, monkeypa
     monkeypatch.setattr(critic_probe, "_critic", toward_target(-1.0))
     assert all(r["ranked_right"] == 0.0 for r in critic_probe.probe(model, episodes=1,
                                                                      seed=1000))
+
+
+def test_stratified_results_cover_every_cell_and_report_per_cell(tmp_path) -> None:
+    """Every exercise x weight level x profile gets its episodes (seeds counting up, the same
+    for every policy); the table's per-cell counts and IQM come from those episodes."""
+    from benchmarks import stratified_results
+
+    episodes = stratified_results.evaluate_cells(
+        "expert", "rehabbot/rehab-knee-v2", {"max_episode_steps": 3}, 1, 700)
+    assert len(episodes) == 2 * 5 * 3
+    assert [e["seed"] for e in episodes] == list(range(700, 730))
+    assert len({stratified_results.cell_key(e) for e in episodes}) == 30
+    assert not any(e["success"] for e in episodes)  # 3 steps: no exercise is done
+    fake = [{**e, "success": e["weight_level"] < 4, "safety_violation":
+             "cuff_force" if e["weight_level"] == 4 else None} for e in episodes]
+    text = stratified_results.summarize({
+        ("rehabbot/rehab-knee-v2", "sac"): [{"train_seed": 0, "episodes": fake},
+                                            {"train_seed": 1, "episodes": fake}],
+        ("rehabbot/rehab-knee-v2", "expert"): [{"train_seed": None, "episodes": episodes}]})
+    assert "| rehab-knee-v2 | sac | 0, 1 | 80, 80 % | 80 % | 0 % |" in text
+    assert "| 0 | f160 | 2/2 | 2/2 | 2/2 | 2/2 | 0/2 (2 cuff_force) |" in text
