@@ -405,3 +405,39 @@ def test_each_shipped_agent_succeeds_as_recorded(env_id, algo) -> None:
     assert measured >= meta["success_rate"] - SHIPPED_SUCCESS_MARGIN, (
         f"{env_id} {algo}: {measured:.0%} success on seeds {seed}..{seed + 2}, "
         f"recorded {meta['success_rate']:.0%}")
+
+
+# --------------------------------------------------------------------------- full models
+
+
+@pytest.mark.slow
+def test_the_full_model_ships_beside_the_actor_and_fine_tunes(zoo_root, tmp_path) -> None:
+    """``--full`` keeps the run's model.zip beside the .npz, bound by its SHA-256:
+    ``load_full_model`` gives the model (critics included) whose actor the .npz holds, ready
+    to ``learn``; a changed zip is refused; an agent without one says so."""
+    pytest.importorskip("sbx")
+    from rehabbot.rl.training import train_run
+
+    env_id = "rehabbot/rehab-knee-v2"
+    run_dir = train_run(env_id, "sac", 0, 200, tmp_path / "runs", backend="sbx",
+                        hyperparams={"learning_starts": 50, "batch_size": 32,
+                                     "buffer_size": 1000, "policy_kwargs": "dict(net_arch=[16])"},
+                        checkpoint_freq=0, eval_freq=0, progress_bar=False)
+    assert zoo.main(["export", str(run_dir), "--episodes", "0", "--full"]) == 0
+    agent = load(env_id, "sac")
+    assert zoo.full_model_path(env_id, "sac").is_file()
+    model = zoo.load_full_model(env_id, "sac")
+    env = gym.make(env_id)
+    observations = np.stack([env.reset(seed=k)[0] for k in range(5)])
+    expected = model.predict(observations, deterministic=True)[0]
+    assert np.max(np.abs(agent.predict(observations)[0] - expected)) < TOLERANCE
+    model.learn(60, reset_num_timesteps=False)  # fine-tuning: critics and optimisers came too
+    assert model.num_timesteps >= 260
+
+    zip_path = zoo.full_model_path(env_id, "sac")
+    zip_path.write_bytes(zip_path.read_bytes() + b"\0")
+    with pytest.raises(ZooError, match="not the model this agent was exported from"):
+        zoo.load_full_model(env_id, "sac")
+    zip_path.unlink()
+    with pytest.raises(UsageError, match="keeps only the actor of rehab-knee-v2/sac"):
+        zoo.load_full_model(env_id, "sac")

@@ -7,6 +7,9 @@ PyTorch, JAX or Stable-Baselines3, no download).
                                     ``predict``); also ``rehabbot.zoo.load``
 ``available()``                     the ``(env_id, algo)`` pairs shipped
 ``load_file(path)``                 an agent from any zoo file
+``load_full_model(env_id, algo)``    the whole trained SB3/SBX model behind an agent, where the
+                                    zoo keeps it (``<algo>.zip`` beside the ``.npz``): for
+                                    ``learn`` (fine-tuning), critics included
 ``export_policy(model, env_id,      write a zoo file from a trained SB3 model (SAC, TD3, PPO;
 algo, out_path, metadata)``         TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
                                     PPO, TQC, CrossQ), a model zip or a run folder
@@ -92,8 +95,9 @@ OP_PARAMS: dict[str, tuple[str, ...]] = {
 }
 
 __all__ = ["ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy", "available", "export_policy",
-           "is_zoo_spec", "load", "load_file", "load_spec", "parse_spec", "weights_sha256",
-           "write_zoo_file", "zoo_dir", "zoo_path"]
+           "full_model_path", "is_zoo_spec", "load", "load_file", "load_full_model", "load_spec",
+           "parse_spec", "ship_full_model", "weights_sha256", "write_zoo_file", "zoo_dir",
+           "zoo_path"]
 
 
 class ZooError(DataError):
@@ -455,6 +459,65 @@ def export_policy(model_or_run_dir: Any, env_id: str | None, algo: str | None,
     return written
 
 
+# --------------------------------------------------------------------------- full models
+
+FULL_MODEL_SUFFIX = ".zip"
+
+
+def full_model_path(env_id: str, algo: str, root: Path | None = None) -> Path:
+    """``<zoo>/<env-short-name>/<algo>.zip``: where the zoo keeps an agent's whole model."""
+    return zoo_path(env_id, algo, root).with_suffix(FULL_MODEL_SUFFIX)
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
+    """The trained model (SB3 or SBX, with its critics) behind the zoo's agent for ``env_id``
+    and ``algo``, loaded without unpickling anything
+    (:func:`rehabbot.rl.safe_load.load_safely`): ``model.learn(...)`` fine-tunes it. ``env``
+    (default: the agent's env, made with its kwargs) gives the spaces and is the env it
+    trains on.
+
+    Raises:
+        UsageError: no such agent, or the zoo keeps only its actor.
+        ZooError: the model file is not the one the agent was exported with (SHA-256).
+    """
+    from rehabbot.rl.algorithms import algo_class
+    from rehabbot.rl.safe_load import load_safely
+
+    meta = load(env_id, algo).metadata
+    path = full_model_path(meta["env_id"], meta["algo"])
+    if not path.is_file():
+        raise UsageError(f"the zoo keeps only the actor of {_short(meta['env_id'])}/"
+                         f"{meta['algo']} (no {path.name}); load(...) gives the actor")
+    if _file_sha256(path) != meta.get("full_model_sha256"):
+        raise ZooError(f"{path} is not the model this agent was exported from (its SHA-256 "
+                       "differs from the agent's full_model_sha256)")
+    env = env if env is not None else gym.make(meta["env_id"], **(meta.get("env_kwargs") or {}))
+    manifest = {"algo": meta["algo"], "hyperparameters": meta.get("hyperparameters")}
+    return load_safely(algo_class(meta["algo"], meta["backend"]), path, env, meta["algo"],
+                       meta["backend"], manifest)
+
+
+def ship_full_model(model_path: str | Path, out_npz: Path) -> dict[str, str]:
+    """Copy a run's ``model.zip`` beside the zoo file ``out_npz`` (atomically); the metadata
+    entry that binds the two (``full_model_sha256``)."""
+    source = Path(model_path)
+    if source.is_dir():
+        source = source / "model.zip"
+    target = Path(out_npz).with_suffix(FULL_MODEL_SUFFIX)
+    data = source.read_bytes()
+    target.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(target, lambda stream: stream.write(data))
+    return {"full_model_sha256": _file_sha256(target)}
+
+
 # --------------------------------------------------------------------------- command line
 
 
@@ -478,6 +541,11 @@ def _parser() -> argparse.ArgumentParser:
                              f"{DEFAULT_EPISODES}; 0: none)")
     export.add_argument("--seed", type=int, default=DEFAULT_SEED, metavar="S",
                         help=f"episode k is reset with seed S + k (default {DEFAULT_SEED})")
+    export.add_argument("--full", action="store_true",
+                        help="also keep the whole model (<algo>.zip beside the .npz, for "
+                             "load_full_model and fine-tuning)")
+    export.add_argument("--note", metavar="JSON",
+                        help="metadata to add, as a JSON object (e.g. how the seed was chosen)")
     commands.add_parser("list", help="the agents in the zoo and their metadata")
     return parser
 
@@ -503,8 +571,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not env_id or not algo:
             raise UsageError("give --env and --algo (the source has no run manifest)")
         out = args.out or zoo_path(env_id, algo)
-        meta = export_policy(args.source, env_id, algo, out, episodes=args.episodes,
-                             seed=args.seed)
+        extra = json.loads(args.note) if args.note else {}
+        if not isinstance(extra, dict):
+            raise UsageError(f"--note {args.note!r} must be a JSON object")
+        if args.full:
+            extra.update(ship_full_model(args.source, out))
+        meta = export_policy(args.source, env_id, algo, out, metadata=extra,
+                             episodes=args.episodes, seed=args.seed)
         print(f"wrote {out}: {meta['env_id']} {meta['algo']} ({meta['backend']}), success "
               f"rate {meta.get('success_rate')} on {args.episodes} episodes, sha256 "
               f"{meta['weights_sha256'][:12]}")

@@ -10,6 +10,7 @@
     env = gym.make(agent.env_id, **agent.metadata.get("env_kwargs", {}))
     obs, info = env.reset(seed=0)
     action, _ = agent.predict(obs)                # SB3's signature; deterministic only
+    model = rehabbot.zoo.load_full_model("rehab-knee-v2", "sac")  # SBX/SB3, for .learn()
 
 This package is the data folder: ``<env-short-name>/<algo>.npz``, one file per agent. The
 loader lives in :mod:`rehabbot.rl.zoo` (the ``rl`` layer), which also builds the files
@@ -19,6 +20,15 @@ format; this module only re-exports it. Importing it loads neither PyTorch nor J
 
 from __future__ import annotations
 
-from rehabbot.rl.zoo import ZooError, ZooPolicy, available, load, load_file, zoo_dir
+from rehabbot.rl.zoo import (
+    ZooError,
+    ZooPolicy,
+    available,
+    load,
+    load_file,
+    load_full_model,
+    zoo_dir,
+)
 
-__all__ = ["ZooError", "ZooPolicy", "available", "load", "load_file", "zoo_dir"]
+__all__ = ["ZooError", "ZooPolicy", "available", "load", "load_file", "load_full_model",
+           "zoo_dir"]
