@@ -21,7 +21,7 @@ Steps, each with its output under ``OUT``:
 5. ``OUT/summary.md`` and ``OUT/summary.json``: the comparison table, the wall-clock time of
    every step, and the commands that reproduce each step; the table is printed at the end.
 
-The default budget (100 000 steps) trains in about 15 minutes on one CPU core (SBX) and ends
+The default budget (100 000 steps) trains in about 20 minutes on one CPU core (SBX) and ends
 with an agent that finishes most episodes of the knee exercises (the README has the measured
 table). Up to 0.3.0 the demo trained PPO through network code of ours on a ``-v1`` id; before
 that SAC on ``rehab-reach-v0``, whose reward traps agents (0 %).
