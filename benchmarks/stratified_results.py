@@ -83,14 +83,25 @@ def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
     return episodes
 
 
+def training_text(manifest: dict) -> str:
+    """How a run trained, from its manifest: library, policy, steps, demonstrations."""
+    hp = manifest.get("hyperparameters") or {}
+    demos = (manifest.get("demos") or {}).get("episodes", 0)
+    kwargs = hp.get("kwargs") or {}
+    returns = f"{kwargs.get('n_steps')}-step returns, " if kwargs.get("n_steps") else ""
+    return (f"{manifest.get('backend')} {hp.get('policy')}, {returns}"
+            f"{manifest.get('timesteps_done')} steps"
+            + (f", {demos} expert episodes in the buffer" if demos else ""))
+
+
 def cell_key(episode: dict) -> tuple[int, int, str]:
     return episode["exercise"], episode["weight_level"], episode["profile"]
 
 
 def summarize(results: dict[tuple[str, str], list[dict]]) -> str:
     """Markdown: one row per env and algorithm (IQM over seeds), then the per-cell tables."""
-    lines = ["| env | algo | seeds | success per seed | success IQM [95 % CI] | expert |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| env | algo | training (from the runs' manifests) | seeds | success per seed | "
+             "success IQM [95 % CI] | expert |", "|---|---|---|---|---|---|---|"]
     cells_text = []
     for (env_id, algo), entries in sorted(results.items()):
         if algo == "expert":
@@ -101,8 +112,9 @@ def summarize(results: dict[tuple[str, str], list[dict]]) -> str:
         expert_rate = f"{100 * np.mean([e['success'] for e in expert]):.0f} %" if expert else "-"
         seeds = ", ".join(str(r["train_seed"]) for r in entries)
         per_seed = ", ".join(f"{100 * x:.0f}" for x in rates)
-        lines.append(f"| {env_short_name(env_id)} | {algo} | {seeds} | {per_seed} % | "
-                     f"{interval.format(0, 100)} % | {expert_rate} |")
+        training = "; ".join(sorted({r.get("training", "-") for r in entries}))
+        lines.append(f"| {env_short_name(env_id)} | {algo} | {training} | {seeds} | "
+                     f"{per_seed} % | {interval.format(0, 100)} % | {expert_rate} |")
         by_cell: dict[tuple, list[bool]] = defaultdict(list)
         stops: dict[tuple, list[str]] = defaultdict(list)
         for r in entries:
@@ -155,6 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         results[(env_id, algo)].append({"run_dir": str(run_dir), "train_seed":
                                         manifest.get("seed"), "env_kwargs": env_kwargs,
                                         "timesteps": manifest.get("timesteps_done"),
+                                        "training": training_text(manifest),
                                         "episodes": episodes})
         rate = np.mean([e["success"] for e in episodes])
         print(f"{run_dir}: {100 * rate:.0f} % of {len(episodes)} episodes", file=sys.stderr,

@@ -161,5 +161,5 @@ def test_stratified_results_cover_every_cell_and_report_per_cell(tmp_path) -> No
         ("rehabbot/rehab-knee-v2", "sac"): [{"train_seed": 0, "episodes": fake},
                                             {"train_seed": 1, "episodes": fake}],
         ("rehabbot/rehab-knee-v2", "expert"): [{"train_seed": None, "episodes": episodes}]})
-    assert "| rehab-knee-v2 | sac | 0, 1 | 80, 80 % | 80 % | 0 % |" in text
+    assert "| rehab-knee-v2 | sac | - | 0, 1 | 80, 80 % | 80 % | 0 % |" in text
     assert "| 0 | f160 | 2/2 | 2/2 | 2/2 | 2/2 | 0/2 (2 cuff_force) |" in text
