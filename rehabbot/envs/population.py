@@ -13,6 +13,11 @@ dict of its fields, or the name of a shipped one (``"train"``, ``"test"``;
 :class:`~rehabbot.envs.config.RehabEnvConfig` field (not ``profile`` or ``condition``, which
 the population sets), validated when the env is built.
 
+The ``-v2`` population ids (``rehab-reach-population-v2``, ``rehab-knee-population-v2``)
+pass ``observation="agent"`` and ``action_scale="unit"`` to every patient's env: the agent
+observation's space does not depend on the patient (its ranges are relative), so one policy
+serves the population.
+
 ## Episodes
 ``reset(seed=s)`` seeds the env's ``np_random``; each reset draws the patient uniformly from it,
 then resets that patient's env with a seed drawn from it too, so a seed fixes the whole
