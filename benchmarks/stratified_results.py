@@ -94,6 +94,17 @@ def training_text(manifest: dict) -> str:
             + (f", {demos} expert episodes in the buffer" if demos else ""))
 
 
+def skrl_run(data: dict, path: str) -> dict:
+    """A run of ``examples/skrl_sac.py`` (its ``result.json``) in this script's format."""
+    names = {json.dumps(v, sort_keys=True): k for k, v in PROFILES.items()}
+    episodes = [{**e, "profile": names[json.dumps(e["profile"], sort_keys=True)]}
+                for e in data["evaluation"]["episodes"]]
+    return {"run_dir": path, "train_seed": data["seed"], "env_kwargs": data["env_kwargs"],
+            "timesteps": data["timesteps"], "episodes": episodes,
+            "training": f"skrl {data['skrl_version']} SAC, 256 x 256 MLPs, 1-step returns, "
+                        f"{data['timesteps']} steps"}
+
+
 def cell_key(episode: dict) -> tuple[int, int, str]:
     return episode["exercise"], episode["weight_level"], episode["profile"]
 
@@ -143,19 +154,22 @@ def summarize(results: dict[tuple[str, str], list[dict]]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("roots", nargs="+", type=Path, help="folders holding run folders")
+    parser.add_argument("roots", nargs="*", type=Path, help="folders holding run folders")
     parser.add_argument("--per-cell", type=int, default=2,
                         help="episodes per exercise x weight level x profile (default 2)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED,
                         help=f"first episode seed (default {DEFAULT_SEED})")
     parser.add_argument("--json", type=Path, help="write every episode to this file")
+    parser.add_argument("--skrl", type=Path, nargs="+", default=[], metavar="RESULT.json",
+                        help="result.json files of examples/skrl_sac.py, shown as their own "
+                             "rows (their episodes are that script's, seeds from 60000)")
     parser.add_argument("--markdown", type=Path,
                         help="also write the tables to this Markdown file (with the command)")
     args = parser.parse_args(argv)
     if args.per_cell < 1:
         parser.error(f"--per-cell {args.per_cell} must be at least 1")
     found = find_runs(args.roots)
-    if not found:
+    if not found and not args.skrl:
         parser.error(f"no run folder with a {runs.MODEL_NAME} under {args.roots}")
     results: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for run_dir in found:
@@ -177,6 +191,14 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "run_dir": None, "train_seed": None, "env_kwargs": env_kwargs,
                 "episodes": evaluate_cells("expert", env_id, env_kwargs, args.per_cell,
                                            args.seed)})
+    for path in args.skrl:
+        data = json.loads(path.read_text())
+        env_id = data["env"]
+        results[(env_id, "sac (skrl)")].append(skrl_run(data, str(path)))
+        if (env_id, "expert") not in results:
+            results[(env_id, "expert")].append({
+                "run_dir": None, "train_seed": None, "env_kwargs": {},
+                "episodes": evaluate_cells("expert", env_id, {}, args.per_cell, args.seed)})
     command = " ".join(["python", "benchmarks/stratified_results.py",
                         *map(str, argv if argv is not None else sys.argv[1:])])
     text = (f"episodes from seed {args.seed} ({args.per_cell} per exercise x weight level x "
