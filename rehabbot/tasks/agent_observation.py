@@ -234,7 +234,8 @@ class AgentObservation:
             v = self._matrix @ x
         head, bounded = v[:self._tanh_stop], v[self._bounded]
         np.tanh(head, out=head)
-        np.clip(bounded, self._bounded_low, self._bounded_high, out=bounded)
+        np.minimum(bounded, self._bounded_high, out=bounded)  # the ufuncs: np.clip's Python
+        np.maximum(bounded, self._bounded_low, out=bounded)  # wrapper costs more than both
         v[self._exercise_start + int(paper_obs[self._e])] = 1.0
         v[self._progress_out] = (2.0 * target_index / (num_targets - 1) - 1.0
                                  if num_targets > 1 else 1.0)
