@@ -163,15 +163,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--skrl", type=Path, nargs="+", default=[], metavar="RESULT.json",
                         help="result.json files of examples/skrl_sac.py, shown as their own "
                              "rows (their episodes are that script's, seeds from 60000)")
+    parser.add_argument("--from-json", type=Path, nargs="+", default=[], metavar="FILE",
+                        help="render the tables from files written by --json (no evaluation; "
+                             "the runs of every file are merged)")
     parser.add_argument("--markdown", type=Path,
                         help="also write the tables to this Markdown file (with the command)")
     args = parser.parse_args(argv)
     if args.per_cell < 1:
         parser.error(f"--per-cell {args.per_cell} must be at least 1")
     found = find_runs(args.roots)
-    if not found and not args.skrl:
+    if not found and not args.skrl and not args.from_json:
         parser.error(f"no run folder with a {runs.MODEL_NAME} under {args.roots}")
     results: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for path in args.from_json:
+        saved = json.loads(path.read_text())
+        if (saved["per_cell"], saved["seed"]) != (args.per_cell, args.seed):
+            parser.error(f"{path} holds --per-cell {saved['per_cell']} --seed {saved['seed']}, "
+                         f"not {args.per_cell} and {args.seed}")
+        for entry in saved["results"]:
+            key = (entry["env_id"], entry["algo"])
+            if entry["algo"] == "expert" and key in results:
+                continue
+            results[key] += entry["runs"]
     for run_dir in found:
         manifest = runs.read_manifest(run_dir) or {}
         env_id, algo = manifest["env_id"], manifest["algo"]
