@@ -117,6 +117,12 @@ def skrl_run(data: dict, path: str) -> dict:
                         f"{data['timesteps']} steps"}
 
 
+def row_label(algo: str, run: dict) -> str:
+    """Runs of one algorithm are one row, apart from those that trained with expert
+    episodes in their buffer (a row of their own)."""
+    return f"{algo} + demos" if "expert episodes" in run.get("training", "") else algo
+
+
 def cell_key(episode: dict) -> tuple[int, int, str]:
     return episode["exercise"], episode["weight_level"], episode["profile"]
 
@@ -193,21 +199,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error(f"{path} holds --per-cell {saved['per_cell']} --seed {saved['seed']}, "
                          f"not {args.per_cell} and {args.seed}")
         for entry in saved["results"]:
-            key = (entry["env_id"], entry["algo"])
-            if entry["algo"] == "expert" and key in results:
+            if entry["algo"] == "expert":
+                if (entry["env_id"], "expert") not in results:
+                    results[(entry["env_id"], "expert")] += entry["runs"]
                 continue
-            results[key] += entry["runs"]
+            for run in entry["runs"]:
+                results[(entry["env_id"], row_label(entry["algo"], run))].append(run)
     for run_dir in found:
         manifest = runs.read_manifest(run_dir) or {}
         env_id, algo = manifest["env_id"], manifest["algo"]
         env_kwargs = manifest.get("env_kwargs") or {}
         episodes = evaluate_cells(str(run_dir / runs.MODEL_NAME), env_id, env_kwargs,
                                   args.per_cell, args.seed)
-        results[(env_id, algo)].append({"run_dir": str(run_dir), "train_seed":
-                                        manifest.get("seed"), "env_kwargs": env_kwargs,
-                                        "timesteps": manifest.get("timesteps_done"),
-                                        "training": training_text(manifest),
-                                        "episodes": episodes})
+        run = {"run_dir": str(run_dir), "train_seed": manifest.get("seed"),
+               "env_kwargs": env_kwargs, "timesteps": manifest.get("timesteps_done"),
+               "training": training_text(manifest), "episodes": episodes}
+        results[(env_id, row_label(algo, run))].append(run)
         rate = np.mean([e["success"] for e in episodes])
         print(f"{run_dir}: {100 * rate:.0f} % of {len(episodes)} episodes", file=sys.stderr,
               flush=True)
