@@ -439,10 +439,10 @@ def test_a_damaged_model_in_a_run_folder_is_one_line(tmp_path, capsys, damage) -
 def test_demo_checks_its_video_path_before_training(tmp_path, monkeypatch, capsys) -> None:
     import rehabbot.rl.training as training
 
-    (tmp_path / "ppo.mp4").mkdir()
+    (tmp_path / "sac.mp4").mkdir()
     monkeypatch.setattr(training, "train_run", lambda *a, **k: pytest.fail("training started"))
     assert main(["demo", "--out", str(tmp_path)]) == 2
-    assert "ppo.mp4' is a folder" in _one_line(capsys.readouterr().err)
+    assert "sac.mp4' is a folder" in _one_line(capsys.readouterr().err)
 
 
 @pytest.mark.slow
