@@ -52,6 +52,8 @@ run and for the scripted expert. "success IQM" is the interquartile mean of the 
 success rates with a 95 % percentile-bootstrap interval over seeds (rliable). Zoo agents are
 chosen on other episodes (validation seeds 40 000 onwards) than these. The per-cell tables
 pool every seed of a row; a cell's stops name the safety rule that ended those episodes.
+Every episode is in `docs/results-v2.json`; `python benchmarks/stratified_results.py
+--from-json docs/results-v2.json` renders this page again from it.
 """
 
 
@@ -120,7 +122,8 @@ def skrl_run(data: dict, path: str) -> dict:
 def row_label(algo: str, run: dict) -> str:
     """Runs of one algorithm are one row, apart from those that trained with expert
     episodes in their buffer (a row of their own)."""
-    return f"{algo} + demos" if "expert episodes" in run.get("training", "") else algo
+    demos = "expert episodes" in run.get("training", "") and not algo.endswith(" + demos")
+    return f"{algo} + demos" if demos else algo
 
 
 def cell_key(episode: dict) -> tuple[int, int, str]:

@@ -4,15 +4,16 @@ actions, and write the paper's figures, a video and a summary.
 
 Usage::
 
-    rehabbot demo --out runs/demo [--timesteps 100000] [--demos 0] [--episodes 10] [--seed 0]
+    rehabbot demo --out runs/demo [--timesteps 100000] [--demos 20] [--episodes 10] [--seed 0]
 
 Steps, each with its output under ``OUT``:
 
-1. ``rehabbot train rehab-knee-v2 --algo sac`` (the shipped settings of ``-v2``: SBX's or
-   SB3's own ``MlpPolicy``, 10-step returns; SBX when it is installed) →
-   ``OUT/runs/rehab-knee-v2/sac/seed<k>/`` (model, checkpoints, monitor CSVs, TensorBoard
-   logs, manifest). ``--demos N`` puts N scripted-expert episodes into the replay buffer
-   first. Interrupted (Ctrl-C)? Run the demo again: it resumes from the last checkpoint.
+1. ``rehabbot train rehab-knee-v2 --algo sac --demos 20`` (the shipped settings of ``-v2``:
+   SBX's or SB3's own ``MlpPolicy``, 10-step returns; SBX when it is installed; 20
+   scripted-expert episodes in the replay buffer first, without which the knee learns on
+   some seeds only: ``docs/results-v2.md``) → ``OUT/runs/rehab-knee-v2/sac/seed<k>/`` (model,
+   checkpoints, monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run the
+   demo again: it resumes from the last checkpoint.
 2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the
    same episode seeds → ``OUT/evaluation/<policy>/evaluation.json`` and ``trace.npz``.
 3. ``rehabbot plot`` → ``OUT/figures/`` (Fig. 3 tool path, Fig. 4 learning curve, Fig. 5
@@ -39,7 +40,7 @@ from rehabbot.envs.registration import env_short_name
 ENV_ID = "rehabbot/rehab-knee-v2"
 ALGO = "sac"
 DEFAULT_TIMESTEPS = 100_000
-DEFAULT_DEMOS = 0  # scripted-expert episodes put into the replay buffer (--demos)
+DEFAULT_DEMOS = 20  # scripted-expert episodes put into the replay buffer (--demos)
 DEFAULT_EPISODES = 10
 EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
 VIDEO_WIDTH_PX, VIDEO_HEIGHT_PX, VIDEO_FRAME_EVERY = 480, 360, 3  # 16.7 fps, software GL
