@@ -497,9 +497,13 @@ def _interrupt(marker: str, args: list[str], cwd: Path,
     """Start ``rehabbot ARGS``, wait until ``marker`` (``module:function``) has been called
     (and ``working()`` holds), send SIGINT, return the exit code, stdout and stderr."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "MUJOCO_GL": "egl"}
+    # A shell starts a command with SIGINT at its default; a test worker may not (in the full
+    # suite under pytest-xdist the children of one worker inherited SIGINT ignored, so Ctrl-C
+    # never reached them; not reproduced with the test files alone): start it as a shell does.
     proc = subprocess.Popen([sys.executable, "-c", MARKED_RUN, marker, *args], cwd=cwd,
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert proc.stdout is not None
         first = ""
