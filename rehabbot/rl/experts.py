@@ -41,7 +41,8 @@ class ScriptedExpert:
         if not (0.0 < speed_fraction <= 1.0):
             raise ValueError(f"speed_fraction={speed_fraction!r} must be in (0, 1]")
         base = _rehab_env(env)
-        mode = base.control_mode if base is not None else _mode_of(env)
+        config = base.config if base is not None else _config_of(env)
+        mode = config.control_mode
         if mode not in SUPPORTED_MODES:
             raise ValueError(f"ScriptedExpert supports control_mode in {list(SUPPORTED_MODES)}, "
                              f"not {mode!r}")
@@ -53,7 +54,6 @@ class ScriptedExpert:
         self.gain = gain
         self.speed_fraction = speed_fraction
         self._base = base
-        config = base.config if base is not None else _config_of(env)
         # The controller's own action box (the env's space is Box(-1, 1) with unit actions).
         low, high = native_action_box(base if base is not None else env, config)
         self._native_low, self._native_high = low, high
@@ -126,15 +126,6 @@ def _rehab_env(env) -> RehabEnv | None:
     on to its episode's RehabEnv), or None for a vector env."""
     unwrapped = getattr(env, "unwrapped", None)
     return unwrapped if isinstance(getattr(unwrapped, "config", None), RehabEnvConfig) else None
-
-
-def _mode_of(env) -> str:
-    """Control mode of a vector env's sub-envs (Gymnasium or SB3 vector env)."""
-    if hasattr(env, "get_attr"):
-        return env.get_attr("control_mode")[0]
-    if hasattr(env, "envs"):
-        return _rehab_env(env.envs[0]).control_mode
-    raise ValueError(f"cannot find the control mode of {env!r}")
 
 
 def _config_of(env) -> RehabEnvConfig:
