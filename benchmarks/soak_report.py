@@ -18,7 +18,7 @@ import numpy as np
 
 from rehabbot.common.files import atomic_write_text
 from rehabbot.common.provenance import package_versions
-from rehabbot.tasks.safety import RULES
+from rehabbot.sim.physics import RULES
 
 END_REASONS = ("success", "truncation", *RULES, "exception", "open")
 MIB = 1024 * 1024

@@ -2,7 +2,7 @@
 without it, in the same run.
 
 Every env steps its physics one step at a time and counts the robot's (and the patient's)
-work on the limb after each (:class:`rehabbot.sim.patient_drive.WorkMeter`). The baseline here
+work on the limb after each (:class:`rehabbot.sim.physics.WorkMeter`). The baseline here
 is the same env with the count switched off (``WorkMeter.after_step`` replaced by a no-op);
 rounds of ``--steps`` zero-action steps alternate between the two, and the figures are
 medians over ``--rounds`` rounds, so a change of the machine's speed hits both alike.

@@ -10,11 +10,15 @@ import pytest
 import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.envs.bilateral_build import ROBOT_PAIR_BIT
 from rehabbot.rl.experts import ScriptedExpert
+from rehabbot.sim.physics import SafetyMonitor, SafetyThresholds
 from rehabbot.tasks.bilateral import pattern_rows, segment_lengths_rad
-from rehabbot.tasks.bilateral_reward import BilateralReward, segment_fraction, sync_gap
-from rehabbot.tasks.progress_reward import ProgressReward
-from rehabbot.tasks.reward import STOP_MARGIN, StepOutcome
-from rehabbot.tasks.safety import SafetyMonitor, SafetyThresholds
+from rehabbot.tasks.reward import (
+    STOP_MARGIN,
+    BilateralReward,
+    StepOutcome,
+    segment_fraction,
+    sync_gap,
+)
 
 ENV_ID = "rehabbot/rehab-bilateral-v1"
 TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety",
@@ -177,26 +181,48 @@ def test_sync_helpers_and_a_stop_never_pays():
     assert sync_gap(0.55, 0.5, True, True, 0.1) == 0.0
     assert segment_fraction(0.25, 1.0) == 0.75
     assert segment_fraction(2.0, 1.0) == 0.0 and segment_fraction(0.3, 0.0) == 1.0
-    reward = BilateralReward(ProgressReward(max_episode_steps=1000), sync_weight=0.5)
+    # One exercise of two targets, each arm's segments 1 rad long, 1 rad of path after the
+    # first target: the fractions are 1 - distance, the path D = d_right + d_left + 1.
+    reward = BilateralReward(max_episode_steps=1000, sync_weight=0.5, rests_rad=((1.0, 0.0),),
+                             segments_rad=(((1.0, 1.0), (1.0, 1.0)),))
+
+    def start(right, left):
+        reward.reset(0, StepOutcome(next_arm_distances_rad=(right, left), lead_rad=(0.0, 0.0)))
+
+    def step(right, left, **kwargs):
+        return reward.step(StepOutcome(arm_distances_rad=(right, left),
+                                       next_arm_distances_rad=(right, left), steps_done=10,
+                                       **kwargs))[1]
+
     # G: holding still from the best earlier state would have cost 60 more than the episode
     # earned since. The stop pays G and this step's other terms (its progress 1.0, its time
-    # cost 0.05), one step's hold at the larger sync gap (0.05 + 0.5 x 0.4) and the margin.
-    stop = reward(StepOutcome(safety_stop=True, steps_done=10, path_left_before_rad=2.0,
-                              path_left_rad=1.9, sync_gap=0.3, sync_gap_before=0.4,
-                              hold_gap=60.0))
+    # cost 0.05), one step's hold at the larger sync gap (0.05 + 0.5 x 0.4: the gap was 0.4
+    # before the step, 0.3 in it) and the margin.
+    start(0.3, 0.8)  # fractions 0.7 and 0.2: a gap of 0.5 - 0.1
+    reward.hold_gap = 60.0
+    stop = step(0.3, 0.7, safety_stop=True)  # D from 2.1 to 2.0; a gap of 0.3
     assert stop["reward_safety"] == pytest.approx(
         -((60.0 + 1.0 - 0.05) + (0.05 + 0.5 * 0.4) + STOP_MARGIN))
     assert stop["reward_sync"] == 0.0 and stop["reward_bonus"] == 0.0
     # G below what the step earned: the stop still pays one step's hold and the margin.
-    in_step = reward(StepOutcome(safety_stop=True, steps_done=10, path_left_before_rad=2.0,
-                                 path_left_rad=1.9, hold_gap=-5.0))
+    start(1.05, 1.05)
+    reward.hold_gap = -5.0
+    in_step = step(1.0, 1.0, safety_stop=True)
     assert in_step["reward_safety"] == pytest.approx(-(0.05 + STOP_MARGIN))
-    # The hold bound: the time cost and the sync term at the bounded gap every step, and the
-    # progress the joints' travel to their setpoints can undo.
-    assert reward.hold_cost(0.7, 0.02, 100, 0.3) == pytest.approx(
+    # The hold bound: the time cost and the sync term at the gap the arms can reach while
+    # each travels its lead (0.28 + 0.01 + 0.01) every step, and the progress the joints'
+    # travel to their setpoints can undo.
+    start(0.3, 0.68)
+    assert reward.hold_cost(StepOutcome(lead_rad=(0.01, 0.01)), 100) == pytest.approx(
         100 * (0.05 + 0.5 * 0.3) + 10.0 * 0.02)
-    lag = reward(StepOutcome(sync_gap=0.4))
-    assert lag["reward_sync"] == pytest.approx(-0.2)
+    # Out of step by 0.4 beyond the tolerance: 0.5 x 0.4 a step; the reward's G moves on by
+    # the step's reward (and never below the new state's hold bound).
+    start(1.0, 1.0)
+    gap_before = reward.hold_gap
+    lag = reward.step(StepOutcome(arm_distances_rad=(0.3, 0.8), next_arm_distances_rad=(0.3,
+                                  0.8), steps_done=1, lead_rad=(0.0, 0.0)))
+    assert lag[1]["reward_sync"] == pytest.approx(-0.2)
+    assert reward.hold_gap == pytest.approx(max(gap_before + lag[0], 999 * (0.05 + 0.5 * 0.4)))
 
 
 def test_each_cuff_is_checked_against_its_own_limit():

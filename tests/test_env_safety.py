@@ -10,25 +10,25 @@ import numpy as np
 import pytest
 
 from rehabbot.envs.config import CONTACT_TOLERANCE_MAX_M, CUFF_FORCE_LIMIT_MAX_N
-from rehabbot.sim.robots import ur5e as ur
-from rehabbot.tasks.exercises import Exercise
-from rehabbot.tasks.reward import STOP_MARGIN
-from rehabbot.tasks.safety import (
+from rehabbot.sim.physics import (
     BLOWUP_FORCE_N,
     BLOWUP_SPEED_RAD_S,
     ISO_TS_15066_QUASI_STATIC_N,
     RULES,
 )
+from rehabbot.sim.robots import ur5e as ur
+from rehabbot.tasks.exercises import Exercise
+from rehabbot.tasks.reward import STOP_MARGIN
 
 
 def _run_until_terminated(env, policy, max_steps=300):
-    hold_distance = env.unwrapped._hold_distance  # the state before the first step
+    hold_distance = env.unwrapped.reward_function.hold_distance_rad  # before the first step
     for _ in range(max_steps):
         _obs, reward, terminated, truncated, info = env.step(policy())
         info["test_hold_distance"] = hold_distance  # of the state before this step
         if terminated or truncated:
             return reward, info
-        hold_distance = env.unwrapped._hold_distance
+        hold_distance = env.unwrapped.reward_function.hold_distance_rad
     raise AssertionError("the episode did not end")
 
 
@@ -54,7 +54,7 @@ def _assert_safety_penalty(env, reward, info):
             # The gap G to the best hold of the episode, this step's other terms, one step,
             # the margin.
             rest = info["reward_distance"] + info["reward_smoothness"] + info["reward_effort"]
-            expected = -(max(base._hold_gap + rest, 0.0) + per_step + STOP_MARGIN)
+            expected = -(max(base.reward_function.hold_gap + rest, 0.0) + per_step + STOP_MARGIN)
             assert info["reward_safety"] == pytest.approx(expected)
             # Never better than holding still from the state before the step: that pays its
             # distance for every step left (steps_left counts this one and one more).
@@ -187,7 +187,7 @@ def test_unstable_physics_option_ends_with_instability_and_the_next_reset_is_hea
     base.model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
     for k in range(50):
         sign = 1.0 if k % 2 else -1.0
-        hold_distance = base._hold_distance
+        hold_distance = base.reward_function.hold_distance_rad
         obs, reward, terminated, truncated, info = env.step(np.full(6, sign, np.float32))
         info["test_hold_distance"] = hold_distance
         if terminated:
@@ -251,7 +251,7 @@ def test_terminate_on_safety_false_reports_without_ending():
 
 def test_rules_are_documented():
     assert RULES == ("instability", "range_of_motion", "cuff_force", "unintended_contact")
-    import rehabbot.tasks.safety as safety
+    import rehabbot.sim.physics as safety
 
     for rule in RULES:
         assert f'"{rule}"' in safety.__doc__

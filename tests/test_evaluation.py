@@ -18,8 +18,8 @@ from rehabbot.analysis.evaluation import SUMMARY_METRICS, ensure_trace, evaluate
 from rehabbot.analysis.traces import TRACE_KEYS
 from rehabbot.cli import main
 from rehabbot.rl.policies import PolicyError, detect_algo, load_policy
+from rehabbot.sim.physics import RULES
 from rehabbot.sim.robots import ur5e as ur
-from rehabbot.tasks.safety import RULES
 
 ENV = "rehab-reach-v0"
 FULL_ID = "rehabbot/rehab-reach-v0"

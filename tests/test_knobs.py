@@ -38,8 +38,8 @@ from rehabbot.rl.hyperparams import (
     settings_names,
 )
 from rehabbot.sim.conditions import healthy_strength_nm
+from rehabbot.sim.physics import ISO_TS_15066_QUASI_STATIC_N
 from rehabbot.sim.scene import SceneOptions
-from rehabbot.tasks.safety import ISO_TS_15066_QUASI_STATIC_N
 
 REACH = "rehabbot/rehab-reach-v1"
 BAD_NUMBERS = [True, False, float("nan"), float("inf"), -float("inf"), 1e9, 1e300, -1e300]
@@ -213,12 +213,8 @@ def test_every_ranged_key_is_an_argument_of_some_algorithm():
 # ----------------------------------------------------------------------------- time limit
 def _horizons(env: gym.Env) -> tuple[int, ...]:
     base = env.unwrapped
-    reward = base.reward_function
-    reward_steps = getattr(reward, "max_episode_steps", None)
-    if reward_steps is None:  # the bilateral reward holds the progress reward
-        reward_steps = reward.progress.max_episode_steps
-    return (base.max_episode_steps, base.config.max_episode_steps, reward_steps,
-            env.spec.max_episode_steps)
+    return (base.max_episode_steps, base.config.max_episode_steps,
+            base.reward_function.max_episode_steps, env.spec.max_episode_steps)
 
 
 @pytest.mark.parametrize("env_id", [REACH, "rehabbot/rehab-knee-v0",

@@ -11,7 +11,7 @@ socket.socket.connect = refuse
 socket.create_connection = refuse
 import rehabbot
 import rehabbot.sim, rehabbot.sim.ik, rehabbot.sim.statics, rehabbot.sim.paths
-import rehabbot.tasks.targets, rehabbot.tasks.safety, rehabbot.tasks.reward
+import rehabbot.tasks.targets, rehabbot.sim.physics, rehabbot.tasks.reward
 import rehabbot.envs.rehab_env, rehabbot.envs.config
 rehabbot.RehabEnv, rehabbot.PatientProfile, rehabbot.Exercise
 HEAVY = ("torch", "stable_baselines3", "matplotlib", "imageio")

@@ -22,11 +22,11 @@ from rehabbot.envs.control import CONTROL_MODES
 from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.sim import patient as pt
 from rehabbot.sim import scene as sc
+from rehabbot.sim.physics import RULES
 from rehabbot.sim.robots import ur5e as ur
 from rehabbot.tasks import exercises as ex
 from rehabbot.tasks.observation import P_STAR, THETA_STAR
 from rehabbot.tasks.reward import STOP_MARGIN
-from rehabbot.tasks.safety import RULES
 
 REWARD_TERMS = ("reward_distance", "reward_bonus", "reward_safety", "reward_smoothness",
                 "reward_effort")
@@ -384,7 +384,8 @@ def test_every_step_is_sound(limb, side, task_type, control_mode, profile, exerc
         setpoint_before = env.controller.setpoint_rad.copy()
         target_before = env.target_index
         target_rad = env.target_sequence.robot_rad[target_before].copy()
-        hold_before, gap_before = env._hold_distance, env._hold_gap
+        reward_state = env.reward_function
+        hold_before, gap_before = reward_state.hold_distance_rad, reward_state.hold_gap
 
         obs, reward, terminated, truncated, info = wrapped.step(action)
 

@@ -1,4 +1,4 @@
-"""The learnable -v1 reward (rehabbot.tasks.progress_reward) and the safety audit of every id:
+"""The learnable -v1 reward (rehabbot.tasks.reward) and the safety audit of every id:
 reaching a target is worth more than stalling short of it for gamma in [0.95, 0.999], and a
 safety stop never pays better than holding still (rehabbot.analysis.reward_audit)."""
 
@@ -15,8 +15,7 @@ from rehabbot.envs.registration import (
     POPULATION_VARIANTS,
 )
 from rehabbot.rl.experts import ScriptedExpert
-from rehabbot.tasks.progress_reward import remaining_path_rad
-from rehabbot.tasks.reward import STOP_MARGIN
+from rehabbot.tasks.reward import STOP_MARGIN, StepOutcome, remaining_path_rad
 
 # The base -v1 ids (the condition and population variants pay the same reward; their own
 # tests are in test_conditions.py and test_population.py).
@@ -131,7 +130,7 @@ def test_a_safety_stop_never_pays_on_reach_v1():
     env = gym.make("rehabbot/rehab-reach-v1", exercise=0, weight_level=0)
     env.reset(seed=0)
     base = env.unwrapped
-    start_bound = base.reward_function.hold_cost(0.0, base._hold_travel(), 1000)
+    start_bound = base.reward_function.hold_cost(StepOutcome(lead_rad=base._leads()), 1000)
     push = np.zeros(6, np.float32)
     push[0] = env.action_space.high[0]
     rewards = []

@@ -1,5 +1,5 @@
 """The ``-v2`` ids: the agent observation (rehabbot.tasks.agent_observation) and actions in
-Box(-1, 1) (rehabbot.envs.actions.UnitActions) over the -v1 task. The physics and the reward
+Box(-1, 1) (rehabbot.envs.control.UnitActions) over the -v1 task. The physics and the reward
 are the -v1 id's, step for step; what the agent sees is computed from the paper's fields as
 documented; bad settings are refused by name."""
 
@@ -142,15 +142,16 @@ def test_bad_interface_settings_are_refused_by_name(kwarg: str, value: object) -
 
 
 def test_the_agent_observation_survives_an_unstable_state() -> None:
-    """Non-finite joint velocities (an unstable step) read as 0; a non-finite force as 2: the
-    observation stays finite and inside its space."""
-    agent = AgentObservation(6, 1, 2, -np.ones(6), np.ones(6), -np.ones(3), np.ones(3),
-                             np.array([140.0]))
-    paper = np.zeros(23, np.float32)
-    out = agent(paper, None, np.zeros(6), np.array([np.nan, np.inf, 0, 0, 0, 0]),
-                np.array([np.nan]), 0, 6)
-    assert np.all(np.isfinite(out)) and np.all(np.abs(out) <= 2.0)
-    assert out[agent.layout.index("cuff_force")] == 2.0
+    """Non-finite joint velocities (an unstable step) read as 0; a non-finite cuff force as 2:
+    the observation stays finite and inside its space."""
+    env = gym.make("rehabbot/rehab-reach-v2")
+    base = env.unwrapped
+    env.reset(seed=0)
+    base.data.qvel[base.handle.dof_adr[:2]] = [np.nan, np.inf]
+    base.data.efc_force[:3] = np.nan  # the cuff's constraint force
+    out = base._observation_out({})
+    assert np.all(np.isfinite(out)) and env.observation_space.contains(out)
+    assert out[base.agent_layout.index("cuff_force")] == 2.0
     with pytest.raises(ValueError, match="upper bound must exceed"):
         AgentObservation(6, 1, 2, np.ones(6), np.ones(6), -np.ones(3), np.ones(3), [1.0])
     with pytest.raises(ValueError, match="n_arms=3"):

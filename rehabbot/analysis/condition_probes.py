@@ -22,7 +22,8 @@ import numpy as np
 
 from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.sim.conditions import PatientCondition, as_condition
-from rehabbot.sim.patient_drive import PatientDrive, WorkMeter
+from rehabbot.sim.patient_drive import PatientDrive
+from rehabbot.sim.physics import WorkMeter
 
 DYNAMOMETER_KV_NMS_PER_RAD = 1000.0  # velocity servo gain of the dynamometer
 HOLD_KP_NM_PER_RAD = 500.0  # the servos that hold the other compliant joints
@@ -105,8 +106,8 @@ def stretch_test(condition: PatientCondition | dict | None, joint: str = "elbow_
                 _make_servo(model, actuator, HOLD_KP_NM_PER_RAD, HOLD_KD_NMS_PER_RAD)
                 data.ctrl[actuator] = data.qpos[qadr]
         mujoco.mj_forward(model, data)
-        meter = WorkMeter(scene, env.safety.cuff_rows[0])
-        drive = PatientDrive(scene, condition, meter, ranges, frame_skip=1)
+        meter = WorkMeter(scene.robots[0].patient_cuff_site_id, env.safety.cuff_rows[0])
+        drive = PatientDrive(scene, condition, ranges, frame_skip=1)
         drive.reset(data, env.np_random)
         meter.reset(data)
         j = names.index(full)
@@ -117,7 +118,7 @@ def stretch_test(condition: PatientCondition | dict | None, joint: str = "elbow_
         rows = []
         steps = int(abs(q_end - q_start) / abs(math.radians(speed_deg_s)) / model.opt.timestep)
         for _ in range(steps):
-            drive.step(model, data, goal, env.np_random)
+            drive.run(model, data, goal, env.np_random, meter)
             rows.append((data.qpos[qadr], data.qvel[dof], data.actuator_force[actuator],
                          drive.torque_nm[exercised.index(full)], data.qfrc_passive[dof]))
     finally:

@@ -47,7 +47,7 @@ from rehabbot.rl import runs
 from rehabbot.rl.policies import POLICY_KEYWORDS, env_for, load_policy, model_file
 from rehabbot.rl.rollout import Episode, run_episode
 from rehabbot.rl.zoo import is_zoo_spec
-from rehabbot.tasks.safety import RULES
+from rehabbot.sim.physics import RULES
 
 REPORT_NAME = "evaluation.json"
 COMPARISON_NAME = "comparison.md"

@@ -1,6 +1,7 @@
 """Assembling a bilateral env from its config: the two-robot scene, each arm's setpoint bounds,
 joint limits and controller, the targets of every (exercise, pattern), the spaces, the safety
-monitor (both cuffs, robot-robot contact) and the reward, each resolved once.
+monitor (both cuffs, robot-robot contact), the physics and the reward, each resolved once: the
+parts of :class:`rehabbot.envs.build.EnvParts` that the env core steps.
 
 Per arm everything is what a one-arm env of the same robot and patient would use, computed on
 an arm view of the scene (:func:`rehabbot.tasks.bilateral.arm_view`); the spaces are the two
@@ -10,8 +11,6 @@ the exercise table, never on the patient.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import mujoco
 import numpy as np
 from gymnasium import spaces
@@ -20,18 +19,18 @@ from rehabbot.envs.bilateral_config import BilateralEnvConfig
 from rehabbot.envs.build import (
     JOINT_LIMIT_MARGIN_RAD,
     THETA_OBS_MARGIN_RAD,
+    EnvParts,
     limit_robot_joints,
     observation_bounds,
 )
-from rehabbot.envs.control import Controller, make_controller
+from rehabbot.envs.control import ControllerPair, make_controller
+from rehabbot.sim.physics import LimbPhysics, SafetyMonitor
 from rehabbot.sim.scene import WEIGHT_LEVELS, Scene
 from rehabbot.sim.scene_build import build_scene
 from rehabbot.tasks import feasibility
 from rehabbot.tasks.bilateral import ARMS, arm_view, build_bilateral_targets, segment_lengths_rad
-from rehabbot.tasks.bilateral_reward import BilateralReward
-from rehabbot.tasks.observation import POSITION_BOUND_M, ObservationLayout, paper_layout
-from rehabbot.tasks.progress_reward import ProgressReward
-from rehabbot.tasks.safety import SafetyMonitor
+from rehabbot.tasks.observation import POSITION_BOUND_M, paper_layout
+from rehabbot.tasks.reward import BilateralReward
 from rehabbot.tasks.targets import TargetSequence
 from rehabbot.tasks.workspace import (
     WORKSPACE_MARGIN_RAD,
@@ -43,64 +42,6 @@ from rehabbot.tasks.workspace import (
 # get it in their contype, the right robot's in their conaffinity, so the robots collide with
 # each other (and not with themselves); the safety monitor counts such a contact.
 ROBOT_PAIR_BIT = 4
-
-
-class ControllerPair:
-    """The two arms' controllers of one control mode as one: actions, setpoints and bounds
-    are the right robot's then the left robot's."""
-
-    def __init__(self, controllers: tuple[Controller, Controller]) -> None:
-        self.controllers = controllers
-        self.mode = controllers[0].mode
-        self.n_joints = controllers[0].n_joints
-        self.split = self.n_joints
-        self.action_space = spaces.Box(
-            np.concatenate([c.action_space.low for c in controllers]),
-            np.concatenate([c.action_space.high for c in controllers]),
-            (2 * self.n_joints,), np.float32)
-        self.clip_low = np.concatenate([c.clip_low for c in controllers]).astype(np.float32)
-        self.clip_high = np.concatenate([c.clip_high for c in controllers]).astype(np.float32)
-
-    @property
-    def setpoint_rad(self) -> np.ndarray:
-        """Both robots' servo setpoints (a new array)."""
-        return np.concatenate([c.setpoint_rad for c in self.controllers])
-
-    def configure(self, model: mujoco.MjModel) -> None:
-        self.controllers[0].configure(model)
-
-    def bind(self, data: mujoco.MjData) -> None:
-        for controller in self.controllers:
-            controller.bind(data)
-
-    def reset(self, data: mujoco.MjData, home_setpoints_rad: np.ndarray) -> None:
-        for controller, home in zip(self.controllers, home_setpoints_rad, strict=True):
-            controller.reset(data, home)
-
-    def apply(self, action: np.ndarray, data: mujoco.MjData) -> None:
-        """Write both robots' controls for a checked action (right half, then left)."""
-        self.controllers[0].apply(action[:self.split], data)
-        self.controllers[1].apply(action[self.split:], data)
-
-
-@dataclass
-class BilateralParts:
-    """What :func:`build_bilateral_parts` resolved for one env."""
-
-    scene: Scene
-    setpoint_low_rad: np.ndarray  # (2 n,) right then left
-    setpoint_high_rad: np.ndarray
-    targets: tuple[TargetSequence, ...]  # one per entry of the bilateral table
-    segment_lengths_rad: tuple[np.ndarray, ...]  # per entry: (N, 2)
-    controller: ControllerPair
-    layout: ObservationLayout
-    observation_space: spaces.Box
-    healthy_low: np.ndarray  # float32
-    healthy_high: np.ndarray  # float32
-    safety: SafetyMonitor
-    reward: BilateralReward
-    unusable_levels: dict[int, str]
-    remaining_paths: tuple[np.ndarray, ...]  # per entry: (N, 2) rest of each arm's path
 
 
 def let_robots_collide(scene: Scene) -> None:
@@ -131,7 +72,7 @@ def _rest_per_arm(sequence: TargetSequence, n_joints: int) -> np.ndarray:
     return rest
 
 
-def build_bilateral_parts(config: BilateralEnvConfig) -> BilateralParts:
+def build_bilateral_parts(config: BilateralEnvConfig) -> EnvParts:
     """Build the two-robot scene and everything the bilateral env needs; refuse
     (``ValueError``) a patient who cannot do the exercises there."""
     scene = build_scene(config.preset, profile=config.profile,
@@ -195,18 +136,20 @@ def build_bilateral_parts(config: BilateralEnvConfig) -> BilateralParts:
     rests = tuple(_rest_per_arm(seq, n) for seq in targets)
 
     safety = SafetyMonitor(scene, config.safety_thresholds(), robots_collide=True)
-    progress = ProgressReward(
+    reward = BilateralReward(
         target_tolerance_rad=config.target_tolerance_rad,
         intermediate_bonus=config.intermediate_bonus, final_bonus=config.final_bonus,
         progress_weight=config.progress_weight, time_cost=config.time_cost,
         smoothness_weight=config.smoothness_weight, effort_weight=config.effort_weight,
         safety_penalty_steps=config.safety_penalty_steps,
         max_episode_steps=config.max_episode_steps,
+        rests_rad=tuple(tuple(float(row.sum()) for row in rest) for rest in rests),
         path_cap_rad=float(max(rest[0].sum() for rest in rests)),
         action_range=controller.clip_high.astype(float) - controller.clip_low.astype(float),
-        torque_limit_nm=np.concatenate([h.robot.torque_limits() for h in scene.robots]))
-    reward = BilateralReward(progress, sync_weight=config.sync_weight,
-                             sync_tolerance=config.sync_tolerance)
+        torque_limit_nm=np.concatenate([h.robot.torque_limits() for h in scene.robots]),
+        sync_weight=config.sync_weight, sync_tolerance=config.sync_tolerance,
+        segments_rad=tuple(tuple((float(a), float(b)) for a, b in length)
+                           for length in lengths))
 
     data = mujoco.MjData(scene.model)
     unusable = {} if not config.terminate_on_safety else feasibility.unusable_levels(
@@ -215,9 +158,18 @@ def build_bilateral_parts(config: BilateralEnvConfig) -> BilateralParts:
         if level in unusable:
             feasibility.refuse(unusable, WEIGHT_LEVELS, level)
     scene.set_weight_level(config.weight_level or 0)
-    return BilateralParts(scene=scene, setpoint_low_rad=setpoint_low,
-                          setpoint_high_rad=setpoint_high, targets=targets,
-                          segment_lengths_rad=lengths, controller=controller, layout=layout,
-                          observation_space=observation_space, healthy_low=healthy_low,
-                          healthy_high=healthy_high, safety=safety, reward=reward,
-                          unusable_levels=unusable, remaining_paths=rests)
+    joint_low = np.concatenate([np.maximum(low - JOINT_LIMIT_MARGIN_RAD, h.robot.joint_low_rad())
+                                for low, h in zip(lows, scene.robots, strict=True)])
+    joint_high = np.concatenate([np.minimum(high + JOINT_LIMIT_MARGIN_RAD,
+                                            h.robot.joint_high_rad())
+                                 for high, h in zip(highs, scene.robots, strict=True)])
+    return EnvParts(scene=scene, handles=tuple(scene.robots), setpoint_low_rad=setpoint_low,
+                    setpoint_high_rad=setpoint_high, joint_low_rad=joint_low,
+                    joint_high_rad=joint_high,
+                    targets=targets, controller=controller, layout=layout,
+                    observation_space=observation_space, healthy_low=healthy_low,
+                    healthy_high=healthy_high, safety=safety,
+                    physics=LimbPhysics(scene, config.condition, safety, None,
+                                        config.frame_skip),
+                    reward=reward, unusable_levels=unusable,
+                    exercise_table=config.bilateral_exercises)

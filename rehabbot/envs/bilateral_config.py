@@ -1,5 +1,8 @@
-"""The configuration of a :class:`rehabbot.envs.bilateral_env.BilateralEnv`: the arguments of a
-:class:`~rehabbot.envs.config.RehabEnvConfig` (validated the same way) plus the bilateral ones.
+"""The configuration of a :class:`rehabbot.envs.bilateral_env.BilateralEnv`: the groups of a
+:class:`~rehabbot.envs.config.RehabEnvConfig` (validated the same way), with the bilateral
+arguments in two of them: ``patterns`` in the task (:class:`BilateralTaskConfig`),
+``sync_weight`` and ``sync_tolerance`` in the reward (:class:`BilateralRewardConfig`, whose
+design is ``"progress"``).
 
 The exercise table of a bilateral env is every arm exercise done with every pattern
 (:mod:`rehabbot.tasks.bilateral`), pattern-major: with the built-in arm exercises and both
@@ -9,47 +12,27 @@ same done alternating. ``exercise=`` indexes this table.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from rehabbot.common.checks import check_choice, check_number
-from rehabbot.envs.config import RehabEnvConfig
+from rehabbot.envs.config import RehabEnvConfig, RewardConfig, TaskConfig
 from rehabbot.tasks.bilateral import PATTERNS, bilateral_exercise
-from rehabbot.tasks.bilateral_reward import SYNC_TOLERANCE, SYNC_WEIGHT
-from rehabbot.tasks.exercises import Exercise
+from rehabbot.tasks.exercises import Exercise, exercise_table
+from rehabbot.tasks.reward import SYNC_TOLERANCE, SYNC_WEIGHT
 
 BILATERAL_PRESET = "upper_bilateral"
 
 
 @dataclass(frozen=True)
-class BilateralEnvConfig(RehabEnvConfig):
-    """Every argument of a BilateralEnv (the table in :mod:`rehabbot.envs.bilateral_env`)."""
+class BilateralTaskConfig(TaskConfig):
+    """:class:`TaskConfig` plus the patterns of the bilateral table."""
 
-    reward: str = "progress"
     patterns: tuple[str, ...] = PATTERNS
-    sync_weight: float = SYNC_WEIGHT
-    sync_tolerance: float = SYNC_TOLERANCE
-    # Derived: (arm exercise, pattern) of each entry of the bilateral exercise table.
-    bilateral_table: tuple[tuple[Exercise, str], ...] = field(init=False, repr=False,
-                                                               compare=False)
 
     def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        exercise = self.exercise
-        set_(self, "exercise", None)  # indexes the bilateral table, checked below
         super().__post_init__()
-        if self.limb != "arm":
-            raise ValueError(f"limb={self.limb!r}: the bilateral env moves both arms; "
-                             "only limb='arm' is supported")
-        if self.side != "right":
-            raise ValueError(f"side={self.side!r}: the bilateral env moves both arms (leave "
-                             "side at its default)")
-        if self.reward != "progress":
-            raise ValueError(f"reward={self.reward!r}: the bilateral env pays the -v1 "
-                             "progress reward only (reward='progress')")
-        if not self.condition.is_healthy:
-            raise ValueError(f"condition={self.condition.to_dict()}: patient conditions are "
-                             "not supported by the bilateral env yet (the patient is healthy "
-                             "and passive)")
         patterns = self.patterns
         if isinstance(patterns, str) or not isinstance(patterns, (tuple, list)) or not patterns:
             raise ValueError(f"patterns={patterns!r} must be a non-empty sequence of "
@@ -58,16 +41,62 @@ class BilateralEnvConfig(RehabEnvConfig):
             check_choice("patterns", pattern, PATTERNS)
         if len(set(patterns)) != len(patterns):
             raise ValueError(f"patterns={patterns!r} names a pattern twice")
-        set_(self, "patterns", tuple(patterns))
-        set_(self, "sync_weight", check_number("sync_weight", self.sync_weight, 0.0, 1e6))
-        set_(self, "sync_tolerance", check_number("sync_tolerance", self.sync_tolerance,
-                                                  0.0, 1.0))
-        table = tuple((exercise_, pattern) for pattern in self.patterns
-                      for exercise_ in self.exercise_table)
-        set_(self, "bilateral_table", table)
-        if exercise is not None:
-            exercise = check_choice("exercise", exercise, range(len(table)))
-            set_(self, "exercise", int(exercise))
+        object.__setattr__(self, "patterns", tuple(patterns))
+
+
+@dataclass(frozen=True)
+class BilateralRewardConfig(RewardConfig):
+    """:class:`RewardConfig` with the ``-v1`` design and the synchronisation term's weights
+    (:class:`rehabbot.tasks.reward.BilateralReward`)."""
+
+    design: str = "progress"
+    sync_weight: float = SYNC_WEIGHT
+    sync_tolerance: float = SYNC_TOLERANCE
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.design != "progress":
+            raise ValueError(f"reward={self.design!r}: the bilateral env pays the -v1 "
+                             "progress reward only (reward='progress')")
+        object.__setattr__(self, "sync_weight", check_number("sync_weight", self.sync_weight,
+                                                             0.0, 1e6))
+        object.__setattr__(self, "sync_tolerance", check_number(
+            "sync_tolerance", self.sync_tolerance, 0.0, 1.0))
+
+
+@dataclass(frozen=True, init=False)
+class BilateralEnvConfig(RehabEnvConfig):
+    """Every argument of a BilateralEnv (the table in :mod:`rehabbot.envs.bilateral_env`)."""
+
+    # Derived: (arm exercise, pattern) of each entry of the bilateral exercise table.
+    bilateral_table: tuple[tuple[Exercise, str], ...] = field(init=False, repr=False,
+                                                               compare=False)
+
+    GROUPS: ClassVar[dict[str, type]] = {**RehabEnvConfig.GROUPS, "task": BilateralTaskConfig,
+                                         "reward": BilateralRewardConfig}
+
+    def _check_across_groups(self) -> None:
+        if self.scene.limb != "arm":
+            raise ValueError(f"limb={self.scene.limb!r}: the bilateral env moves both arms; "
+                             "only limb='arm' is supported")
+        if self.scene.side != "right":
+            raise ValueError(f"side={self.scene.side!r}: the bilateral env moves both arms "
+                             "(leave side at its default)")
+        if not self.patient.condition.is_healthy:
+            raise ValueError(f"condition={self.patient.condition.to_dict()}: patient "
+                             "conditions are not supported by the bilateral env yet (the "
+                             "patient is healthy and passive)")
+        # ``exercise`` indexes the bilateral table, not the arm exercises'.
+        task = self.task
+        arm_table = exercise_table("arm", task.exercises)
+        object.__setattr__(self, "task", dataclasses.replace(task, exercise=None))
+        super()._check_across_groups()
+        table = tuple((exercise, pattern) for pattern in task.patterns
+                      for exercise in arm_table)
+        object.__setattr__(self, "bilateral_table", table)
+        if task.exercise is not None:
+            exercise = int(check_choice("exercise", task.exercise, range(len(table))))
+            object.__setattr__(self, "task", dataclasses.replace(self.task, exercise=exercise))
 
     @property
     def preset(self) -> str:
@@ -81,6 +110,5 @@ class BilateralEnvConfig(RehabEnvConfig):
 
     def to_kwargs(self) -> dict:
         kwargs = super().to_kwargs()
-        kwargs["patterns"] = list(self.patterns)
+        kwargs["patterns"] = list(self.task.patterns)
         return kwargs
-

@@ -1,5 +1,7 @@
-"""Assembling an env from its config: scene, robot limits, targets, controller, spaces, safety
-monitor and reward function, each resolved once (:func:`build_parts`).
+"""Assembling a one-arm env from its config: scene, robot limits, targets, controller, spaces,
+safety monitor, physics and reward function, each resolved once (:func:`build_parts`, the
+parts :class:`rehabbot.envs.core.RehabEnvCore` steps; the two-arm builder,
+:mod:`rehabbot.envs.bilateral_build`, resolves the same parts for two robots).
 
 The observation and action spaces depend only on the id's limb, robot, control mode and
 exercise table, never on the patient profile or the weight level, so that a policy trained on
@@ -10,9 +12,7 @@ patient) is what the instability rule checks.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
-from typing import Any
 
 import mujoco
 import numpy as np
@@ -20,8 +20,14 @@ from gymnasium import spaces
 
 from rehabbot.envs import condition_setup
 from rehabbot.envs.config import RehabEnvConfig
-from rehabbot.envs.control import SETPOINT_SPACE_MARGIN_RAD, Controller, make_controller
+from rehabbot.envs.control import (
+    SETPOINT_SPACE_MARGIN_RAD,
+    Controller,
+    ControllerPair,
+    make_controller,
+)
 from rehabbot.sim.handles import RobotHandle
+from rehabbot.sim.physics import LimbPhysics, SafetyMonitor
 from rehabbot.sim.scene import WEIGHT_LEVELS, Scene
 from rehabbot.sim.scene_build import build_scene
 from rehabbot.tasks import feasibility
@@ -31,9 +37,7 @@ from rehabbot.tasks.observation import (
     ObservationLayout,
     paper_layout,
 )
-from rehabbot.tasks.progress_reward import ProgressReward, remaining_path_rad
-from rehabbot.tasks.reward import PaperReward
-from rehabbot.tasks.safety import SafetyMonitor
+from rehabbot.tasks.reward import PaperReward, ProgressReward, Reward, remaining_path_rad
 from rehabbot.tasks.targets import TargetSequence, build_targets
 from rehabbot.tasks.workspace import setpoint_bounds
 
@@ -44,40 +48,32 @@ ROBOT_LIMIT_SOLREF = (0.004, 1.0)  # stiff joint limits (2 x the physics step)
 
 @dataclass
 class EnvParts:
-    """What :func:`build_parts` resolved for one env."""
+    """What a builder resolved for one env (one arm: :func:`build_parts`; two:
+    :func:`rehabbot.envs.bilateral_build.build_bilateral_parts`). Per-arm arrays hold every
+    arm's values side by side, the right arm's first."""
 
     scene: Scene
-    handle: RobotHandle
+    handles: tuple[RobotHandle, ...]  # one per arm
     setpoint_low_rad: np.ndarray
     setpoint_high_rad: np.ndarray
-    joint_low_rad: np.ndarray
+    joint_low_rad: np.ndarray  # the robots' joint limits in the model
     joint_high_rad: np.ndarray
     targets: tuple[TargetSequence, ...]
-    controller: Controller
+    controller: Controller | ControllerPair
     layout: ObservationLayout
     observation_space: spaces.Box
     healthy_low: np.ndarray  # float32
     healthy_high: np.ndarray  # float32
     safety: SafetyMonitor
-    reward: PaperReward | ProgressReward
+    physics: LimbPhysics
+    reward: Reward
     unusable_levels: dict[int, str]
-    remaining_paths: tuple[tuple[float, ...], ...]  # per exercise: rest[i] (rad) after target i
     exercise_table: tuple  # the exercises as done (key poses scaled by the condition's rom_scale)
-    compliant_ranges_rad: np.ndarray  # (n_compliant, 2) the compliant joints' ranges
-    goals_rad: tuple  # per exercise, per target: the compliant joints' angles [rad]
-
-
-def reward_with_horizon(reward: Any, max_episode_steps: int) -> Any:
-    """``reward`` (a frozen dataclass) with ``max_episode_steps`` replaced, in it and in every
-    reward it holds (the bilateral reward's progress reward)."""
-    changes: dict[str, Any] = {}
-    for item in dataclasses.fields(reward):
-        value = getattr(reward, item.name)
-        if item.name == "max_episode_steps":
-            changes[item.name] = max_episode_steps
-        elif dataclasses.is_dataclass(value) and not isinstance(value, type):
-            changes[item.name] = reward_with_horizon(value, max_episode_steps)
-    return dataclasses.replace(reward, **changes) if changes else reward
+    # One arm: the compliant joints' ranges (n_compliant, 2), reduced by the condition's
+    # rom_scale, and per exercise, per target, their angles [rad] (what an active patient aims
+    # for); None for two arms (the bilateral patient is healthy and passive).
+    compliant_ranges_rad: np.ndarray | None = None
+    goals_rad: tuple | None = None
 
 
 def limit_robot_joints(scene: Scene, handle: RobotHandle, low_rad: np.ndarray,
@@ -173,11 +169,12 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
         "torque_limit_nm": handle.robot.torque_limits(),
     }
     worst_norm = float(np.linalg.norm(worst_distance))
-    if config.reward == "progress":
+    reward: Reward
+    if config.reward.design == "progress":
         # D_cap: no pose in the box is farther from a target, and no target has a longer path
         # after it than the first.
         reward = ProgressReward(progress_weight=config.progress_weight,
-                                time_cost=config.time_cost,
+                                time_cost=config.time_cost, rests_rad=remaining,
                                 path_cap_rad=worst_norm + max(rest[0] for rest in remaining),
                                 **common)
     else:
@@ -198,12 +195,14 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
         condition_setup.check_condition_forces(scene, targets, condition, safety.force_limit_n,
                                                config.weight_levels)
     scene.set_weight_level(config.weight_level or 0)
-    return EnvParts(scene=scene, handle=handle, setpoint_low_rad=setpoint_low,
+    return EnvParts(scene=scene, handles=(handle,), setpoint_low_rad=setpoint_low,
                     setpoint_high_rad=setpoint_high, joint_low_rad=joint_low,
-                    joint_high_rad=joint_high, targets=targets, controller=controller,
-                    layout=layout, observation_space=observation_space,
+                    joint_high_rad=joint_high,
+                    targets=targets, controller=controller, layout=layout,
+                    observation_space=observation_space,
                     healthy_low=healthy_low.astype(np.float32),
                     healthy_high=healthy_high.astype(np.float32), safety=safety,
-                    reward=reward, unusable_levels=unusable, remaining_paths=remaining,
-                    exercise_table=exercises, compliant_ranges_rad=ranges,
+                    physics=LimbPhysics(scene, condition, safety, ranges, config.frame_skip),
+                    reward=reward, unusable_levels=unusable, exercise_table=exercises,
+                    compliant_ranges_rad=ranges,
                     goals_rad=condition_setup.goals_rad(scene, targets))

@@ -22,6 +22,13 @@ workspace (the paper's Table 3 ranges in robot joint space,
 :func:`rehabbot.tasks.workspace.setpoint_bounds`); in ``joint_position`` mode an action
 outside them is clipped to them and counted in ``info["action_clipped"]``
 (:attr:`Controller.clip_low` / :attr:`Controller.clip_high`).
+
+An action reaches the controller checked: a float32 array of the right shape inside the box
+takes the controller's fast path (:meth:`Controller.apply_fast`); anything else is checked by
+:func:`checked_action` (clipped and counted, or refused with a ``ValueError`` that names the
+problem). On the ``-v2`` ids (``action_scale="unit"``) the action is ``Box(-1, 1)``, mapped
+linearly onto the controller's box first (:class:`UnitActions`). Two robots
+(:class:`ControllerPair`) act as one controller on both halves of the action.
 """
 
 from __future__ import annotations
@@ -78,6 +85,11 @@ class Controller:
 
     def _make_space(self) -> spaces.Box:
         raise NotImplementedError
+
+    @property
+    def controllers(self) -> tuple[Controller, ...]:
+        """The controllers of each arm: this one (a :class:`ControllerPair` has two)."""
+        return (self,)
 
     def configure(self, model: mujoco.MjModel) -> None:
         """Switch the model's actuator groups for this mode (servos on, by default)."""
@@ -232,6 +244,109 @@ class TorqueController(Controller):
         :data:`TORQUE_HOLD_BRAKE_S`."""
         del theta_rad
         return TORQUE_HOLD_SAG_RAD + TORQUE_HOLD_BRAKE_S * speed_rad_s
+
+
+def checked_action(action, space: spaces.Box, clip_low: np.ndarray, clip_high: np.ndarray,
+                   clip_bounds: tuple[tuple[float, float], ...]) -> tuple[np.ndarray, int]:
+    """``action`` as an array inside ``[clip_low, clip_high]`` and how many values were
+    clipped. ``ValueError`` names the problem for anything that cannot be an action:
+    NaN/inf (with their indices), a wrong shape, a dtype that is not a real number (bool,
+    complex, str, object)."""
+    if type(action) is np.ndarray and action.dtype is FLOAT32 and action.shape == space.shape:
+        for value, (low, high) in zip(action.tolist(), clip_bounds, strict=True):
+            if not low <= value <= high:  # also for NaN
+                break
+        else:
+            return action, 0  # the common case: float32, inside the box
+    try:
+        a = np.asarray(action)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"action {action!r} cannot be read as {space.shape} floats: "
+                         f"{err}") from None
+    if a.dtype.kind not in "iuf":  # no silent casts of bool, complex, str or objects
+        raise ValueError(f"action {action!r} has dtype {a.dtype}; expected {space.shape} real "
+                         "numbers (float32 preferred)")
+    a = a.astype(float)
+    if a.shape != space.shape:
+        raise ValueError(f"action has shape {a.shape}; expected {space.shape}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise ValueError(f"action has non-finite values at indices "
+                         f"{np.flatnonzero(bad).tolist()}: {a.tolist()}")
+    clipped = int(np.count_nonzero((a < clip_low) | (a > clip_high)))
+    if clipped:
+        a = np.clip(a, clip_low, clip_high)
+    return a, clipped
+
+
+class UnitActions:
+    """Actions in ``Box(-1, 1)`` (the ``-v2`` ids, ``action_scale="unit"``), mapped linearly
+    onto the controller's box ``[clip_low, clip_high]``: -1 is the lower and +1 the upper
+    bound of each joint's action (``-pi/400 .. pi/400`` rad in ``joint_delta`` mode; the
+    patient's setpoint bounds in ``joint_position`` mode). The checks and the clipping count of
+    :func:`checked_action` apply to the unit action."""
+
+    def __init__(self, clip_low: np.ndarray, clip_high: np.ndarray) -> None:
+        low = np.asarray(clip_low, dtype=np.float64)
+        high = np.asarray(clip_high, dtype=np.float64)
+        if low.shape != high.shape or not np.all(high > low):
+            raise ValueError(f"a unit action needs a bounded box, got {low} .. {high}")
+        self.space = spaces.Box(-1.0, 1.0, low.shape, np.float32)
+        self._center, self._half = (high + low) / 2, (high - low) / 2
+        self._ones = np.ones(low.shape)
+        self._bounds = ((-1.0, 1.0),) * low.size
+
+    def native(self, action) -> tuple[np.ndarray, int]:
+        """``(the controller's action (float32, inside its box), how many values were
+        clipped to [-1, 1])``; ``ValueError`` as :func:`checked_action`."""
+        unit, clipped = checked_action(action, self.space, -self._ones, self._ones,
+                                       self._bounds)
+        # +-1 maps onto the bounds up to float64 rounding, far below float32's step: the cast
+        # lands on the float32 bounds (the controller's check would clip and count anything
+        # outside them).
+        return (self._center + self._half * unit).astype(np.float32), clipped
+
+
+class ControllerPair:
+    """The two arms' controllers of one control mode as one: actions, setpoints and bounds
+    are the right robot's then the left robot's."""
+
+    def __init__(self, controllers: tuple[Controller, Controller]) -> None:
+        self.controllers = controllers
+        self.mode = controllers[0].mode
+        self.n_joints = controllers[0].n_joints
+        self.split = self.n_joints
+        self.action_space = spaces.Box(
+            np.concatenate([c.action_space.low for c in controllers]),
+            np.concatenate([c.action_space.high for c in controllers]),
+            (2 * self.n_joints,), np.float32)
+        self.clip_low = np.concatenate([c.clip_low for c in controllers]).astype(np.float32)
+        self.clip_high = np.concatenate([c.clip_high for c in controllers]).astype(np.float32)
+
+    @property
+    def setpoint_rad(self) -> np.ndarray:
+        """Both robots' servo setpoints (a new array)."""
+        return np.concatenate([c.setpoint_rad for c in self.controllers])
+
+    def configure(self, model: mujoco.MjModel) -> None:
+        self.controllers[0].configure(model)
+
+    def apply_fast(self, action: object) -> bool:
+        """No fast path: the env checks every action (:func:`checked_action`)."""
+        return False
+
+    def bind(self, data: mujoco.MjData) -> None:
+        for controller in self.controllers:
+            controller.bind(data)
+
+    def reset(self, data: mujoco.MjData, home_setpoints_rad: np.ndarray) -> None:
+        for controller, home in zip(self.controllers, home_setpoints_rad, strict=True):
+            controller.reset(data, home)
+
+    def apply(self, action: np.ndarray, data: mujoco.MjData) -> None:
+        """Write both robots' controls for a checked action (right half, then left)."""
+        self.controllers[0].apply(action[:self.split], data)
+        self.controllers[1].apply(action[self.split:], data)
 
 
 def make_controller(mode: str, handle: RobotHandle, low_rad: np.ndarray, high_rad: np.ndarray,

@@ -1,11 +1,11 @@
-"""What every RehabBot env class shares (:class:`rehabbot.envs.rehab_env.RehabEnv` and
+"""The Gymnasium plumbing every RehabBot env shares (:class:`rehabbot.envs.core.RehabEnvCore`,
+whose ``reset`` and ``step`` serve :class:`rehabbot.envs.rehab_env.RehabEnv` and
 :class:`rehabbot.envs.bilateral_env.BilateralEnv`): rendering and ``close``, the episode's state
-as read-only properties, the config's settings read as attributes, and the errors of a
-``step()`` out of turn. Each subclass builds itself and steps its own way."""
+as read-only properties, the config's settings read as attributes, the start of an episode and
+the errors of a ``step()`` out of turn."""
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -13,21 +13,18 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.checks import check_number, check_options
-from rehabbot.envs.actions import UnitActions
-from rehabbot.envs.build import reward_with_horizon
 from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES, kwarg_names
 from rehabbot.envs.time_limit import MakeTimeLimit
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
 from rehabbot.tasks import feasibility
-from rehabbot.tasks.agent_observation import AgentObservation
 from rehabbot.tasks.targets import TargetSequence
 
 RESET_OPTIONS = ("exercise", "weight_level")
 
 
 class RehabEnvBase(MakeTimeLimit, gym.Env):
-    """The shared part of the RehabBot envs. A subclass sets :attr:`config_class` and, in its
-    constructor, ``config``, calls :meth:`_adopt_parts` on its built parts, and sets
+    """The shared plumbing of the RehabBot envs. A subclass sets :attr:`config_class` and, in
+    its constructor, ``config``, calls :meth:`_adopt_parts` on its built parts, and sets
     ``_rendering``, ``_healthy_low`` and ``_healthy_high``; ``reset`` and ``step`` keep
     ``_steps``, ``_target_index``, ``_exercise``, ``_sequence``, ``_closed`` and
     ``_needs_reset``."""
@@ -105,9 +102,9 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         if not self._needs_reset:
             raise RuntimeError("set_time_limit() called during an episode; call it before "
                                "reset()")
-        self.config = dataclasses.replace(self.config, max_episode_steps=limit)
+        self.config = self.config.replace(max_episode_steps=limit)
         self.max_episode_steps = limit
-        self.reward_function = reward_with_horizon(self.reward_function, limit)
+        self._reward.max_episode_steps = limit
         self._rendering.trace = np.zeros((limit + 1, 3))
         self._rendering.trace_len = 0
 
@@ -115,7 +112,7 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         # The config's settings read as attributes (env.limb, env.target_tolerance_rad, ...).
         config = self.__dict__.get("config")
         if config is not None and name in kwarg_names(self.config_class):
-            return getattr(config, name)
+            return config.flat(name)
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     # ------------------------------------------------------------------------------------------
@@ -133,7 +130,6 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         self.targets: tuple[TargetSequence, ...] = parts.targets
         self.controller = parts.controller
         self.safety = parts.safety
-        self.reward_function = parts.reward
         self.layout = parts.layout
         self.action_space = self.controller.action_space
         self.observation_space = parts.observation_space
@@ -144,45 +140,10 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
         self._unusable_levels = parts.unusable_levels
 
-    def _adopt_agent_interface(self, n_arms: int) -> None:
-        """The ``-v2`` interface, when the config asks for it: the agent observation
-        (``observation="agent"``, :mod:`rehabbot.tasks.agent_observation`) and actions in
-        ``Box(-1, 1)`` (``action_scale="unit"``, :class:`rehabbot.envs.actions.UnitActions`).
-        Call once the controller, safety rules and ``_dof_adr`` are set."""
-        config = self.config
-        self._agent_observation: AgentObservation | None = None
-        self._unit_actions: UnitActions | None = None
-        if config.action_scale == "unit":
-            self._unit_actions = UnitActions(self.controller.clip_low, self.controller.clip_high)
-            self.action_space = self._unit_actions.space
-        if config.observation == "agent":
-            model, adr = self.model, np.asarray(self.scene.exercised_qpos_adr).tolist()
-            joints = [int(np.flatnonzero(model.jnt_qposadr == a)[0]) for a in adr]
-            phi_range = model.jnt_range[joints]
-            agent = self._agent_observation = AgentObservation(
-                self.controller.n_joints, n_arms, len(self.targets),
-                self.setpoint_low_rad, self.setpoint_high_rad, phi_range[:, 0], phi_range[:, 1],
-                self.safety.force_limits_n, has_setpoints=config.control_mode != "torque")
-            self.agent_layout = agent.layout
-            low, high = agent.space_bounds
-            self.observation_space = gym.spaces.Box(low, high, (agent.layout.size,), np.float32)
-
     def paper_observation(self) -> np.ndarray:
         """The paper's observation of the current state (a copy; its fields in
         :attr:`layout`), whatever the id's ``observation``."""
         return self._obs.copy()
-
-    def _observation_out(self, info: dict) -> np.ndarray:
-        """What ``reset`` and ``step`` return: the paper's observation, or the agent
-        observation (with the paper's in ``info["paper_observation"]``)."""
-        agent = self._agent_observation
-        if agent is None:
-            return self._obs.copy()
-        info["paper_observation"] = self._obs.copy()
-        i, sequence = self._target_index, self._sequence
-        return agent(self._obs, sequence.robot_rad[i + 1] if i + 1 < len(sequence) else None,
-                     self.controller.setpoint_rad, self.data.qvel[self._dof_adr],
-                     self.safety.cuff_forces_n(self.data), i, len(sequence))
 
     def _start_episode(self, seed: int | None, options: dict | None) -> None:
         """The part of ``reset`` both env classes share: seed, check the options, draw the
@@ -209,8 +170,9 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         self.scene.reset_data(self.data)
 
     def _render_targets(self) -> np.ndarray:
-        """The target tool positions the rendering marks (robot base frame)."""
-        return self._sequence.tool_pos_base_m
+        """The target tool positions the rendering marks: the first robot's (its base
+        frame)."""
+        return self._sequence.tool_pos_base_m[:, :3]
 
     def _refuse_step(self) -> None:
         if self._closed:

@@ -32,7 +32,6 @@ every patient at once to check a population up front.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -106,7 +105,7 @@ class PopulationEnv(MakeTimeLimit, gym.Env):
         limit = check_number("max_episode_steps", max_episode_steps, low, high, integer=True)
         if limit == self.config.max_episode_steps:
             return
-        self.config = dataclasses.replace(self.config, max_episode_steps=limit)
+        self.config = self.config.replace(max_episode_steps=limit)
         self._kwargs["max_episode_steps"] = limit
         for env in self._envs.values():
             env.set_time_limit(limit)

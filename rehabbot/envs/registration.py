@@ -45,7 +45,7 @@ MAX_EPISODE_STEPS = 1000
 
 # id -> (kwargs, one-line description). The -v0 ids are the paper's Table 2 with eq. (5); the
 # -v1 ids are the same tasks and spaces with the learnable progress reward
-# (rehabbot.tasks.progress_reward).
+# (rehabbot.tasks.reward).
 ENV_SPECS: dict[str, tuple[dict, str]] = {
     "rehabbot/rehab-reach-v0": (
         {"limb": "arm", "side": "right", "task_type": "reaching"},

@@ -56,7 +56,7 @@ weight level of an id (``r``: each robot joint's hardware range, 2 pi or pi for 
 The ``-v2`` ids are the ``-v1`` task and reward with an interface any learner can use: the
 action is ``Box(-1, 1, (n,), float32)``, mapped linearly onto the control mode's box
 (``joint_delta``: -1 .. +1 is -pi/400 .. +pi/400 rad; ``joint_position``: the patient's
-setpoint bounds; :class:`rehabbot.envs.actions.UnitActions`), and the observation is
+setpoint bounds; :class:`rehabbot.envs.control.UnitActions`), and the observation is
 ``Box(-2, 2, (50,), float32)`` (56 with the FR3), every entry scaled to about [-1, 1]
 (:mod:`rehabbot.tasks.agent_observation`, where the formulas are):
 
@@ -88,7 +88,7 @@ Named terms, each reported as ``info["reward_<name>"]``; the reward is their sum
 target_tolerance_rad``), optional ``reward_smoothness`` and ``reward_effort``, ``reward_safety``
 on a stop (a stop never pays); stalling can be worth more than reaching a target
 (``benchmarks/reward_trap.py``). ``reward="progress"`` (the -v1 ids),
-:mod:`rehabbot.tasks.progress_reward`: ``reward_progress`` (``progress_weight`` x the decrease
+:class:`rehabbot.tasks.reward.ProgressReward`: ``reward_progress`` (``progress_weight`` x the decrease
 of the joint-space path still to travel), ``reward_bonus``, ``reward_time = -time_cost``, the
 optional terms and ``reward_safety``; reaching each target beats stalling for every gamma in
 [0.95, 0.999]. ``info["cost"]`` is 1.0 in a step where a safety rule fired, else 0.0
@@ -114,7 +114,7 @@ the weight level are drawn from ``np_random`` unless fixed by the constructor or
 
 ## Episode end
 * terminated, success: the last target is reached (``info["is_success"]``);
-* terminated, safety: a rule of :mod:`rehabbot.tasks.safety` fires
+* terminated, safety: a rule of :mod:`rehabbot.sim.physics` fires
   (``info["safety_violation"]``): ``"instability"``, ``"range_of_motion"``, ``"cuff_force"``
   or ``"unintended_contact"``;
 * truncated: ``max_episode_steps`` (1000 = 20 s), applied by the registration's ``TimeLimit``.
@@ -126,50 +126,54 @@ is a no-op. An ``"instability"`` always ends the episode (even with
 starts from the healthy home state.
 
 ## Arguments
-All are fields of :class:`rehabbot.envs.config.RehabEnvConfig`, validated before anything is
-built (``ValueError`` naming the value and its valid choices or range). ``RehabEnv(config)``
-takes a config instead.
+The flat keywords below are the fields of the groups of a
+:class:`rehabbot.envs.config.RehabEnvConfig` (``scene``, ``patient``, ``task``, ``control``,
+``safety``, ``reward``, ``render``: the table's second column), validated before anything is
+built (``ValueError`` naming the value and its valid choices or range). A group may be passed
+whole, as its config class or a dict of its fields (``RehabEnv(reward={"design": "progress",
+"time_cost": 0.1})``; ``reward="progress"``, a string, is the design), with flat keywords
+applied on top; ``RehabEnv(config)`` takes a whole config instead.
 
-| kwarg | default | meaning |
-|---|---|---|
-| ``limb`` | ``"arm"`` | ``"arm"`` (seated, shoulder + elbow), ``"hip"`` (supine), ``"knee"`` (seated) |
-| ``side`` | ``"right"`` | ``"right"`` or ``"left"`` arm / leg |
-| ``task_type`` | ``"reaching"`` | ``"reaching"`` (the key poses) or ``"trajectory"`` (dense min-jerk waypoints) |
-| ``control_mode`` | ``"joint_delta"`` | see Action space |
-| ``profile`` | ``None`` | :class:`PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
-| ``condition`` | ``None`` | :class:`PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive. A condition variant id (``rehab-reach-spastic-v1``, ...) refuses a ``condition=`` that would replace its own: use the base id |
-| ``weight_level`` | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
-| ``exercise`` | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
-| ``exercises`` | ``None`` | the exercise table: :class:`Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
-| ``robot`` | ``"ur5e"`` | the robot on the cuff: ``"ur5e"`` (the paper's) or ``"fr3"`` (Franka Research 3, 7 joints) |
-| ``cuff`` | ``"connect"`` | ``"connect"`` (strap: position only) or ``"weld"`` |
-| ``base_reorientation_deg`` | 0.0 | rotation of the robot base about its vertical axis, in [-180, 180] |
-| ``frame_skip`` | 10 | physics steps per decision |
-| ``timestep_s`` | 0.002 | physics step in [1e-4, 0.005] s; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
-| ``target_tolerance_rad`` | 0.05 | epsilon of eq. (5) |
-| ``reward`` | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
-| ``observation`` | ``"paper"`` | ``"paper"`` (the paper's 23 fields, -v0 and -v1) or ``"agent"`` (the -v2 ids; see Observation space) |
-| ``action_scale`` | ``"native"`` | ``"native"`` (actions in the control mode's units, -v0 and -v1) or ``"unit"`` (``Box(-1, 1)``, the -v2 ids) |
-| ``progress_weight`` | 10.0 | progress reward: paid per rad of path travelled |
-| ``time_cost`` | 0.05 | progress reward: cost of every step |
-| ``intermediate_bonus`` | 10.0 | B_i for i < N - 1 |
-| ``final_bonus`` | 100.0 | B_{N-1} |
-| ``smoothness_weight`` | 0.0 | weight of ``reward_smoothness`` |
-| ``effort_weight`` | 0.0 | weight of ``reward_effort`` |
-| ``terminate_on_safety`` | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
-| ``safety_penalty`` | ``"hold"`` | ``"hold"`` (every reward: the gap to the best hold of the episode, one step more and a margin of 1.0, so a stop never pays) or, paper reward only, ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
-| ``safety_penalty_steps`` | None | charge at most this many steps at the current hold cost instead (0.2.0's default was 100; with a cap a stop can pay) |
-| ``rom_tolerance_deg`` | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range, in [0, 10] deg (10: the knee hyperextension a CPM device allows, domain-facts §4.2) |
-| ``cuff_force_limit_n`` | None | cuff force rule: limit in N for every cuff, in [1, 880] N (880 = 4 x the largest ISO/TS 15066 quasi-static limit, thighs 220 N); None = the quasi-static limit of the region each cuff holds |
-| ``contact_tolerance_m`` | 0.002 | contact rule: penetration that counts as contact, in [0, 0.01] m (2 x the deepest limb compression at an ISO/TS 15066 quasi-static limit, upper arm 150 N / 30 N/mm = 5 mm) |
-| ``max_episode_steps`` | 1000 | horizon used by the safety penalty, in [1, 10**6] (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` sets both: the env takes its TimeLimit's ``m`` as its horizon; ``m <= 0`` (Gymnasium's ``-1`` = no time limit included) is refused (:mod:`rehabbot.envs.registration`). A ``RehabEnv`` built directly never truncates: wrap it as ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` |
-| ``segment_s`` | 3.0 | trajectory: duration of each min-jerk segment between key poses |
-| ``waypoint_dt_s`` | 0.1 | trajectory: sampling period of the min-jerk path |
-| ``min_waypoint_spacing_rad`` | 0.1 | trajectory: minimum distance (inf-norm, robot joints) between waypoints |
-| ``max_speed_rad_s`` | 0.5 | ``joint_velocity`` mode: action bound |
-| ``render_mode`` | None | ``"human"``, ``"rgb_array"`` or ``"depth_array"`` |
-| ``width``, ``height`` | 640, 480 | image size in pixels |
-| ``camera_name`` | ``"overview"`` | ``"overview"``, ``"front"``, ``"side"`` or None (free camera) |
+| kwarg | group | default | meaning |
+|---|---|---|---|
+| ``limb`` | scene | ``"arm"`` | ``"arm"`` (seated, shoulder + elbow), ``"hip"`` (supine), ``"knee"`` (seated) |
+| ``side`` | scene | ``"right"`` | ``"right"`` or ``"left"`` arm / leg |
+| ``task_type`` | task | ``"reaching"`` | ``"reaching"`` (the key poses) or ``"trajectory"`` (dense min-jerk waypoints) |
+| ``control_mode`` | control | ``"joint_delta"`` | see Action space |
+| ``profile`` | patient | ``None`` | :class:`PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
+| ``condition`` | patient | ``None`` | :class:`PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive. A condition variant id (``rehab-reach-spastic-v1``, ...) refuses a ``condition=`` that would replace its own: use the base id |
+| ``weight_level`` | patient | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
+| ``exercise`` | task | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
+| ``exercises`` | task | ``None`` | the exercise table: :class:`Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
+| ``robot`` | scene | ``"ur5e"`` | the robot on the cuff: ``"ur5e"`` (the paper's) or ``"fr3"`` (Franka Research 3, 7 joints) |
+| ``cuff`` | scene | ``"connect"`` | ``"connect"`` (strap: position only) or ``"weld"`` |
+| ``base_reorientation_deg`` | scene | 0.0 | rotation of the robot base about its vertical axis, in [-180, 180] |
+| ``frame_skip`` | control | 10 | physics steps per decision |
+| ``timestep_s`` | scene | 0.002 | physics step in [1e-4, 0.005] s; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
+| ``target_tolerance_rad`` | task | 0.05 | epsilon of eq. (5) |
+| ``reward`` | reward | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
+| ``observation`` | task | ``"paper"`` | ``"paper"`` (the paper's 23 fields, -v0 and -v1) or ``"agent"`` (the -v2 ids; see Observation space) |
+| ``action_scale`` | control | ``"native"`` | ``"native"`` (actions in the control mode's units, -v0 and -v1) or ``"unit"`` (``Box(-1, 1)``, the -v2 ids) |
+| ``progress_weight`` | reward | 10.0 | progress reward: paid per rad of path travelled |
+| ``time_cost`` | reward | 0.05 | progress reward: cost of every step |
+| ``intermediate_bonus`` | reward | 10.0 | B_i for i < N - 1 |
+| ``final_bonus`` | reward | 100.0 | B_{N-1} |
+| ``smoothness_weight`` | reward | 0.0 | weight of ``reward_smoothness`` |
+| ``effort_weight`` | reward | 0.0 | weight of ``reward_effort`` |
+| ``terminate_on_safety`` | safety | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
+| ``safety_penalty`` | reward | ``"hold"`` | ``"hold"`` (every reward: the gap to the best hold of the episode, one step more and a margin of 1.0, so a stop never pays) or, paper reward only, ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
+| ``safety_penalty_steps`` | reward | None | charge at most this many steps at the current hold cost instead (0.2.0's default was 100; with a cap a stop can pay) |
+| ``rom_tolerance_deg`` | safety | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range, in [0, 10] deg (10: the knee hyperextension a CPM device allows, domain-facts §4.2) |
+| ``cuff_force_limit_n`` | safety | None | cuff force rule: limit in N for every cuff, in [1, 880] N (880 = 4 x the largest ISO/TS 15066 quasi-static limit, thighs 220 N); None = the quasi-static limit of the region each cuff holds |
+| ``contact_tolerance_m`` | safety | 0.002 | contact rule: penetration that counts as contact, in [0, 0.01] m (2 x the deepest limb compression at an ISO/TS 15066 quasi-static limit, upper arm 150 N / 30 N/mm = 5 mm) |
+| ``max_episode_steps`` | task | 1000 | horizon used by the safety penalty, in [1, 10**6] (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` sets both: the env takes its TimeLimit's ``m`` as its horizon; ``m <= 0`` (Gymnasium's ``-1`` = no time limit included) is refused (:mod:`rehabbot.envs.registration`). A ``RehabEnv`` built directly never truncates: wrap it as ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` |
+| ``segment_s`` | task | 3.0 | trajectory: duration of each min-jerk segment between key poses |
+| ``waypoint_dt_s`` | task | 0.1 | trajectory: sampling period of the min-jerk path |
+| ``min_waypoint_spacing_rad`` | task | 0.1 | trajectory: minimum distance (inf-norm, robot joints) between waypoints |
+| ``max_speed_rad_s`` | control | 0.5 | ``joint_velocity`` mode: action bound |
+| ``render_mode`` | render | None | ``"human"``, ``"rgb_array"`` or ``"depth_array"`` |
+| ``width``, ``height`` | render | 640, 480 | image size in pixels |
+| ``camera_name`` | render | ``"overview"`` | ``"overview"``, ``"front"``, ``"side"`` or None (free camera) |
 
 ``depth_array`` images hold the distance from the camera in metres; pixels that see no geometry
 hold the camera's far-plane distance. ``env.dt`` is the seconds per step, as in Gymnasium's
@@ -178,340 +182,23 @@ MuJoCo envs.
 
 from __future__ import annotations
 
-import math
 from typing import Any, ClassVar
 
-import mujoco
-import numpy as np
-
-from rehabbot.common.arrays import as_index
-from rehabbot.envs.actions import checked_action
 from rehabbot.envs.build import build_parts
 from rehabbot.envs.config import RehabEnvConfig, config_from
-from rehabbot.envs.env_base import RehabEnvBase
-from rehabbot.envs.env_rendering import EnvRendering
-from rehabbot.sim.patient_drive import LimbPhysics
-from rehabbot.tasks.exercises import Exercise
-from rehabbot.tasks.reward import StepOutcome, joint_distance, next_hold_gap, total
-
-# A value this far inside a bound of the healthy box is inside whatever float32 rounding does
-# (the bounds are below 10 in magnitude; float32 rounds them by at most 5e-7).
-BOUND_CLEARANCE = 1e-5
+from rehabbot.envs.core import RehabEnvCore
 
 
-class RehabEnv(RehabEnvBase):
-    """A UR5e moves a patient's limb through a therapy exercise (see the module docstring)."""
+class RehabEnv(RehabEnvCore):
+    """A UR5e moves a patient's limb through a therapy exercise (see the module docstring).
+    ``reset`` and ``step`` are the env core's (:mod:`rehabbot.envs.core`)."""
 
     config_class: ClassVar[type] = RehabEnvConfig
 
     def __init__(self, config: RehabEnvConfig | None = None, **kwargs: Any) -> None:
         self.config = config = config_from(RehabEnvConfig, "RehabEnv", config, kwargs)
         parts = build_parts(config)  # ValueError for a patient who cannot do the exercises
-        self._adopt_parts(parts, config)
-        self.handle = parts.handle
-        self.robot = self.handle.robot
+        self.handle = parts.handles[0]
         self.joint_low_rad, self.joint_high_rad = parts.joint_low_rad, parts.joint_high_rad
-        self.exercises: tuple[Exercise, ...] = parts.exercise_table
-        self._remaining_paths = parts.remaining_paths
-        self._uses_path = self.reward_function.uses_path
-        self._rest: tuple[float, ...] = parts.remaining_paths[0]
-        self._hold_distance = 0.0  # ||theta - theta*|| of the current state, active target
-        self._path_left = 0.0  # the path still to travel from the current state [rad]
-        self._uses_hold_gap = getattr(self.reward_function, "uses_hold_gap", False)
-        # The physics with the patient's condition and the work on the limb.
-        self._physics = LimbPhysics(self.scene, config.condition, self.safety.cuff_rows[0],
-                                    parts.compliant_ranges_rad, self.frame_skip)
         self.compliant_ranges_rad = parts.compliant_ranges_rad  # (reduced by rom_scale)
-        self._goals = parts.goals_rad
-        self._goal = self._goals[0][0]
-        self._hold_gap = 0.0  # G of StepOutcome.hold_gap
-
-        # -- ids, slices and buffers (resolved once) -----------------------------------------
-        layout = self.layout
-        self._theta_star, self._p_star = layout.slice("theta_star"), layout.slice("p_star")
-        self._theta_obs, self._p_obs = layout.slice("theta"), layout.slice("p")
-        self._phi_obs, self._e_obs, self._l_obs = (layout.slice("phi"), layout.index("e"),
-                                                   layout.index("l"))
-        self._clip_low = self.controller.clip_low.astype(float)
-        self._clip_high = self.controller.clip_high.astype(float)
-        self._clip_bounds = tuple(zip(self.controller.clip_low.tolist(),
-                                      self.controller.clip_high.tolist(), strict=True))
-        base = self.handle.base_body_id
-        mujoco.mj_kinematics(self.model, self.data)
-        self._base_pos = self.data.xpos[base].copy()
-        self._base_rot = self.data.xmat[base].reshape(3, 3).copy()
-        self._qpos_adr = as_index(self.handle.qpos_adr)
-        phi_adr = [int(a) for a in self.scene.exercised_qpos_adr]
-        self._phi_block = slice(min(phi_adr), max(phi_adr) + 1)  # read as one slice
-        self._phi_pick = tuple(a - min(phi_adr) for a in phi_adr)
-        self._dof_adr = as_index(self.handle.dof_adr)
-        self._tool_site = self.handle.tool_site_id
-        self._exercised_qpos_adr = as_index(self.scene.exercised_qpos_adr)
-        self._patient_qpos_adr = as_index(self.scene.patient_qpos_adr)
-        n = self._n_joints = self.robot.n_joints
-        self._obs = np.zeros(layout.size, np.float32)  # working vector
-        # The per-step fields theta, p, phi sit side by side (indices 9-20 of the paper's
-        # layout): one write, one bounds check.
-        if not (self._theta_obs.stop == self._p_obs.start and self._p_obs.stop ==
-                self._phi_obs.start):
-            raise AssertionError("the layout must keep theta, p and phi side by side")
-        self._dynamic = slice(self._theta_obs.start, self._phi_obs.stop)
-        self.set_healthy_box(parts.healthy_low, parts.healthy_high)
-        self._static_inside = True  # whether theta*, p*, e and l are in the healthy box
-        self._healthy_values: list[float] = []  # theta, p, phi of the last healthy step
-        self._base_pos_list = self._base_pos.tolist()
-        self._base_rot_cols = self._base_rot.T.tolist()  # p = base_rot^T (x - base_pos)
-        self._theta = [0.0] * n  # the last healthy joint angles (a list: six numbers)
-        self._target = [0.0] * n  # theta* of the active target
-        self._prev_action = np.zeros(n)
-        self._keep_previous_action = self.reward_function.uses_previous_action
-        self._outcome = StepOutcome(previous_action=self._prev_action)
-        self._num_targets = 0
-        self._tolerance = self.reward_function.target_tolerance_rad
-        self._terminate_on_safety = config.terminate_on_safety
-        self._steps = 0
-        self._target_index = 0
-        self._exercise = 0
-        self._sequence = self.targets[0]
-        self._needs_reset = True  # before the first reset, after a termination, after close
-        self._closed = False
-        self._rendering = EnvRendering(self.model, self.render_mode, config.width,
-                                       config.height, config.camera_name,
-                                       self.max_episode_steps, self.dt_s, self._base_pos,
-                                       self._base_rot)
-        self._record = self.render_mode is not None
-        self._bind_views()
-        self._adopt_agent_interface(n_arms=1)
-        self.scene.reset_data(self.data)
-
-    # ------------------------------------------------------------------------------------------
-    # Gymnasium API
-    # ------------------------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        self._start_episode(seed, options)
-        data = self.data
-        self.controller.reset(data, self.scene.home_setpoints[0])
-        self.safety.reset(data)
-        self._physics.reset(data, self.np_random)
-        self._prev_action[:] = 0.0
-        self._rendering.clear_trace()
-        self._record_trace()
-        obs = self._obs
-        obs[self._e_obs] = self._exercise
-        obs[self._l_obs] = self.scene.weight_level
-        self._num_targets = len(self._sequence)
-        self._write_target()
-        self._theta = self._observe() or self._qpos[self._qpos_adr].tolist()
-        self._rest = self._remaining_paths[self._exercise]
-        self._hold_distance = joint_distance(self._theta, self._target)
-        self._path_left = self._hold_distance + self._rest[0]
-        if self._uses_hold_gap:
-            self._hold_gap = self.reward_function.hold_cost(
-                self._hold_distance, self._hold_travel(), self.max_episode_steps)
-        info = self._info(None, False, self.safety.cuff_force_n(data),
-                          self.reward_function.zero_terms(), 0)
-        self._needs_reset = False
-        if self.render_mode == "human":
-            self.render()
-        return self._observation_out(info), info
-
-    def step(self, action):
-        if self._needs_reset:
-            self._refuse_step()
-        data, clipped = self.data, 0
-        if self._unit_actions is not None:  # -v2: Box(-1, 1) onto the controller's box
-            action, clipped = self._unit_actions.native(action)
-        if not self.controller.apply_fast(action):  # a float32 array inside the box: checked
-            action, native_clipped = checked_action(action, self.controller.action_space,
-                                                    self._clip_low, self._clip_high,
-                                                    self._clip_bounds)
-            clipped += native_clipped
-            self.controller.apply(action, data)
-        self._physics.step(self.model, data, self._goal, self.np_random)
-        self._steps += 1
-
-        violation, force_n = self.safety.check_step(data)
-        obs = self._obs
-        if violation != "instability":
-            healthy = self._healthy_values
-            theta = self._observe()
-            if theta is not None:
-                self._theta = theta
-                if self._record:
-                    self._rendering.record(self._tool_xpos)
-            else:
-                violation = "instability"
-                self._healthy_values = healthy
-        if violation == "instability":  # keep the last healthy observation and joint angles
-            obs[self._dynamic] = self._healthy_values
-            force_n = 0.0 if not math.isfinite(force_n) else force_n
-
-        # Distance to the target that was active during the step (six numbers: plain Python).
-        squared = largest = 0.0
-        for angle, goal in zip(self._theta, self._target, strict=True):
-            error = angle - goal
-            squared += error * error
-            if abs(error) > largest:
-                largest = abs(error)
-        last = self._target_index == self._num_targets - 1
-        safety_stop = violation is not None and (self._terminate_on_safety
-                                                 or violation == "instability")
-        reached = largest < self._tolerance and not safety_stop
-        outcome = self._outcome
-        distance = outcome.distance_rad = math.sqrt(squared)
-        outcome.hold_distance_rad = self._hold_distance
-        # After a switch, holding still costs the distance to the next target.
-        switching = reached and not last
-        hold = self._hold_distance = (
-            joint_distance(self._theta, self._sequence.robot_rad[self._target_index + 1].tolist())
-            if switching else distance)
-        if self._uses_path:
-            outcome.path_left_before_rad = self._path_left
-            self._path_left = outcome.path_left_rad = hold + self._rest[
-                self._target_index + 1 if switching else self._target_index]
-        outcome.reached = reached
-        outcome.last_target = last
-        outcome.safety_stop = safety_stop
-        outcome.steps_done = self._steps
-        outcome.action = action
-        outcome.hold_gap = self._hold_gap
-        terms = self.reward_function(outcome)
-        reward = total(terms)
-        if self._uses_hold_gap and not safety_stop:
-            self._hold_gap = next_hold_gap(self._hold_gap, reward, self.reward_function.hold_cost(
-                hold, self._hold_travel(), max(self.max_episode_steps - self._steps, 0)))
-        if self._keep_previous_action:
-            self._prev_action[:] = action
-
-        terminated, is_success = safety_stop, False
-        if reached:
-            if last:
-                terminated = is_success = True
-            else:
-                self._target_index += 1
-                self._write_target()  # the observation shows the next target
-        self._needs_reset = terminated
-        info = self._info(violation, is_success, force_n, terms, clipped)
-        if self.render_mode == "human":
-            self.render()
-        return self._observation_out(info), reward, terminated, False, info
-
-    # ------------------------------------------------------------------------------------------
-    # Properties
-    # ------------------------------------------------------------------------------------------
-    def set_healthy_box(self, low: np.ndarray, high: np.ndarray) -> None:
-        """Replace the box a healthy observation must stay in (float32, read-only copies)."""
-        self._healthy_low = np.array(low, dtype=np.float32)
-        self._healthy_high = np.array(high, dtype=np.float32)
-        for bound in (self._healthy_low, self._healthy_high):
-            bound.setflags(write=False)
-        self._dynamic_bounds = tuple(zip(self._healthy_low[self._dynamic].tolist(),
-                                         self._healthy_high[self._dynamic].tolist(),
-                                         strict=True))
-        self._dynamic_clear = tuple((low + BOUND_CLEARANCE, high - BOUND_CLEARANCE)
-                                    for low, high in self._dynamic_bounds)
-        self._static_inside = self._static_fields_inside()
-
-    @property
-    def worst_step_reward(self) -> float | None:
-        """The per-step loss of the ``"worst_case"`` safety penalty (this patient's bounds);
-        None for the progress reward, which has no such penalty."""
-        return getattr(self.reward_function, "worst_step_reward", None)
-
-    # ------------------------------------------------------------------------------------------
-    # Helpers
-    # ------------------------------------------------------------------------------------------
-    def _hold_travel(self) -> float:
-        """How far [rad] the joints may still travel if the agent holds still from here
-        (:meth:`rehabbot.envs.control.Controller.hold_travel_rad`)."""
-        speed = 0.0
-        for velocity in self._qvel[self._dof_adr].tolist():
-            speed += velocity * velocity
-        return self.controller.hold_travel_rad(self._theta, math.sqrt(speed))
-
-    def _write_target(self) -> None:
-        """The active target's fields of the observation (theta*, p*)."""
-        obs, i = self._obs, self._target_index
-        target = self._sequence.robot_rad[i]
-        obs[self._theta_star] = target
-        obs[self._p_star] = self._sequence.tool_pos_base_m[i]
-        self._target = target.tolist()
-        self._goal = self._goals[self._exercise][i]
-        self._static_inside = self._static_fields_inside()
-
-    def _static_fields_inside(self) -> bool:
-        """Whether the fields that change only at reset and target switches (theta*, p*, e,
-        l) are in the healthy box; checked when they change, not every step."""
-        obs, dynamic = self._obs, self._dynamic
-        inside = (obs >= self._healthy_low) & (obs <= self._healthy_high)
-        return bool(inside[:dynamic.start].all() and inside[dynamic.stop:].all())
-
-    def _observe(self) -> list[float] | None:
-        """Write the fields that change every step (theta, p, phi) into ``self._obs`` (and
-        keep them, to restore the last healthy observation); return theta (the robot's joint
-        angles, float64) as a list, or None if the observation left the healthy box."""
-        qpos = self._qpos
-        theta = qpos[self._qpos_adr].tolist()
-        block = qpos[self._phi_block].tolist()
-        (bx, by, bz), (c0, c1, c2) = self._base_pos_list, self._base_rot_cols
-        x, y, z = self._tool_xpos.tolist()
-        dx, dy, dz = x - bx, y - by, z - bz
-        values = self._healthy_values = [
-            *theta, dx * c0[0] + dy * c0[1] + dz * c0[2], dx * c1[0] + dy * c1[1] + dz * c1[2],
-            dx * c2[0] + dy * c2[1] + dz * c2[2], *[block[k] for k in self._phi_pick]]
-        self._obs[self._dynamic] = values
-        if not self._static_inside:
-            return None
-        # Clear of the bounds (by far more than float32 rounding): inside. Near them, compare
-        # the float32 observation with the float32 bounds, as the box is defined.
-        for value, (low, high) in zip(values, self._dynamic_clear, strict=True):
-            if not low < value < high:
-                break
-        else:
-            return theta
-        for value, (low, high) in zip(self._obs[self._dynamic].tolist(),
-                                      self._dynamic_bounds, strict=True):
-            if not low <= value <= high:  # NaN fails too
-                return None
-        return theta
-
-    def _info(self, safety_violation, is_success, force_n, terms, clipped) -> dict:
-        return {
-            "is_success": is_success,
-            "target_index": self._target_index,
-            "num_targets": self._num_targets,
-            "safety_violation": safety_violation,
-            **terms,  # reward_distance, reward_bonus, ...
-            "interaction_force_n": force_n,
-            "robot_torque_nm": self._qfrc_actuator[self._dof_adr].copy(),
-            **self._physics.info(),  # patient_torque_nm, patient/robot_work_j, assistance
-            "patient_qpos": self._qpos[self._patient_qpos_adr].copy(),
-            "exercise": self._exercise,
-            "weight_level": self.scene.weight_level,
-            "action_clipped": clipped,
-            # Safety-Gymnasium's convention: 1.0 in a step where a safety rule fired (also with
-            # terminate_on_safety=False), else 0.0; for constrained RL.
-            "cost": 0.0 if safety_violation is None else 1.0,
-        }
-
-    def _record_trace(self) -> None:
-        if self._record:
-            self._rendering.record(self._tool_xpos)
-
-    def _bind_views(self) -> None:
-        """Cache views of ``self.data``'s arrays (again after unpickling: views do not
-        survive a pickle round trip)."""
-        data = self.data
-        self._qpos = data.qpos
-        self._qvel = data.qvel
-        self._tool_xpos = data.site_xpos[self._tool_site]  # a view
-        self._qfrc_actuator = data.qfrc_actuator
-        self.controller.bind(data)
-        self.safety.bind(data)
-        self._physics.bind(data)
-        self._outcome.torque_nm = self._qfrc_actuator[self._dof_adr]  # a view
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-        self._bind_views()
-
+        self._adopt(parts)

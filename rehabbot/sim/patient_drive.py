@@ -21,14 +21,15 @@ isometric torque of that joint, in that direction, for the profile's mass and se
 harder than a maximal voluntary contraction). Without the bound a grade-4 stretch reflex grew
 with the stretch speed without limit (2,372 N·m with the safety stops off).
 
-:class:`WorkMeter` integrates the mechanical work on the limb: the patient's (torque x joint
-displacement over each physics step) and the robot's (cuff force on the limb x displacement of
-the patient's cuff site), each also as positive work only, and their ratio.
+:meth:`PatientDrive.run` is the physics loop of a control step with these torques; the env
+calls it through :class:`rehabbot.sim.physics.LimbPhysics`, which passes the
+:class:`~rehabbot.sim.physics.WorkMeter` that counts the work.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -50,75 +51,14 @@ ACTIVE_SATURATION_RAD = 0.35  # the active patient pulls with full strength beyo
 ACTIVE_DAMPING_S = 0.3  # Kd = this x Kp
 
 
-class WorkMeter:
-    """Mechanical work on the limb since :meth:`reset`: the robot's through the cuff and the
-    patient's through its muscles [J]; positive work counted separately for the ratio."""
-
-    def __init__(self, scene: Scene, cuff_row: int) -> None:
-        handle = scene.robots[0]
-        self._site = handle.patient_cuff_site_id
-        self._row = cuff_row
-        self._site_pos = np.zeros(3)
-        self.reset_counts()
-
-    def reset_counts(self) -> None:
-        self.robot_j = 0.0
-        self.robot_positive_j = 0.0
-        self.patient_j = 0.0
-        self.patient_positive_j = 0.0
-        self._force: list[float] | None = None
-        self._pos: tuple[float, ...] = (0.0, 0.0, 0.0)
-
-    def bind(self, data: mujoco.MjData) -> None:
-        """Cache a view of the patient's cuff site position (again after a pickle round trip)."""
-        self._site_pos = data.site_xpos[self._site]
-
-    def reset(self, data: mujoco.MjData) -> None:
-        """Start counting from the state in ``data`` (after ``mj_forward``)."""
-        self.reset_counts()
-        self.bind(data)
-        self._pos = tuple(self._site_pos.tolist())
-
-    def after_step(self, data: mujoco.MjData) -> None:
-        """Account for the robot's work up to the state ``data`` held at the start of the last
-        physics step (``mj_step`` leaves its positions and constraint forces there): the force
-        of the step before times the displacement since."""
-        x, y, z = self._site_pos.tolist()
-        force = self._force
-        if force is not None:
-            px, py, pz = self._pos
-            fx, fy, fz = force
-            work = fx * (px - x) + fy * (py - y) + fz * (pz - z)  # the force on the limb is -f
-            self.robot_j += work
-            if work > 0.0:
-                self.robot_positive_j += work
-        self._pos = (x, y, z)
-        row = self._row
-        efc = data.efc_force
-        self._force = efc[row:row + 3].tolist() if len(efc) >= row + 3 else None
-
-    def add_patient(self, work_j: float) -> None:
-        self.patient_j += work_j
-        if work_j > 0.0:
-            self.patient_positive_j += work_j
-
-    @property
-    def assistance_ratio(self) -> float:
-        """Robot's positive work / all positive work on the limb; 1.0 until the patient has
-        done positive work (the robot carries the limb)."""
-        total = self.robot_positive_j + self.patient_positive_j
-        return self.robot_positive_j / total if self.patient_positive_j > 0.0 else 1.0
-
-
 class PatientDrive:
     """The condition's torques on the compliant exercised joints of ``scene`` (see the module
     docstring). ``ranges_rad`` are the (possibly reduced) ranges of those joints."""
 
-    def __init__(self, scene: Scene, condition: PatientCondition, meter: WorkMeter,
-                 ranges_rad: np.ndarray, frame_skip: int) -> None:
+    def __init__(self, scene: Scene, condition: PatientCondition, ranges_rad: np.ndarray,
+                 frame_skip: int) -> None:
         model = scene.model
         self.condition = condition
-        self.meter = meter
         self.frame_skip = frame_skip
         self.dt_s = float(model.opt.timestep)
         dofs = [int(d) for d in scene.compliant_dof_adr]
@@ -164,10 +104,11 @@ class PatientDrive:
         self.torque_nm[:] = 0.0
         data.qfrc_applied[self._dofs] = 0.0
 
-    def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float],
-             rng: np.random.Generator) -> None:
-        """One control step: ``frame_skip`` physics steps with the patient's torques.
-        ``goal_rad``: the compliant joints' angles at the active target."""
+    def run(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float],
+            rng: np.random.Generator, meter: Any) -> None:
+        """One control step: ``frame_skip`` physics steps with the patient's torques, the work
+        counted by ``meter`` (a :class:`~rehabbot.sim.physics.WorkMeter`). ``goal_rad``: the
+        compliant joints' angles at the active target."""
         self._goals.append(goal_rad)
         if len(self._goals) > self._goal_lag + 1:
             del self._goals[0]
@@ -175,7 +116,7 @@ class PatientDrive:
         if self._tremor:
             self._advance_tremor_processes(rng)
         qpos, qvel, applied, bias = data.qpos, data.qvel, data.qfrc_applied, data.qfrc_bias
-        meter, dofs, qadr = self.meter, self._dofs, self._qadr
+        dofs, qadr = self._dofs, self._qadr
         for _ in range(self.frame_skip):
             q = [qpos[a] for a in qadr]
             v = [qvel[d] for d in dofs]
@@ -239,44 +180,3 @@ class PatientDrive:
         z_drift, z_mod = rng.normal(0.0, 1.0, 2).tolist()
         self._drift_hz = decay * self._drift_hz + noise * TREMOR_DRIFT_HZ * z_drift
         self._modulation = min(max(decay * self._modulation + noise * z_mod, -1.0), 1.0)
-
-
-class LimbPhysics:
-    """One control step of the physics with the patient: ``frame_skip`` physics steps, the
-    condition's torques when it applies any (:class:`PatientDrive`), and the work on the limb
-    counted after every physics step (:class:`WorkMeter`)."""
-
-    def __init__(self, scene: Scene, condition: PatientCondition, cuff_row: int,
-                 ranges_rad: np.ndarray, frame_skip: int) -> None:
-        self.meter = WorkMeter(scene, cuff_row)
-        self.frame_skip = frame_skip
-        self.drive = PatientDrive(scene, condition, self.meter, ranges_rad, frame_skip) \
-            if condition.acts else None
-        self.torque_nm = self.drive.torque_nm if self.drive is not None else \
-            np.zeros(len(scene.exercised_joints))
-
-    def bind(self, data: mujoco.MjData) -> None:
-        self.meter.bind(data)
-
-    def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
-        """Start an episode from the state in ``data`` (after ``mj_forward``)."""
-        self.meter.reset(data)
-        if self.drive is not None:
-            self.drive.reset(data, rng)
-
-    def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float],
-             rng: np.random.Generator) -> None:
-        """Advance one control step (``goal_rad``: what an active patient aims for)."""
-        if self.drive is not None:
-            self.drive.step(model, data, goal_rad, rng)
-            return
-        after_step = self.meter.after_step
-        for _ in range(self.frame_skip):
-            mujoco.mj_step(model, data)
-            after_step(data)
-
-    def info(self) -> dict:
-        """The patient's entries of the env's ``info``."""
-        meter = self.meter
-        return {"patient_torque_nm": self.torque_nm.copy(), "patient_work_j": meter.patient_j,
-                "robot_work_j": meter.robot_j, "assistance_ratio": meter.assistance_ratio}

@@ -42,8 +42,6 @@ number of exercises of the id. For one UR5e and two exercises the observation ha
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from rehabbot.tasks.observation import ObservationField, ObservationLayout, paper_layout
@@ -105,10 +103,14 @@ def _scaled_range(low: np.ndarray, high: np.ndarray, name: str) -> tuple[np.ndar
 
 
 class AgentObservation:
-    """Builds the agent observation from the paper's observation and a few more readings of
-    the state. Every field but the one-hot exercise and the target progress is an affine map
-    of those readings followed by ``tanh`` or a clip, so one matrix-vector product computes
-    them all (a few microseconds a step; ``benchmarks/step_throughput.py``).
+    """The agent observation as one affine map: the matrix and the input layout with which the
+    env computes it every step (:meth:`rehabbot.envs.core.RehabEnvCore._observation_out`):
+    ``v = matrix @ [paper observation | next target | setpoints | joint velocities | cuff
+    forces | 1]``, then ``tanh`` on ``v[:tanh_stop]`` and a clip of ``v[bounded]`` to
+    ``[bounded_low, bounded_high]``; the one-hot exercise (``exercise_start + e``) and the
+    ``target_progress`` entry (index ``progress``) are set from the episode's state. Every
+    field but those two is such a map of the readings followed by ``tanh`` or a clip, so one
+    matrix-vector product computes them all (a few microseconds a step).
 
     Args:
         n_joints, n_arms, n_exercises: the layout (:func:`agent_layout`).
@@ -123,7 +125,7 @@ class AgentObservation:
                  phi_low_rad: np.ndarray, phi_high_rad: np.ndarray,
                  force_limits_n: np.ndarray, has_setpoints: bool = True) -> None:
         self.layout = agent_layout(n_joints, n_arms, n_exercises)
-        self.paper = paper_layout(n_joints, n_arms)
+        self.paper_layout = paper_layout(n_joints, n_arms)
         self.n_exercises = n_exercises
         self.has_setpoints = has_setpoints
         joints = n_joints * n_arms
@@ -131,28 +133,26 @@ class AgentObservation:
             setpoint_low_rad, setpoint_high_rad, "setpoint bounds")
         # The input vector: [paper observation | next target | setpoints | joint velocities |
         # cuff forces | 1].
-        size = self.paper.size
-        self._next = slice(size, size + joints)
-        self._setpoint = slice(self._next.stop, self._next.stop + joints)
-        self._velocity = slice(self._setpoint.stop, self._setpoint.stop + joints)
-        self._forces = slice(self._velocity.stop, self._velocity.stop + n_arms)
-        self._input = np.zeros(self._forces.stop + 1)
-        self._input[-1] = 1.0
+        size = self.paper_layout.size
+        self.paper = slice(0, size)
+        self.next = slice(size, size + joints)
+        self.setpoint = slice(self.next.stop, self.next.stop + joints)
+        self.velocity = slice(self.setpoint.stop, self.setpoint.stop + joints)
+        self.forces = slice(self.velocity.stop, self.velocity.stop + n_arms)
+        self.input = np.zeros(self.forces.stop + 1)
+        self.input[-1] = 1.0
         out = self.layout
-        self._tanh_stop = out.slice("joint_velocity").stop
-        self._relative = slice(out.slice("theta_in_bounds").start, out.slice("phi_in_range").stop)
+        self.tanh_stop = out.slice("joint_velocity").stop
+        relative = slice(out.slice("theta_in_bounds").start, out.slice("phi_in_range").stop)
         # theta_in_bounds, phi_in_range and cuff_force lie side by side: one clip.
-        self._bounded = slice(self._relative.start, out.slice("cuff_force").stop)
-        n_relative = self._relative.stop - self._relative.start
-        self._bounded_low = np.r_[np.full(n_relative, -RELATIVE_CLIP), np.zeros(n_arms)]
-        self._bounded_high = np.r_[np.full(n_relative, RELATIVE_CLIP), np.full(n_arms,
-                                                                               FORCE_CLIP)]
-        self._exercise_start = out.slice("exercise").start
-        self._progress_out = out.index("target_progress")
-        self._e = self.paper.index("e")
-        self._paper_size = size
-        self._theta_star = self.paper.slice("theta_star")
-        self._matrix = np.zeros((out.size, self._input.size))
+        self.bounded = slice(relative.start, out.slice("cuff_force").stop)
+        n_relative = relative.stop - relative.start
+        self.bounded_low = np.r_[np.full(n_relative, -RELATIVE_CLIP), np.zeros(n_arms)]
+        self.bounded_high = np.r_[np.full(n_relative, RELATIVE_CLIP), np.full(n_arms,
+                                                                              FORCE_CLIP)]
+        self.exercise_start = out.slice("exercise").start
+        self.progress = out.index("target_progress")
+        self.matrix = np.zeros((out.size, self.input.size))
         self._fill_fixed_rows()
         self.set_patient(phi_low_rad, phi_high_rad, force_limits_n)
 
@@ -161,17 +161,17 @@ class AgentObservation:
 
     def _cols(self, name: str) -> np.ndarray:
         if name in ("next", "setpoint", "velocity", "forces"):
-            part = getattr(self, f"_{name}")
+            part = getattr(self, name)
             return np.arange(part.start, part.stop)
-        return np.arange(self.paper.slice(name).start, self.paper.slice(name).stop)
+        return np.arange(self.paper_layout.slice(name).start, self.paper_layout.slice(name).stop)
 
     def _difference(self, out: str, plus: str, minus: str, scale: float) -> None:
-        rows, m = self._rows(out), self._matrix
+        rows, m = self._rows(out), self.matrix
         m[rows, self._cols(plus)] = 1.0 / scale
         m[rows, self._cols(minus)] = -1.0 / scale
 
     def _fill_fixed_rows(self) -> None:
-        m, one = self._matrix, self._input.size - 1
+        m, one = self.matrix, self.input.size - 1
         self._difference("joint_error_fine", "theta_star", "theta", JOINT_FINE_SCALE_RAD)
         self._difference("joint_error", "theta_star", "theta", JOINT_SCALE_RAD)
         self._difference("tool_error_fine", "p_star", "p", TOOL_FINE_SCALE_M)
@@ -184,7 +184,7 @@ class AgentObservation:
         m[rows, self._cols("theta")] = 1.0 / self._theta_half
         m[rows, one] = -self._theta_center / self._theta_half
         level = self.layout.index("weight_level")
-        m[level, self.paper.index("l")] = 0.5
+        m[level, self.paper_layout.index("l")] = 0.5
         m[level, one] = -1.0
 
     def set_patient(self, phi_low_rad: np.ndarray, phi_high_rad: np.ndarray,
@@ -192,10 +192,10 @@ class AgentObservation:
         """The patient-specific scales: the exercised joints' range and the cuff limits."""
         center, half = _scaled_range(phi_low_rad, phi_high_rad, "range of motion")
         limits = np.asarray(force_limits_n, dtype=float)
-        if limits.shape != (self._forces.stop - self._forces.start,) or not np.all(limits > 0):
+        if limits.shape != (self.forces.stop - self.forces.start,) or not np.all(limits > 0):
             raise ValueError(f"force_limits_n={limits.tolist()} must be one positive limit "
                              "per cuff")
-        m, one, rows = self._matrix, self._input.size - 1, self._rows("phi_in_range")
+        m, one, rows = self.matrix, self.input.size - 1, self._rows("phi_in_range")
         m[rows, self._cols("phi")] = 1.0 / half
         m[rows, one] = -center / half
         m[self._rows("cuff_force"), self._cols("forces")] = 1.0 / limits
@@ -204,39 +204,3 @@ class AgentObservation:
     def space_bounds(self) -> tuple[float, float]:
         """The observation space's bounds: every entry lies in [-2, 2]."""
         return -OBSERVATION_BOUND, OBSERVATION_BOUND
-
-    def __call__(self, paper_obs: np.ndarray, next_target_rad: np.ndarray | None,
-                 setpoint_rad: np.ndarray, joint_velocity_rad_s: np.ndarray,
-                 cuff_forces_n: np.ndarray, target_index: int, num_targets: int) -> np.ndarray:
-        """The agent observation (float32, a new array).
-
-        Args:
-            paper_obs: the paper's observation of the state (:mod:`rehabbot.tasks.observation`).
-            next_target_rad: the robot joint target after the active one, or None at the last.
-            setpoint_rad: the servo setpoints (ignored without setpoints).
-            joint_velocity_rad_s: the robot joints' velocities (non-finite values read as 0:
-                an unstable step keeps a finite observation).
-            cuff_forces_n: each cuff's force (a non-finite force reads as twice the limit).
-            target_index, num_targets: the active target and how many the exercise has.
-        """
-        x = self._input
-        x[:self._paper_size] = paper_obs
-        x[self._next] = x[self._theta_star] if next_target_rad is None else next_target_rad
-        if self.has_setpoints:
-            x[self._setpoint] = setpoint_rad
-        x[self._velocity] = joint_velocity_rad_s
-        x[self._forces] = cuff_forces_n
-        v = self._matrix @ x
-        if not math.isfinite(v.sum()):  # an unstable step: no NaN reaches the agent
-            velocity, forces = x[self._velocity], x[self._forces]
-            velocity[~np.isfinite(velocity)] = 0.0
-            forces[~np.isfinite(forces)] = 1e9  # finite: 0 x inf would spread NaN
-            v = self._matrix @ x
-        head, bounded = v[:self._tanh_stop], v[self._bounded]
-        np.tanh(head, out=head)
-        np.minimum(bounded, self._bounded_high, out=bounded)  # the ufuncs: np.clip's Python
-        np.maximum(bounded, self._bounded_low, out=bounded)  # wrapper costs more than both
-        v[self._exercise_start + int(paper_obs[self._e])] = 1.0
-        v[self._progress_out] = (2.0 * target_index / (num_targets - 1) - 1.0
-                                 if num_targets > 1 else 1.0)
-        return v.astype(np.float32)

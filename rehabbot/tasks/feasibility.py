@@ -25,8 +25,8 @@ from collections.abc import Iterable, Sequence
 import mujoco
 import numpy as np
 
+from rehabbot.sim.physics import SafetyMonitor
 from rehabbot.sim.scene import Scene
-from rehabbot.tasks.safety import SafetyMonitor
 from rehabbot.tasks.targets import TargetSequence
 
 TARGET_BOUND_TOLERANCE_RAD = 1e-9

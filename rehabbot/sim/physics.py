@@ -1,4 +1,13 @@
-"""Safety rules that end an episode, and their thresholds.
+"""One control step of the simulated scene and the rules it must keep: ``frame_skip`` MuJoCo
+steps (with the patient's muscle torques when a condition applies them,
+:mod:`rehabbot.sim.patient_drive`), the mechanical work done on the limb, and the safety rules
+checked on the new state (:class:`LimbPhysics`, the env's physics step).
+
+:class:`WorkMeter` integrates the mechanical work on the limb: the patient's (torque x joint
+displacement over each physics step) and the robot's (cuff force on the limb x displacement of
+the patient's cuff site), each also as positive work only, and their ratio.
+
+The safety rules (:class:`SafetyMonitor`) end an episode:
 
 =========================  ====================================================================
 rule (``info`` name)       fires when
@@ -31,6 +40,8 @@ import numpy as np
 from mujoco import mju_dot
 
 from rehabbot.common.arrays import as_index
+from rehabbot.sim.conditions import PatientCondition
+from rehabbot.sim.patient_drive import PatientDrive
 from rehabbot.sim.scene import Scene
 
 RULES = ("instability", "range_of_motion", "cuff_force", "unintended_contact")
@@ -249,3 +260,135 @@ class SafetyMonitor:
         q = data.qpos[self._patient_qpos_adr]
         bad = (q < self._rom_low) | (q > self._rom_high)
         return [n for n, b in zip(self.scene.patient_joint_names, bad, strict=True) if b]
+
+
+class WorkMeter:
+    """Mechanical work on the limb since :meth:`reset`: the robot's through the cuff and the
+    patient's through its muscles [J]; positive work counted separately for the ratio."""
+
+    def __init__(self, cuff_site_id: int, cuff_row: int) -> None:
+        self._site = cuff_site_id  # the patient's side of the cuff
+        self._row = cuff_row
+        self._site_pos = np.zeros(3)
+        self.reset_counts()
+
+    def reset_counts(self) -> None:
+        self.robot_j = 0.0
+        self.robot_positive_j = 0.0
+        self.patient_j = 0.0
+        self.patient_positive_j = 0.0
+        self._force: list[float] | None = None
+        self._pos: tuple[float, ...] = (0.0, 0.0, 0.0)
+
+    def bind(self, data: mujoco.MjData) -> None:
+        """Cache a view of the patient's cuff site position (again after a pickle round trip)."""
+        self._site_pos = data.site_xpos[self._site]
+
+    def reset(self, data: mujoco.MjData) -> None:
+        """Start counting from the state in ``data`` (after ``mj_forward``)."""
+        self.reset_counts()
+        self.bind(data)
+        self._pos = tuple(self._site_pos.tolist())
+
+    def after_step(self, data: mujoco.MjData) -> None:
+        """Account for the robot's work up to the state ``data`` held at the start of the last
+        physics step (``mj_step`` leaves its positions and constraint forces there): the force
+        of the step before times the displacement since."""
+        x, y, z = self._site_pos.tolist()
+        force = self._force
+        if force is not None:
+            px, py, pz = self._pos
+            fx, fy, fz = force
+            work = fx * (px - x) + fy * (py - y) + fz * (pz - z)  # the force on the limb is -f
+            self.robot_j += work
+            if work > 0.0:
+                self.robot_positive_j += work
+        self._pos = (x, y, z)
+        row = self._row
+        efc = data.efc_force
+        self._force = efc[row:row + 3].tolist() if len(efc) >= row + 3 else None
+
+    def add_patient(self, work_j: float) -> None:
+        self.patient_j += work_j
+        if work_j > 0.0:
+            self.patient_positive_j += work_j
+
+    @property
+    def assistance_ratio(self) -> float:
+        """Robot's positive work / all positive work on the limb; 1.0 until the patient has
+        done positive work (the robot carries the limb)."""
+        total = self.robot_positive_j + self.patient_positive_j
+        return self.robot_positive_j / total if self.patient_positive_j > 0.0 else 1.0
+
+
+class LimbPhysics:
+    """One control step of the physics (:meth:`step`): ``frame_skip`` physics steps, the
+    condition's torques when it applies any (:class:`~rehabbot.sim.patient_drive.PatientDrive`,
+    one-arm scenes), the work on the limb counted after every physics step (one
+    :class:`WorkMeter` per cuff), then the safety rules on the new state."""
+
+    def __init__(self, scene: Scene, condition: PatientCondition, safety: SafetyMonitor,
+                 ranges_rad: np.ndarray | None, frame_skip: int) -> None:
+        self.safety = safety
+        self.meters = tuple(WorkMeter(handle.patient_cuff_site_id, row)
+                            for handle, row in zip(scene.robots, safety.cuff_rows, strict=True))
+        self.meter = self.meters[0]
+        self.frame_skip = frame_skip
+        self.drive = None
+        if condition.acts:
+            if len(self.meters) != 1:
+                raise ValueError("a patient condition that applies torques needs a one-arm "
+                                 "scene")
+            self.drive = PatientDrive(scene, condition, ranges_rad, frame_skip)
+        self.torque_nm = self.drive.torque_nm if self.drive is not None else \
+            np.zeros(len(scene.exercised_joints))
+
+    def bind(self, data: mujoco.MjData) -> None:
+        """Cache views of ``data``'s arrays (again after a pickle round trip)."""
+        for meter in self.meters:
+            meter.bind(data)
+        self.safety.bind(data)
+
+    def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
+        """Start an episode from the state in ``data`` (after ``mj_forward``)."""
+        self.safety.reset(data)
+        for meter in self.meters:
+            meter.reset(data)
+        if self.drive is not None:
+            self.drive.reset(data, rng)
+
+    def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float] | None,
+             rng: np.random.Generator) -> tuple[str | None, float]:
+        """Advance one control step (``goal_rad``: what an active patient aims for) and return
+        the first safety rule that fires (or None) and the largest cuff force [N]."""
+        if self.drive is not None:
+            self.drive.run(model, data, goal_rad, rng, self.meter)
+        elif len(self.meters) == 1:
+            after_step = self.meter.after_step
+            for _ in range(self.frame_skip):
+                mujoco.mj_step(model, data)
+                after_step(data)
+        else:
+            meters = self.meters
+            for _ in range(self.frame_skip):
+                mujoco.mj_step(model, data)
+                for meter in meters:
+                    meter.after_step(data)
+        return self.safety.check_step(data)
+
+    def info(self) -> dict:
+        """The patient's entries of the env's ``info``: the patient's torques on the exercised
+        joints, the work of the patient and of the robot(s) [J], and the assistance ratio (the
+        robots' share of the positive work; 1.0 until the patient does positive work)."""
+        if len(self.meters) == 1:
+            meter = self.meter
+            return {"patient_torque_nm": self.torque_nm.copy(), "patient_work_j": meter.patient_j,
+                    "robot_work_j": meter.robot_j, "assistance_ratio": meter.assistance_ratio}
+        meters = self.meters
+        patient_positive = sum(m.patient_positive_j for m in meters)
+        robot_positive = sum(m.robot_positive_j for m in meters)
+        ratio = robot_positive / (robot_positive + patient_positive) \
+            if patient_positive > 0.0 else 1.0
+        return {"patient_torque_nm": self.torque_nm.copy(),
+                "patient_work_j": sum(m.patient_j for m in meters),
+                "robot_work_j": sum(m.robot_j for m in meters), "assistance_ratio": ratio}
