@@ -15,7 +15,13 @@ from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_
 from rehabbot.envs.registration import ENV_SPECS, env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
-from rehabbot.rl.hyperparams import coerce_number, settings_names, settings_path, shipped_settings
+from rehabbot.rl.hyperparams import (
+    coerce_number,
+    library_defaults,
+    settings_names,
+    settings_path,
+    shipped_settings,
+)
 from rehabbot.rl.planning import (
     DEFAULT_BC_EPISODES,
     DEFAULT_CHECKPOINT_FREQ,
@@ -207,12 +213,9 @@ def cmd_train(args: argparse.Namespace) -> int:
                        vec=args.vec, backend=args.backend, demos=args.demos, bc=args.bc)
     new_runs = [plan for plan in plans if plan.skip is None and plan.resume is None]
     if args.hyperparams is None and new_runs and hyperparams is not None:
-        library = (f"--hyperparams sb3-defaults/{args.algo}" if
-                   f"sb3-defaults/{args.algo}" in settings_names() else
-                   "a --hyperparams file without entries")
         print(f"settings: the shipped {hyperparams!r} file, entry {new_runs[0].hp.entry!r} "
-              f"({settings_path(hyperparams)}); {library} trains with the library's defaults "
-              "instead", file=sys.stderr, flush=True)
+              f"({settings_path(hyperparams)}); {library_defaults(args.algo)} trains with the "
+              "library's defaults instead", file=sys.stderr, flush=True)
     for change in new_runs[0].hp.backend_changes if new_runs else ():
         used = "dropped" if change["used"] is None else f"-> {change['used']}"
         print(f"note: {new_runs[0].backend} backend: {change['key']} {change['given']!r} "

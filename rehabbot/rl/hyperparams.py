@@ -6,20 +6,21 @@ A file holds either env ids (full, or without ``rehabbot/``) mapped to hyperpara
 ``default`` entry for every other id (as RL Zoo reads it), or one flat mapping. Keys: the SB3
 constructor arguments of the algorithm plus the zoo keys ``n_timesteps``, ``n_envs``,
 ``policy``, ``normalize``, ``noise_type`` and ``noise_std``; ``policy`` is an SB3 alias
-(``MlpPolicy``) or, as in RL Zoo, the dotted name of a policy class under ``rehabbot.`` or
-``stable_baselines3.`` (``rehabbot.rl.features.TrackingErrorSACPolicy``); ``policy_kwargs`` may
-be a mapping or a zoo string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``,
-parsed without ``eval`` (:mod:`rehabbot.rl.zoo_strings`);
-``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``. Each value
-is checked against its valid range (:mod:`rehabbot.rl.hyperparam_checks`).
+(``MlpPolicy``) or, as in RL Zoo, the dotted name of a policy class under
+``stable_baselines3.`` (``sbx.`` for SBX); ``policy_kwargs`` may be a mapping or a zoo string
+such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``, parsed without ``eval``
+(:mod:`rehabbot.rl.zoo_strings`); ``learning_rate``/``clip_range``/``clip_range_vf`` may be
+``"lin_<float>"``. Each value is checked against its valid range
+(:mod:`rehabbot.rl.hyperparam_checks`).
 
 Files are read for one backend (``backend="sb3"``, the default, or ``"sbx"``): keys are checked
 against that library's class; for SBX, what only PyTorch can run is translated or dropped and
 listed (:mod:`rehabbot.rl.sbx_settings`).
 
-The settings shipped with the package are written so that RL Zoo reads them unchanged too
-(``python -m rl_zoo3.train --gym-packages rehabbot --conf-file .../sac.yml``): a ``default``
-entry, classes named only as ``policy``, ``policy_kwargs`` as a string of literals.
+The settings shipped with the package name only the libraries' own classes and options, so
+that RL Zoo reads them unchanged too (``python -m rl_zoo3.train --gym-packages rehabbot
+--conf-file .../sac.yml``): full env ids, classes named only as ``policy``, ``policy_kwargs``
+as a string of literals.
 """
 
 from __future__ import annotations
@@ -35,8 +36,15 @@ from pathlib import Path
 from typing import Any
 
 from rehabbot.common.errors import RehabbotError, UsageError
-from rehabbot.envs.registration import ENV_SPECS, env_short_name, resolve_env_id
-from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
+from rehabbot.envs.registration import BILATERAL_IDS, ENV_SPECS, env_short_name, resolve_env_id
+from rehabbot.rl.algorithms import (
+    ALGO_NAMES,
+    OFF_POLICY,
+    REMOVED_POLICY_MODULES,
+    algo_class,
+    check_algo,
+    removed_policy,
+)
 from rehabbot.rl.hyperparam_checks import BOOL_KEYS as BOOL_KEYS  # re-exported
 from rehabbot.rl.hyperparam_checks import SCHEDULE_KEYS as SCHEDULE_KEYS  # re-exported
 from rehabbot.rl.hyperparam_checks import TRAIN_FREQ_UNITS as TRAIN_FREQ_UNITS  # re-exported
@@ -58,7 +66,7 @@ DEFAULT_SOURCES = {"sb3": HYPERPARAMS_DEFAULT_SOURCE, "sbx": "sbx defaults"}
 SETTINGS_FOLDER = "hyperparams"  # package data of rehabbot.rl
 DEFAULT_ENTRY = "default"  # RL Zoo's entry for every env id without its own
 # Packages a dotted ``policy`` may be imported from (a hyperparameter file names no other code).
-POLICY_PACKAGES = ("rehabbot", "stable_baselines3")
+POLICY_PACKAGES = ("stable_baselines3",)
 SBX_POLICY_PACKAGES = ("sbx",)
 
 
@@ -95,11 +103,41 @@ def settings_names() -> list[str]:
 
 
 def shipped_settings(algo: str) -> str | None:
-    """The name of the settings file shipped for ``algo`` (``"sac"`` for SAC: the file of the
-    published results, with an entry per id), or None when there is none. ``rehabbot train``
-    uses it when no ``--hyperparams`` is given."""
+    """The name of the settings file shipped for ``algo`` (``"sac"`` for SAC: an entry per
+    ``-v2`` id), or None when there is none. ``rehabbot train`` uses it when no
+    ``--hyperparams`` is given."""
     algo = _check_algo(algo)
     return algo if algo in settings_names() else None
+
+
+def library_defaults(algo: str) -> str:
+    """The ``--hyperparams`` that trains ``algo`` with the library's defaults on any id."""
+    name = f"sb3-defaults/{algo}"
+    return f"--hyperparams {name}" if name in settings_names() else \
+        "a --hyperparams file without entries"
+
+
+def _no_entry(path: str | Path, file: Path, env_id: str, algo: str,
+              entries: list[Any]) -> HyperparameterError:
+    """The error for a file without an entry for ``env_id``: for a shipped file and a ``-v0``
+    or ``-v1`` id, why it has none and what to train instead."""
+    shipped = file.parent.resolve() == Path(str(_settings_root())).resolve()
+    stem, _, version = env_id.rpartition("-")
+    if shipped and version in ("v0", "v1") and f"{stem}-v2" in ENV_SPECS:
+        fields = "44 fields of both arms" if env_id in BILATERAL_IDS else "23 fields"
+        what = ("is the paper's reference (its observation and reward), on which a plain "
+                "network does not learn" if version == "v0" else
+                f"observes the paper's {fields}, from which a plain network does not learn "
+                "(0 % in every configuration tried)")
+        same = "the same task with the learnable -v1 reward and" if version == "v0" else \
+            "the same task and reward with"
+        return HyperparameterError(
+            f"the shipped {file.stem!r} settings have no entry for {env_id}: it {what}; train "
+            f"{stem}-v2 ({same} the agent observation), or pass {library_defaults(algo)} to "
+            "train this id with the library's defaults")
+    return HyperparameterError(f"hyperparameter file {str(path)!r} has no entry for {env_id} "
+                               f"and no {DEFAULT_ENTRY!r} entry (entries: "
+                               f"{', '.join(map(str, entries))})")
 
 
 def settings_path(name: str | Path) -> Path:
@@ -270,9 +308,7 @@ def _policy_error(where: str, raw: Any, cls: Any, why: str,
     return HyperparameterError(
         f"{where}: policy {raw!r} {why}; valid: {', '.join(cls.policy_aliases)}, or the dotted "
         f"name of a subclass of {_class_name(cls.policy_aliases[DEFAULT_POLICY])} under "
-        f"{' or '.join(f'{package}.' for package in packages)}"
-        + (" (rehabbot.rl.features has one for each algorithm)" if "rehabbot" in packages
-           else ""))
+        f"{' or '.join(f'{package}.' for package in packages)}")
 
 
 def parse_policy(raw: Any, cls: Any, where: str,
@@ -285,6 +321,8 @@ def parse_policy(raw: Any, cls: Any, where: str,
         raise _policy_error(where, raw, cls, "is neither an alias nor a dotted class name",
                             packages)
     module_name, _, attr = raw.strip().rpartition(".")
+    if module_name in REMOVED_POLICY_MODULES:
+        raise HyperparameterError(f"{where}: {removed_policy(raw.strip())}")
     if module_name.split(".")[0] not in packages:
         raise _policy_error(where, raw, cls, "is outside the packages policies may come from",
                             packages)
@@ -339,10 +377,8 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
         elif key == "n_envs":
             hp.n_envs = _as_count(raw, key, where)
         elif key == "policy" and sbx and sbx_settings.is_torch_policy(raw):
-            counterpart = sbx_settings.jax_counterpart(raw, algo)
-            hp.policy = DEFAULT_POLICY if counterpart is None else counterpart
-            hp.backend_changes.append(sbx_settings.policy_change(raw) if counterpart is None
-                                      else sbx_settings.counterpart_change(raw, counterpart))
+            hp.policy = DEFAULT_POLICY
+            hp.backend_changes.append(sbx_settings.policy_change(raw))
         elif key == "policy":
             hp.policy = parse_policy(raw, cls, where,
                                       SBX_POLICY_PACKAGES if sbx else POLICY_PACKAGES)
@@ -463,9 +499,7 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str,
     if not matches and DEFAULT_ENTRY in data:
         matches = [DEFAULT_ENTRY]
     if not matches:
-        raise HyperparameterError(f"hyperparameter file {source!r} has no entry for {env_id} "
-                                  f"and no {DEFAULT_ENTRY!r} entry (entries: "
-                                  f"{', '.join(map(str, data))})")
+        raise _no_entry(path, file, env_id, algo, list(data))
     if len(matches) > 1:
         raise HyperparameterError(f"hyperparameter file {source!r} has two entries for "
                                   f"{env_id}: {', '.join(matches)}")

@@ -10,7 +10,7 @@ from typing import Any
 
 from rehabbot.common.errors import RehabbotError, UsageError
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import ALGO_NAMES, BACKENDS, OFF_POLICY
+from rehabbot.rl.algorithms import ALGO_NAMES, BACKENDS, OFF_POLICY, read_model_data
 from rehabbot.rl.backends import check_backend_choice, saved_backend, sbx_available
 from rehabbot.rl.hyperparams import Hyperparameters, jsonable
 
@@ -246,6 +246,7 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
         if normalize is not None and point.vecnormalize is None:
             raise TrainingError(f"cannot resume {run_dir}: checkpoint {point.checkpoint.name} "
                                 "lacks its VecNormalize statistics")
+        read_model_data(point.checkpoint)  # PolicyError now: unreadable, or a removed class
         total = total_timesteps if total_timesteps is not None \
             else int(manifest.get("total_timesteps", DEFAULT_TIMESTEPS))
         plan = RunPlan(

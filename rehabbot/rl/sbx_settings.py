@@ -7,13 +7,8 @@ rules, and the run's manifest lists each change (``hyperparameters.backend_chang
 what was given, what is used instead or ``null`` when dropped, and why):
 
 =================================== =======================================================
-``policy``: ``TrackingErrorSACPolicy``, its JAX counterpart in :mod:`rehabbot.rl.features_jax`
-``TrackingErrorTD3Policy`` or       (the same features, computed inside SBX's actor and
-``TrackingErrorActorCriticPolicy``  critics or value network); ``features_extractor_kwargs``
-(``rehabbot.rl.features``)          become its own kwargs
-``policy``: any other PyTorch       SBX's ``MlpPolicy`` (the SBX network reads the
-policy class (``rehabbot.rl.``,     observation as it is)
-SB3's)
+``policy``: a PyTorch policy class  SBX's ``MlpPolicy`` (the SBX network reads the
+(SB3's or sb3-contrib's)            observation as it is)
 ``policy_kwargs``:
   ``features_extractor_class/_kwargs`` dropped (SBX's MLP policies have no extractor)
   ``activation_fn`` (``nn.ReLU``, …) the Flax function of the same name (``flax.linen.relu``)
@@ -41,7 +36,7 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-TORCH_POLICY_PACKAGES = ("rehabbot", "stable_baselines3", "sb3_contrib")
+TORCH_POLICY_PACKAGES = ("stable_baselines3", "sb3_contrib")
 SBX_POLICY = "MlpPolicy"
 EXTRACTOR_KEYS = ("features_extractor_class", "features_extractor_kwargs")
 ACTIVATIONS = {"ReLU": "relu", "Tanh": "tanh", "ELU": "elu", "LeakyReLU": "leaky_relu",
@@ -72,7 +67,7 @@ def _name(value: Any) -> Any:
 
 def is_torch_policy(raw: Any) -> bool:
     """Whether a ``policy`` value names a PyTorch policy class (a dotted name under
-    rehabbot, stable_baselines3 or sb3_contrib, or such a class itself)."""
+    stable_baselines3 or sb3_contrib, or such a class itself)."""
     if isinstance(raw, type):
         return raw.__module__.split(".")[0] in TORCH_POLICY_PACKAGES
     return isinstance(raw, str) and "." in raw.strip(". ") and \
@@ -84,29 +79,6 @@ def policy_change(raw: Any) -> dict[str, Any]:
     return change("policy", raw, SBX_POLICY,
                   "a PyTorch policy class cannot run on JAX; SBX's MlpPolicy takes its place "
                   "(without a features extractor: the network reads the observation as it is)")
-
-
-def _dotted(raw: Any) -> str:
-    if isinstance(raw, type):
-        return f"{raw.__module__}.{raw.__qualname__}"
-    return str(raw).strip()
-
-
-def jax_counterpart(raw: Any, algo: str) -> type | None:
-    """SBX's policy with the same network as the PyTorch ``policy`` ``raw`` (the tracking-error
-    policies of :mod:`rehabbot.rl.features` for SAC, TD3 and PPO), or None."""
-    from rehabbot.rl.features_jax import SBX_TRACKING_ERROR_POLICIES
-
-    found = SBX_TRACKING_ERROR_POLICIES.get(_dotted(raw))
-    return found if found is not None and algo == found.ALGO else None
-
-
-def counterpart_change(raw: Any, used: type) -> dict[str, Any]:
-    """The change record for a PyTorch ``policy`` replaced by its JAX counterpart."""
-    return change("policy", raw, _dotted(used),
-                  "the same network on JAX: SBX's MlpPolicy with TrackingErrorFeatures computed "
-                  "inside the actor and the critics or value network "
-                  "(rehabbot.rl.features_jax)")
 
 
 def dropped_key_reason(key: str, algo: str) -> str | None:
@@ -185,26 +157,6 @@ def _init_params(cls: type) -> dict[str, inspect.Parameter]:
     return params
 
 
-def _feature_kwargs(key: str, value: Any, policy_class: type,
-                    changes: list[dict[str, Any]]) -> dict[str, Any]:
-    """``features_extractor_class/_kwargs`` for a policy that computes TrackingErrorFeatures
-    itself: the class must be TrackingErrorFeatures, the kwargs become the policy's own."""
-    where = f"policy_kwargs.{key}"
-    if key == "features_extractor_class":
-        if _dotted(value).rsplit(".", 1)[-1] != "TrackingErrorFeatures":
-            changes.append(change(where, value, None, f"{policy_class.__name__} computes "
-                                  "TrackingErrorFeatures itself; no other extractor runs on JAX"))
-        return {}
-    kept = {}
-    for name, item in (value or {}).items():
-        if name in policy_class.FEATURE_KWARGS:
-            kept[name] = item
-        else:
-            changes.append(change(f"{where}.{name}", item, None, "not an argument of "
-                                  "TrackingErrorFeatures in JAX"))
-    return kept
-
-
 def translate_policy_kwargs(kwargs: dict[str, Any], policy_class: type,
                             changes: list[dict[str, Any]]) -> dict[str, Any]:
     """``policy_kwargs`` parsed for SB3 (torch classes resolved) as SBX's ``policy_class``
@@ -214,9 +166,7 @@ def translate_policy_kwargs(kwargs: dict[str, Any], policy_class: type,
     optimizer = None
     for key, value in kwargs.items():
         where = f"policy_kwargs.{key}"
-        if key in EXTRACTOR_KEYS and hasattr(policy_class, "FEATURE_KWARGS"):
-            out.update(_feature_kwargs(key, value, policy_class, changes))
-        elif key in EXTRACTOR_KEYS:
+        if key in EXTRACTOR_KEYS:
             changes.append(change(where, value, None, "SBX's MLP policies have no features "
                                   "extractor: the network reads the observation as it is"))
         elif key == "activation_fn" and _is_torch(value):

@@ -30,8 +30,8 @@ parameters:
 
 ================= ==========================================================================
 ``normalize``     VecNormalize's ``clip((x - mean) / sqrt(var + epsilon), -clip, clip)``
-``tracking_error`` :func:`rehabbot.rl.features_numpy.tracking_error_features` (``center``,
-                  ``half_range``, ``fine_scale_rad``; NaN for none)
+``tracking_error`` the input of the ``-v1`` agents' networks (:func:`tracking_error_features`;
+                  ``center``, ``half_range``, ``fine_scale_rad``: NaN for none)
 ``dense``         ``x @ weight.T + bias`` (``weight`` has PyTorch's (out, in) shape)
 ``batch_norm``    ``(x - mean) / sqrt(var + epsilon) * scale + bias`` (running statistics)
 activations       ``relu``, ``tanh``, ``elu`` (``alpha``), ``leaky_relu`` (``slope``),
@@ -71,7 +71,7 @@ import numpy as np
 from rehabbot.common.errors import DataError, RehabbotError, UsageError
 from rehabbot.common.files import atomic_write
 from rehabbot.envs.registration import NAMESPACE, env_short_name
-from rehabbot.rl.features_numpy import tracking_error_features
+from rehabbot.tasks.observation import tracking_slices
 
 ZOO_DIR = Path(__file__).resolve().parents[1] / "zoo"
 ZOO_DIR_ENV = "REHABBOT_ZOO_DIR"
@@ -105,6 +105,22 @@ class ZooError(DataError):
 
 
 # --------------------------------------------------------------------------- the program
+
+
+def tracking_error_features(obs: np.ndarray, center: np.ndarray, half_range: np.ndarray,
+                            fine_scale_rad: float | None) -> np.ndarray:
+    """``[(obs - center) / half_range, (theta* - theta) / 0.5 rad, (p* - p) / 0.1 m]``, plus
+    ``tanh((theta* - theta) / fine_scale_rad)`` when given, for a float32 batch of the paper's
+    observation layout (:func:`rehabbot.tasks.observation.tracking_slices`): the features that
+    the networks of the ``-v1`` agents read (rehabbot 0.3's ``TrackingErrorFeatures``, removed
+    with issue 26), in float32 and in their order of operations, so that the shipped agents
+    act as they were trained."""
+    theta_star, p_star, theta, p = tracking_slices(obs.shape[1])
+    joint_error = (obs[:, theta_star] - obs[:, theta]) / 0.5
+    parts = [(obs - center) / half_range, joint_error, (obs[:, p_star] - obs[:, p]) / 0.1]
+    if fine_scale_rad is not None:
+        parts.append(np.tanh(joint_error * (0.5 / fine_scale_rad)))
+    return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
 
 
 def _op(name: str, p: Mapping[str, np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:

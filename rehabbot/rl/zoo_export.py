@@ -5,16 +5,14 @@ export_policy`: the layers of its network as plain float32 arrays, in the step f
 ============ ======================================== =========================================
 backend      algorithms                                actor read
 ============ ======================================== =========================================
-``sb3``      SAC, TD3, PPO (Stable-Baselines3); TQC,   the features extractor (``Flatten`` or
-             CrossQ (sb3-contrib)                      :class:`~rehabbot.rl.features.
-                                                       TrackingErrorFeatures`), every module of
-                                                       the actor's MLP (Linear, activations,
-                                                       Hardtanh, BatchNorm/BatchRenorm with
-                                                       their running statistics), then tanh for
-                                                       SAC/TQC/CrossQ and squashed PPO
-``sbx``      SAC, TD3, PPO, TQC, CrossQ (SBX, JAX)     the flax parameters of the actor
-                                                       (``Dense_<k>``, ``BatchRenorm_<k>``) and
-                                                       its activation function
+``sb3``      SAC, TD3, PPO (Stable-Baselines3); TQC,   every module of the ``MlpPolicy`` actor
+             CrossQ (sb3-contrib)                      (Linear, activations, Hardtanh,
+                                                       BatchNorm/BatchRenorm with their running
+                                                       statistics), then tanh for SAC/TQC/CrossQ
+                                                       and squashed PPO
+``sbx``      SAC, TD3, PPO, TQC, CrossQ (SBX, JAX)     the flax parameters of the ``MlpPolicy``
+                                                       actor (``Dense_<k>``, ``BatchRenorm_<k>``)
+                                                       and its activation function
 ============ ======================================== =========================================
 
 A squashed actor's output in [-1, 1] is mapped to the action box (``unscale``), an unsquashed
@@ -26,7 +24,6 @@ only inside the functions that read their models; this module never imports
 
 from __future__ import annotations
 
-import importlib
 import shlex
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -38,20 +35,11 @@ import numpy as np
 
 from rehabbot.common.errors import DataError, UsageError
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import policy_module_backend, read_model_data
+from rehabbot.rl.algorithms import ALGORITHMS, algo_class, detect_model
 from rehabbot.rl.safe_load import load_safely
 from rehabbot.rl.vecnormalize_io import read_vecnormalize
 
 Op = tuple[str, dict[str, Any]]
-# (backend, algo) -> (module, class)
-MODEL_CLASSES = {
-    ("sb3", "sac"): ("stable_baselines3", "SAC"), ("sb3", "td3"): ("stable_baselines3", "TD3"),
-    ("sb3", "ppo"): ("stable_baselines3", "PPO"), ("sb3", "tqc"): ("sb3_contrib", "TQC"),
-    ("sb3", "crossq"): ("sb3_contrib", "CrossQ"),
-    ("sbx", "sac"): ("sbx", "SAC"), ("sbx", "td3"): ("sbx", "TD3"), ("sbx", "ppo"): ("sbx", "PPO"),
-    ("sbx", "tqc"): ("sbx", "TQC"), ("sbx", "crossq"): ("sbx", "CrossQ"),
-}
-EXPORT_ALGOS = ("sac", "td3", "ppo", "tqc", "crossq")
 # JAX activation function name -> zoo op (with its default parameter)
 JAX_ACTIVATIONS: dict[str, Op] = {
     "relu": ("relu", {}), "tanh": ("tanh", {}), "silu": ("silu", {}), "swish": ("silu", {}),
@@ -79,23 +67,6 @@ def _f32(value: Any) -> np.ndarray:
     if hasattr(value, "detach"):
         value = value.detach().cpu().numpy()
     return np.asarray(value, dtype=np.float32)
-
-
-# The SBX actor each tracking-error actor of rehabbot.rl.features_jax extends.
-SBX_FEATURE_ACTOR_KINDS = {
-    "TrackingErrorActor": "sbx.common.policies.SquashedGaussianActor",
-    "TrackingErrorTD3Actor": "sbx.td3.policies.Actor",
-    "TrackingErrorPPOActor": "sbx.ppo.policies.Actor",
-    "TrackingErrorNormalizedPPOActor": "sbx.ppo.policies.Actor",
-}
-
-
-def _bound_units_ops(policy: Any, action_space: gym.spaces.Box) -> list[Op]:
-    """``center + half * u`` for a policy whose network acts in units of the action bound
-    (``ACTIONS_IN_BOUND_UNITS``: ``TrackingErrorNormalizedActionPolicy`` and its JAX twin)."""
-    if not getattr(policy, "ACTIONS_IN_BOUND_UNITS", False):
-        return []
-    return [("unscale", {"low": _f32(action_space.low), "high": _f32(action_space.high)})]
 
 
 def _output_ops(action_space: gym.spaces.Box, squashed: bool) -> list[Op]:
@@ -162,22 +133,6 @@ def _torch_module_ops(module: Any) -> list[Op]:
     return ops
 
 
-def _sb3_features_ops(extractor: Any) -> list[Op]:
-    """The zoo steps of a parameter-free SB3 features extractor."""
-    name = type(extractor).__name__
-    if name == "FlattenExtractor":
-        return []
-    from rehabbot.rl.features import TrackingErrorFeatures
-
-    if isinstance(extractor, TrackingErrorFeatures):
-        fine = extractor.fine_scale_rad
-        return [("tracking_error", {"center": _f32(extractor._center),
-                                    "half_range": _f32(extractor._half_range),
-                                    "fine_scale_rad": np.nan if fine is None else fine})]
-    raise ExportError(f"the zoo cannot export the features extractor {name} (supported: "
-                      "FlattenExtractor, TrackingErrorFeatures)")
-
-
 def sb3_actor_ops(model: Any) -> list[Op]:
     """The deterministic actor of an SB3 / sb3-contrib model (SAC, TD3, PPO, TQC, CrossQ)."""
     policy = model.policy
@@ -194,13 +149,13 @@ def sb3_actor_ops(model: Any) -> list[Op]:
             body, tanh = [actor.mu], False
     else:
         raise ExportError(f"the zoo cannot export a {type(policy).__name__} policy")
-    ops = _sb3_features_ops(extractor)
-    for part in body:
-        ops.extend(_torch_module_ops(part))
+    if type(extractor).__name__ != "FlattenExtractor":  # the MlpPolicy's: no parameters
+        raise ExportError(f"the zoo cannot export the features extractor "
+                          f"{type(extractor).__name__} (supported: FlattenExtractor)")
+    ops = [op for part in body for op in _torch_module_ops(part)]
     if tanh:
         ops.append(("tanh", {}))
-    return ops + _bound_units_ops(policy, model.action_space) + \
-        _output_ops(model.action_space, bool(policy.squash_output))
+    return ops + _output_ops(model.action_space, bool(policy.squash_output))
 
 
 # --------------------------------------------------------------------------- SBX (JAX)
@@ -240,12 +195,6 @@ def sbx_actor_ops(model: Any) -> list[Op]:
     activation = _jax_activation(policy.activation_fn)
     n_hidden = len(actor.net_arch)
     ops: list[Op] = []
-    if kind.startswith("rehabbot.rl.features_jax."):  # TrackingErrorFeatures, then the MLP
-        fine = actor.fine_scale_rad
-        ops.append(("tracking_error", {"center": _f32(actor.center),
-                                       "half_range": _f32(actor.half_range),
-                                       "fine_scale_rad": np.nan if fine is None else fine}))
-        kind = SBX_FEATURE_ACTOR_KINDS.get(type(actor).__name__, kind)
     if kind in ("sbx.common.policies.SquashedGaussianActor",  # SAC, TQC: tanh(mean)
                 "sbx.td3.policies.Actor"):  # TD3: tanh of the output layer
         for k in range(n_hidden):
@@ -277,16 +226,10 @@ def sbx_actor_ops(model: Any) -> list[Op]:
         ops += [_dense(params, n_hidden), ("tanh", {})]
     else:
         raise ExportError(f"the zoo cannot export the SBX actor {kind}")
-    return ops + _bound_units_ops(policy, model.action_space) + \
-        _output_ops(model.action_space, bool(policy.squash_output))
+    return ops + _output_ops(model.action_space, bool(policy.squash_output))
 
 
 # --------------------------------------------------------------------------- sources
-
-
-def _zip_policy_module(path: Path) -> str:
-    policy_class = read_model_data(path).get("policy_class", {})
-    return str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
 
 
 def _manifest_env(path: Path, manifest: dict[str, Any]) -> gym.Env:
@@ -306,18 +249,8 @@ def load_model(path: Path, algo: str, backend: str | None = None,
                manifest: dict[str, Any] | None = None) -> Any:
     """A saved SB3 or SBX model (the backend from the zip's policy class unless given),
     loaded without unpickling (:mod:`rehabbot.rl.safe_load`) in the env of ``manifest``."""
-    if backend is None:
-        backend = "sbx" if policy_module_backend(_zip_policy_module(path)) == "sbx" else "sb3"
-    key = (backend, algo)
-    if key not in MODEL_CLASSES:
-        raise UsageError(f"the zoo exports {', '.join(EXPORT_ALGOS)} (sb3 or sbx), not "
-                         f"{algo!r} on {backend!r}")
-    module_name, class_name = MODEL_CLASSES[key]
-    try:
-        cls = getattr(importlib.import_module(module_name), class_name)
-    except (ImportError, AttributeError) as err:
-        raise UsageError(f"exporting {class_name} ({backend}) needs {module_name}: {err}"
-                         ) from err
+    backend = backend or detect_model(path)[1]
+    cls = algo_class(algo, backend)
     kwargs = {"device": "cpu"} if backend == "sb3" else {}
     env = _manifest_env(path, manifest or {})
     try:
@@ -383,8 +316,8 @@ def load_source(model_or_run_dir: Any, algo: str | None = None) -> ExportSource:
     else:
         model = model_or_run_dir
         algo = str(algo or type(model).__name__).lower()
-    if algo not in EXPORT_ALGOS:
-        raise UsageError(f"the zoo exports {', '.join(EXPORT_ALGOS)}, not {algo!r}")
+    if algo not in ALGORITHMS:
+        raise UsageError(f"the zoo exports {', '.join(ALGORITHMS)}, not {algo!r}")
     for name, space in (("observation", model.observation_space),
                         ("action", model.action_space)):
         if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:

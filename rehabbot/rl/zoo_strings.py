@@ -17,10 +17,6 @@ TORCH_NAMES = {
     **{f"{prefix}{name}": ("torch.optim", name)
        for prefix in ("optim.", "th.optim.", "torch.optim.")
        for name in ("Adam", "AdamW", "RMSprop", "SGD")},
-    # RehabBot's own features extractor (observation + tracking errors).
-    **{name: ("rehabbot.rl.features", "TrackingErrorFeatures")
-       for name in ("TrackingErrorFeatures", "rehabbot.rl.features.TrackingErrorFeatures",
-                    "rehabbot.features.TrackingErrorFeatures")},
 }
 
 
