@@ -238,7 +238,6 @@ def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, fini
     class removed with issue 26 fail with one line that names the class and the release that
     loads it: no import of the class, no traceback, nothing unpickled or changed."""
     from rehabbot.cli import main
-    from rehabbot.rl import zoo
 
     run_dir = _copy_run(finished_run, tmp_path / "runs")
     marker = tmp_path / "pwned"
@@ -252,8 +251,8 @@ def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, fini
                                   "--out", str(tmp_path / "evaluation")]),
         "render": lambda: main(["render", str(run_dir / runs.MODEL_NAME), "--out",
                                 str(tmp_path / "video.gif"), "--width", "64", "--height", "48"]),
-        "zoo export": lambda: zoo.main(["export", str(run_dir), "--episodes", "0",
-                                        "--out", str(tmp_path / "agent.npz")]),
+        "zoo export": lambda: main(["zoo", "export", str(run_dir), "--episodes", "0",
+                                    "--out", str(tmp_path / "agent.npz")]),
         "resume": lambda: main(["train", ENV, "--algo", "ppo", "--timesteps", "256", "--out",
                                 str(tmp_path / "runs"), "--resume", "--no-progress"]),
     }

@@ -372,14 +372,19 @@ def test_export_command_writes_the_zoo_file(env, zoo_root, tmp_path, capsys) -> 
     _perturbed(_sb3_model("td3", env)).save(run / "model")
     (run / "manifest.json").write_text(json.dumps({"env_id": FULL_ID, "algo": "td3",
                                                    "seed": 3, "timesteps_done": 10}))
-    assert zoo.main(["export", str(run), "--episodes", "0"]) == 0
-    assert "wrote" in capsys.readouterr().out
-    assert load(ENV, "td3").metadata["seed"] == 3
-    assert zoo.main(["list"]) == 0
+    from rehabbot.cli import main
+
+    assert main(["zoo", "export", str(run), "--episodes", "0", "--note", '{"why": "test"}']) == 0
+    assert f"wrote {zoo_root / ENV / 'td3.npz'}: {FULL_ID} td3 (sb3)" in capsys.readouterr().out
+    assert load(ENV, "td3").metadata["seed"] == 3 and load(ENV, "td3").metadata["why"] == "test"
+    assert main(["zoo", "list"]) == 0
     assert f"{ENV}/td3" in capsys.readouterr().out
-    assert zoo.main(["export", str(run / "model.zip"), "--env", ENV, "--algo", "a2c"]) == 2
-    assert zoo.main(["export", str(tmp_path / "nowhere.zip"), "--env", ENV,
-                     "--algo", "sac"]) == 1
+    assert main(["zoo", "export", str(run / "model.zip"), "--env", ENV, "--algo", "a2c"]) == 2
+    assert main(["zoo", "export", str(tmp_path / "nowhere.zip"), "--env", ENV,
+                 "--algo", "sac"]) == 1
+    with pytest.raises(SystemExit) as stop:  # argparse: --note must be a JSON object
+        main(["zoo", "export", str(run), "--note", "[1]"])
+    assert stop.value.code == 2 and "must be a JSON object" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- shipped agents
@@ -431,7 +436,9 @@ def test_the_full_model_ships_beside_the_actor_and_fine_tunes(zoo_root, tmp_path
                         hyperparams={"learning_starts": 50, "batch_size": 32,
                                      "buffer_size": 1000, "policy_kwargs": "dict(net_arch=[16])"},
                         checkpoint_freq=0, eval_freq=0, progress_bar=False)
-    assert zoo.main(["export", str(run_dir), "--episodes", "0", "--full"]) == 0
+    from rehabbot.cli import main
+
+    assert main(["zoo", "export", str(run_dir), "--episodes", "0", "--full"]) == 0
     agent = load(env_id, "sac")
     assert zoo.full_model_path(env_id, "sac").is_file()
     model = zoo.load_full_model(env_id, "sac")

@@ -13,8 +13,8 @@ PyTorch, JAX or Stable-Baselines3, no download).
 ``export_policy(model, env_id,      write a zoo file from a trained SB3 model (SAC, TD3, PPO;
 algo, out_path, metadata)``         TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
                                     PPO, TQC, CrossQ), a model zip or a run folder
-``python -m rehabbot.rl.zoo``       ``export RUN_DIR --env ID --algo ALGO`` (default output:
-                                    the zoo folder of the package), ``list``
+                                    (``rehabbot zoo export RUN_DIR``; default output: the zoo
+                                    folder of the package)
 =================================== ======================================================
 
 **Where the files are.** ``rehabbot/zoo/<env-short-name>/<algo>.npz`` (package data; e.g.
@@ -54,12 +54,10 @@ of the trained model is not exported.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
 import re
-import sys
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -68,7 +66,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rehabbot.common.errors import DataError, RehabbotError, UsageError
+from rehabbot.common.errors import DataError, UsageError
 from rehabbot.common.files import atomic_write
 from rehabbot.envs.registration import NAMESPACE, env_short_name
 from rehabbot.tasks.observation import tracking_slices
@@ -366,8 +364,8 @@ def available() -> list[tuple[str, str]]:
 def _listing() -> str:
     shipped = available()
     if not shipped:
-        return (f"the zoo ({zoo_dir()}) holds no agents yet; build one with `python -m "
-                "rehabbot.rl.zoo export RUN_DIR`")
+        return (f"the zoo ({zoo_dir()}) holds no agents yet; build one with `rehabbot zoo "
+                "export RUN_DIR`")
     return "available: " + ", ".join(f"{env_short_name(e)}/{a}" for e, a in shipped)
 
 
@@ -441,17 +439,20 @@ def measure_success(policy: ZooPolicy, env_id: str, env_kwargs: Mapping[str, Any
                            "successes": int(sum(successes))}}
 
 
-def export_policy(model_or_run_dir: Any, env_id: str | None, algo: str | None,
-                  out_path: str | Path, metadata: Mapping[str, Any] | None = None,
-                  episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED) -> dict[str, Any]:
-    """Export the deterministic actor of a trained model to the zoo file ``out_path``.
+def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | None = None,
+                  out_path: str | Path | None = None, metadata: Mapping[str, Any] | None = None,
+                  episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED,
+                  full: bool = False) -> dict[str, Any]:
+    """Export the deterministic actor of a trained model to the zoo file ``out_path``
+    (default: the zoo's file for its env and algorithm, :func:`zoo_path`).
 
     ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
     train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
-    command, and its ``vecnormalize.pkl`` the observation normalisation). ``metadata`` adds
-    or overrides metadata fields. The exported actor then runs ``episodes`` episodes (seeds
-    ``seed, seed + 1, ...``; 0: none) and its success rate is recorded. Returns the metadata
-    written. Imports the model's library (PyTorch or JAX).
+    command, and its ``vecnormalize.json`` the observation normalisation). ``metadata`` adds
+    or overrides metadata fields. ``full`` also keeps the model zip beside the zoo file
+    (:func:`ship_full_model`, for :func:`load_full_model`). The exported actor then runs
+    ``episodes`` episodes (seeds ``seed, seed + 1, ...``; 0: none) and its success rate is
+    recorded. Returns the metadata written. Imports the model's library (PyTorch or JAX).
     """
     from rehabbot.common.version import VERSION
     from rehabbot.rl import zoo_export
@@ -463,7 +464,11 @@ def export_policy(model_or_run_dir: Any, env_id: str | None, algo: str | None,
         raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
     meta.update(env_id=f"{NAMESPACE}/{_short(env_id)}", rehabbot_version=VERSION)
     meta.update(dict(metadata or {}))
-    out_path = Path(out_path)
+    out_path = Path(out_path) if out_path is not None else zoo_path(meta["env_id"], meta["algo"])
+    if full:
+        if not isinstance(model_or_run_dir, (str, Path)):
+            raise UsageError("full=True needs the model's zip or run folder, not a model object")
+        meta.update(ship_full_model(model_or_run_dir, out_path))
     written = write_zoo_file(out_path, source.ops, source.observation_space,
                              source.action_space, meta)
     if episodes > 0:
@@ -532,79 +537,3 @@ def ship_full_model(model_path: str | Path, out_npz: Path) -> dict[str, str]:
     target.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(target, lambda stream: stream.write(data))
     return {"full_model_sha256": _file_sha256(target)}
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python -m rehabbot.rl.zoo",
-        description="Build and list the zoo of trained agents shipped with rehabbot.")
-    commands = parser.add_subparsers(dest="command", required=True)
-    export = commands.add_parser(
-        "export", help="export a trained model's deterministic actor to a zoo file",
-        description="Export a model (a `rehabbot train` run folder or a model zip, SB3 or "
-                    "SBX) to <zoo>/<env>/<algo>.npz, then measure its success rate.")
-    export.add_argument("source", type=Path, metavar="RUN_DIR|MODEL.zip")
-    export.add_argument("--env", metavar="ID", help="env id (default: the run's manifest)")
-    export.add_argument("--algo", help="sac, td3, ppo, tqc or crossq (default: the manifest)")
-    export.add_argument("--out", type=Path, metavar="FILE.npz",
-                        help="output file (default: the package's zoo folder, or "
-                             f"${ZOO_DIR_ENV}, /<env>/<algo>.npz)")
-    export.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
-                        help=f"episodes to measure the success rate on (default "
-                             f"{DEFAULT_EPISODES}; 0: none)")
-    export.add_argument("--seed", type=int, default=DEFAULT_SEED, metavar="S",
-                        help=f"episode k is reset with seed S + k (default {DEFAULT_SEED})")
-    export.add_argument("--full", action="store_true",
-                        help="also keep the whole model (<algo>.zip beside the .npz, for "
-                             "load_full_model and fine-tuning)")
-    export.add_argument("--note", metavar="JSON",
-                        help="metadata to add, as a JSON object (e.g. how the seed was chosen)")
-    commands.add_parser("list", help="the agents in the zoo and their metadata")
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m rehabbot.rl.zoo export|list``; exit code 0, 1 (bad file) or 2 (usage)."""
-    args = _parser().parse_args(argv)
-    try:
-        if args.command == "list":
-            for env_id, algo in available():
-                meta = load(env_id, algo).metadata
-                print(f"{env_short_name(env_id)}/{algo}: backend {meta.get('backend')}, "
-                      f"{meta.get('training_steps')} steps, seed {meta.get('seed')}, success "
-                      f"{meta.get('success_rate')}")
-            if not available():
-                print(_listing())
-            return 0
-        from rehabbot.rl import runs
-
-        manifest = runs.read_manifest(args.source) if args.source.is_dir() else None
-        env_id = args.env or (manifest or {}).get("env_id")
-        algo = args.algo or (manifest or {}).get("algo")
-        if not env_id or not algo:
-            raise UsageError("give --env and --algo (the source has no run manifest)")
-        out = args.out or zoo_path(env_id, algo)
-        extra = json.loads(args.note) if args.note else {}
-        if not isinstance(extra, dict):
-            raise UsageError(f"--note {args.note!r} must be a JSON object")
-        if args.full:
-            extra.update(ship_full_model(args.source, out))
-        meta = export_policy(args.source, env_id, algo, out, metadata=extra,
-                             episodes=args.episodes, seed=args.seed)
-        print(f"wrote {out}: {meta['env_id']} {meta['algo']} ({meta['backend']}), success "
-              f"rate {meta.get('success_rate')} on {args.episodes} episodes, sha256 "
-              f"{meta['weights_sha256'][:12]}")
-        return 0
-    except UsageError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except (RehabbotError, OSError, ImportError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())
