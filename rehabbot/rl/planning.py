@@ -98,15 +98,6 @@ def check_demonstrations(algo: str, demos: int | None, bc: bool) -> tuple[int, b
     return episodes, bool(bc)
 
 
-def _companion_file(path: Path) -> Path | None:
-    """``path`` if it exists, else its legacy pickled twin (refused with a message that
-    says how to convert it when it is loaded), else None."""
-    if path.is_file():
-        return path
-    legacy = path.with_suffix(".pkl")
-    return legacy if legacy.is_file() else None
-
-
 def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumePoint | None:
     """The newest checkpoint (by step count); model.zip of a finished run without any."""
     found = runs.checkpoints(run_dir)
@@ -114,11 +105,11 @@ def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumeP
         steps, path = found[0]
         replay_buffer, vecnormalize = runs.companions(path.parent, steps)
         return ResumePoint(path, steps, replay_buffer if replay_buffer.is_file() else None,
-                           _companion_file(vecnormalize))
+                           runs.stored(vecnormalize))
     model = run_dir / runs.MODEL_NAME
     if model.is_file() and manifest and manifest.get("status") == "finished":
         return ResumePoint(model, int(manifest.get("timesteps_done", 0)), None,
-                           _companion_file(run_dir / runs.VECNORMALIZE_NAME))
+                           runs.stored(run_dir / runs.VECNORMALIZE_NAME))
     return None
 
 

@@ -28,7 +28,7 @@ Stable-Baselines3 (or SBX) is imported only when a model is loaded.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,7 +48,7 @@ from rehabbot.rl.algorithms import (
 )
 from rehabbot.rl.backends import saved_backend
 from rehabbot.rl.safe_load import load_safely
-from rehabbot.rl.vecnormalize_io import read_vecnormalize
+from rehabbot.rl.vecnormalize_io import VecNormalizeStats, read_vecnormalize
 
 POLICY_KEYWORDS = ("expert", "aan", "random")
 
@@ -84,12 +84,12 @@ class LoadedPolicy:
     model_path: Path | None = None
     run_dir: Path | None = None
     manifest: dict = field(default_factory=dict)
-    normalize_obs: Callable[[np.ndarray], np.ndarray] | None = None
+    vecnormalize: VecNormalizeStats | None = None  # the run's observation normalisation
 
     def act(self, observation: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """One action for one observation."""
-        if self.normalize_obs is not None:
-            observation = self.normalize_obs(observation)
+        if self.vecnormalize is not None:
+            observation = self.vecnormalize.normalize_obs(observation)
         action, _ = self.policy.predict(observation, deterministic=deterministic)
         return action
 
@@ -101,7 +101,7 @@ class LoadedPolicy:
                 "run_dir": str(self.run_dir) if self.run_dir else None,
                 "train_seed": self.manifest.get("seed"),
                 "train_timesteps": self.manifest.get("timesteps_done"),
-                "obs_normalized": self.normalize_obs is not None}
+                "obs_normalized": self.vecnormalize is not None}
 
 
 def model_file(spec: str | Path) -> Path:
@@ -139,23 +139,16 @@ def check_spaces(model_obs: gym.Space, model_act: gym.Space, env: gym.Env, what:
                               f"env's is {theirs}")
 
 
-def _load_normalizer(run_dir: Path | None) -> Callable[[np.ndarray], np.ndarray] | None:
-    """The observation normalisation of the run's ``vecnormalize.json`` (None without one).
+def _load_normalizer(run_dir: Path | None) -> VecNormalizeStats | None:
+    """The run's ``vecnormalize.json`` statistics (None without one).
 
     Raises:
         PolicyError: damaged statistics, or a legacy pickled ``vecnormalize.pkl`` only (it
             is not unpickled; the message says how to convert a trusted one).
     """
-    if run_dir is None:
-        return None
-    path = run_dir / runs.VECNORMALIZE_NAME
-    if not path.is_file():
-        legacy = run_dir / runs.LEGACY_VECNORMALIZE_NAME
-        if not legacy.is_file():
-            return None
-        path = legacy
+    path = runs.stored(run_dir / runs.VECNORMALIZE_NAME) if run_dir is not None else None
     try:
-        return read_vecnormalize(path).normalize_obs
+        return read_vecnormalize(path) if path is not None else None
     except DataError as err:
         raise PolicyError(str(err)) from err
 
@@ -188,7 +181,7 @@ def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
     return LoadedPolicy(policy=model, label=label, kind="model", algo=algo, backend=backend,
                         model_path=path,
                         run_dir=run_dir, manifest=manifest,
-                        normalize_obs=_load_normalizer(run_dir))
+                        vecnormalize=_load_normalizer(run_dir))
 
 
 def model_label(algo: str, seed: Any, path: Path) -> str:

@@ -457,7 +457,7 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
     from rehabbot.common.version import VERSION
     from rehabbot.rl import zoo_export
 
-    source = zoo_export.load_source(model_or_run_dir, algo)
+    source = zoo_export.load_source(model_or_run_dir, algo, env_id)
     meta: dict[str, Any] = dict(source.metadata)
     env_id = env_id or meta.get("env_id")
     if not env_id:

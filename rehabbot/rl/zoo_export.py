@@ -33,11 +33,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rehabbot.common.errors import DataError, UsageError
+from rehabbot.common.errors import UsageError
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import ALGORITHMS, algo_class, detect_model
-from rehabbot.rl.safe_load import load_safely
-from rehabbot.rl.vecnormalize_io import read_vecnormalize
+from rehabbot.rl.algorithms import check_algo
+from rehabbot.rl.policies import env_for, load_model, model_file
+from rehabbot.rl.safe_load import is_sbx
 
 Op = tuple[str, dict[str, Any]]
 # JAX activation function name -> zoo op (with its default parameter)
@@ -232,55 +232,6 @@ def sbx_actor_ops(model: Any) -> list[Op]:
 # --------------------------------------------------------------------------- sources
 
 
-def _manifest_env(path: Path, manifest: dict[str, Any]) -> gym.Env:
-    """The env of the model's run (its spaces replace the zip's pickled ones)."""
-    env_id = manifest.get("env_id")
-    if not isinstance(env_id, str):
-        raise DataError(f"cannot load {str(path)!r} without its run folder: a model zip is "
-                        "loaded without unpickling, and the env whose spaces it uses is named "
-                        "by the run's manifest.json")
-    try:
-        return gym.make(env_id, **dict(manifest.get("env_kwargs") or {}))
-    except (gym.error.Error, TypeError, ValueError) as err:
-        raise DataError(f"cannot make the env of {str(path)!r} ({env_id}): {err}") from err
-
-
-def load_model(path: Path, algo: str, backend: str | None = None,
-               manifest: dict[str, Any] | None = None) -> Any:
-    """A saved SB3 or SBX model (the backend from the zip's policy class unless given),
-    loaded without unpickling (:mod:`rehabbot.rl.safe_load`) in the env of ``manifest``."""
-    backend = backend or detect_model(path)[1]
-    cls = algo_class(algo, backend)
-    kwargs = {"device": "cpu"} if backend == "sb3" else {}
-    env = _manifest_env(path, manifest or {})
-    try:
-        return load_safely(cls, path, env, algo, backend, manifest, **kwargs)
-    except DataError:
-        raise
-    except Exception as err:  # the libraries raise many kinds on a damaged file
-        raise DataError(f"cannot load model {str(path)!r}: {type(err).__name__}: {err}"
-                        ) from err
-
-
-def _normalize_ops(run_dir: Path | None) -> list[Op]:
-    if run_dir is None:
-        return []
-    path = run_dir / runs.VECNORMALIZE_NAME
-    if not path.is_file():
-        path = run_dir / runs.LEGACY_VECNORMALIZE_NAME  # refused by read_vecnormalize
-        if not path.is_file():
-            return []
-    stats = read_vecnormalize(path)  # DataError: damaged, or a pickle (not read)
-    if not stats.norm_obs:
-        return []
-    return [("normalize", {"mean": stats.obs_mean, "var": stats.obs_var,
-                           "epsilon": stats.epsilon, "clip": stats.clip_obs})]
-
-
-def _backend_of(model: Any) -> str:
-    return "sbx" if type(model).__module__.split(".")[0] == "sbx" else "sb3"
-
-
 def _manifest_metadata(manifest: dict[str, Any]) -> dict[str, Any]:
     command = manifest.get("command")
     if isinstance(command, list) and command:
@@ -294,42 +245,40 @@ def _manifest_metadata(manifest: dict[str, Any]) -> dict[str, Any]:
     }.items() if value is not None}
 
 
-def load_source(model_or_run_dir: Any, algo: str | None = None) -> ExportSource:
-    """The actor and provenance of a model object, a model zip or a run folder."""
+def load_source(model_or_run_dir: Any, algo: str | None = None,
+                env_id: str | None = None) -> ExportSource:
+    """The actor and provenance of a model object, or of a model zip or run folder loaded as
+    ``rehabbot evaluate`` loads it, in its run's env (``env_id``: the env of a loose zip)."""
+    algo = check_algo(algo) if algo else None
     manifest: dict[str, Any] = {}
-    run_dir = None
+    stats = None
     if isinstance(model_or_run_dir, (str, Path)):
-        path = Path(model_or_run_dir)
-        if path.is_dir():
-            run_dir, path = path, path / runs.MODEL_NAME
-        elif not path.is_file() and path.with_name(path.name + ".zip").is_file():
-            path = path.with_name(path.name + ".zip")
-        if not path.is_file():
-            raise DataError(f"model file {str(path)!r} not found")
-        run_dir = run_dir or runs.find_run_dir(path)
-        manifest = (runs.read_manifest(run_dir) if run_dir else None) or {}
-        algo = str(algo or manifest.get("algo") or "").lower()
-        if not algo:
-            raise UsageError(f"the algorithm of {str(path)!r} is unknown (no run manifest): "
-                             "give algo / --algo")
-        model = load_model(path, algo, manifest.get("backend"), manifest)
+        path = model_file(model_or_run_dir)  # PolicyError: not found
+        run_dir = runs.find_run_dir(path)
+        run_env, env_kwargs = env_for([str(path)], None if run_dir else env_id)
+        loaded = load_model(path, gym.make(run_env, **env_kwargs))
+        if algo is not None and algo != loaded.algo:
+            raise UsageError(f"{str(path)!r} holds a {loaded.algo} model, not {algo}")
+        model, algo, manifest, stats = (loaded.policy, loaded.algo, loaded.manifest,
+                                        loaded.vecnormalize)
     else:
         model = model_or_run_dir
-        algo = str(algo or type(model).__name__).lower()
-    if algo not in ALGORITHMS:
-        raise UsageError(f"the zoo exports {', '.join(ALGORITHMS)}, not {algo!r}")
+        algo = algo or check_algo(type(model).__name__)
     for name, space in (("observation", model.observation_space),
                         ("action", model.action_space)):
         if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
             raise ExportError(f"the zoo exports models with flat Box spaces; the {name} "
                               f"space is {space}")
-    backend = _backend_of(model)
+    backend = "sbx" if is_sbx(model) else "sb3"
     actor = sbx_actor_ops(model) if backend == "sbx" else sb3_actor_ops(model)
     policy = model.policy
     metadata = {"algo": algo, "backend": backend,
                 "policy_class": f"{type(policy).__module__}.{type(policy).__qualname__}",
                 "training_steps": int(model.num_timesteps), "seed": model.seed,
                 **_manifest_metadata(manifest)}
-    return ExportSource(ops=_normalize_ops(run_dir) + actor,
+    normalize = [("normalize", {"mean": stats.obs_mean, "var": stats.obs_var,
+                                "epsilon": stats.epsilon, "clip": stats.clip_obs})
+                 ] if stats is not None and stats.norm_obs else []
+    return ExportSource(ops=normalize + actor,
                         observation_space=model.observation_space,
                         action_space=model.action_space, metadata=metadata)
