@@ -182,17 +182,13 @@ def test_bad_sweep_files_are_refused_naming_the_value(tmp_path: Path, change: di
         parse_sweep_config(data, "s.yaml").trials()
 
 
-def test_bad_env_kwargs_and_demos_are_refused_before_anything_runs(tmp_path, monkeypatch):
+def test_bad_env_kwargs_and_demos_are_refused_before_anything_runs(tmp_path):
     config = parse_sweep_config(_config(tmp_path, env_kwargs={"weight_level": 9}))
     with pytest.raises(SweepConfigError, match=r"env_kwargs: .*weight_level=9"):
         check_sweep(config)
-    if sweep_module.train_run_accepts("demos"):  # train_run's own rules, checked up front
-        with pytest.raises(SweepConfigError, match=r"ppo: .*needs --bc"):
-            check_sweep(parse_sweep_config(_config(tmp_path, algos=["ppo"], hyperparams=None,
-                                                   demos=3)))
-    monkeypatch.setattr(sweep_module, "train_run_accepts", lambda name: name != "demos")
-    with pytest.raises(SweepConfigError, match=r"demos: .*does not take .demos."):
-        check_sweep(parse_sweep_config(_config(tmp_path, demos=5)))
+    with pytest.raises(SweepConfigError, match=r"ppo: .*needs --bc"):  # train_run's own rules
+        check_sweep(parse_sweep_config(_config(tmp_path, algos=["ppo"], hyperparams=None,
+                                               demos=3)))
     assert not (tmp_path / "out").exists()
 
 
@@ -226,6 +222,18 @@ def test_run_sweep_refuses_more_cpus_per_trial_than_the_local_ray_has(tmp_path) 
 
 
 # --------------------------------------------------------------------------- trials
+
+
+def test_a_trial_takes_n_envs_from_its_settings_file(tmp_path: Path) -> None:
+    """Without n_envs in the sweep file, a trial trains with the settings file's n_envs (as
+    `rehabbot train` does), not with one env."""
+    data = _config(tmp_path, eval_freq=0, checkpoint_freq=0, timesteps=50)
+    (tmp_path / "sac-small.yml").write_text(yaml.safe_dump({"default": {**SMALL_SAC,
+                                                                        "n_envs": 2}}))
+    (trial,) = parse_sweep_config(data).trials()
+    assert trial.n_envs is None
+    assert run_trial(trial.to_json())["status"] == "finished"
+    assert _manifest(trial.run_dir)["n_envs"] == 2
 
 
 def test_a_trial_trains_then_skips_then_resumes_to_more_steps(tmp_path: Path) -> None:

@@ -24,7 +24,6 @@ and its status, and is rewritten as trials finish. Ray is imported only inside f
 
 from __future__ import annotations
 
-import inspect
 import json
 import logging
 import os
@@ -40,9 +39,9 @@ from rehabbot.common.errors import DataError, RehabbotError, UsageError
 from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
 from rehabbot.rl import runs
-from rehabbot.rl.planning import find_resume_point
+from rehabbot.rl.backends import DEFAULT_BACKEND
+from rehabbot.rl.planning import check_demonstrations, find_resume_point
 from rehabbot.rl.sweep_config import (
-    OPTIONAL_TRAIN_KEYS,
     RAY_DIR,
     SWEEP_FILE,
     SweepConfig,
@@ -130,13 +129,6 @@ def run_status(trial: Trial) -> dict[str, Any]:
             "error": manifest.get("error") if status == "failed" else None}
 
 
-def train_run_accepts(name: str) -> bool:
-    """Whether :func:`train_run` takes the keyword ``name`` (e.g. ``demos``)."""
-    from rehabbot.rl.training import train_run
-
-    return name in inspect.signature(train_run).parameters
-
-
 def run_trial(spec: Mapping[str, Any], command: Sequence[str] = ()) -> dict[str, Any]:
     """Run one trial in this process (what a Ray worker does): start, continue or skip its
     run folder with :func:`train_run`; returns its record (status, steps, wall-clock, error).
@@ -153,21 +145,18 @@ def run_trial(spec: Mapping[str, Any], command: Sequence[str] = ()) -> dict[str,
     started = time.monotonic()
     error = None
     if state != "complete":
-        kwargs: dict[str, Any] = dict(
-            n_envs=trial.n_envs, hyperparams=trial.build_hyperparameters(),
-            env_kwargs=trial.env_kwargs, resume=state == "resume",
-            overwrite=state == "restart", eval_freq=trial.eval_freq,
-            eval_episodes=trial.eval_episodes, checkpoint_freq=trial.checkpoint_freq,
-            progress_bar=False)
-        for name in OPTIONAL_TRAIN_KEYS:  # only set if train_run takes them (check_sweep)
-            kwargs[name] = getattr(trial, name)
-        kwargs = {k: v for k, v in kwargs.items() if v is not None}
         saved_argv = sys.argv
         if command:
             sys.argv = list(command)
         try:
             train_run(trial.env_id, trial.algo, trial.seed, trial.total_timesteps,
-                      trial.out_dir, **kwargs)
+                      trial.out_dir, n_envs=trial.n_envs,
+                      hyperparams=trial.build_hyperparameters(), env_kwargs=trial.env_kwargs,
+                      resume=state == "resume", overwrite=state == "restart",
+                      eval_freq=trial.eval_freq, eval_episodes=trial.eval_episodes,
+                      checkpoint_freq=trial.checkpoint_freq, progress_bar=False,
+                      backend=trial.backend or DEFAULT_BACKEND, demos=trial.demos,
+                      bc=bool(trial.bc))
         except Exception as err:  # a trial's failure is reported, not raised
             error = " ".join(f"{type(err).__name__}: {err}".split())
         finally:
@@ -280,7 +269,7 @@ def _progress_callback(state: _SweepState) -> Any:
 
 def check_sweep(config: SweepConfig) -> list[Trial]:
     """Every trial of ``config``, checked before anything runs: hyperparameter files and grid
-    values, ``demos`` support, the env kwargs (each env is built once), the output folder.
+    values, ``demos`` and ``bc``, the env kwargs (each env is built once), the output folder.
 
     Raises:
         SweepConfigError: a bad setting (names it).
@@ -288,20 +277,12 @@ def check_sweep(config: SweepConfig) -> list[Trial]:
     """
     from rehabbot.rl.training import check_env_kwargs
 
-    for name in OPTIONAL_TRAIN_KEYS:
-        if config.uses(name) and not train_run_accepts(name):
-            raise SweepConfigError(f"{config.source}: {name}: this version of rehabbot's "
-                                   f"train_run does not take {name!r}; remove the key")
     trials = config.trials()
-    if config.uses("demos") or config.uses("bc"):
-        from rehabbot.rl import planning
-
-        check = getattr(planning, "check_demonstrations", None)
-        for algo in config.algos if check is not None else ():
-            try:
-                check(algo, config.demos[algo], bool(config.bc[algo]))
-            except UsageError as err:
-                raise SweepConfigError(f"{config.source}: {algo}: {err}") from err
+    for algo in config.algos:
+        try:
+            check_demonstrations(algo, config.demos[algo], bool(config.bc[algo]))
+        except UsageError as err:
+            raise SweepConfigError(f"{config.source}: {algo}: {err}") from err
     if config.env_kwargs is not None:
         for env_id in config.envs:
             try:

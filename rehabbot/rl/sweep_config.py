@@ -42,8 +42,6 @@ SWEEP_KEYS = ("out", "envs", "algos", "seeds", "timesteps", "hyperparams", "grid
               "env_kwargs", "eval_freq", "eval_episodes", "checkpoint_freq", "n_envs",
               "backend", "demos", "bc", "resources_per_trial")
 REQUIRED_KEYS = ("envs", "algos", "seeds")
-# Keys passed to train_run only if it takes them (checked with inspect when the sweep starts).
-OPTIONAL_TRAIN_KEYS = ("backend", "demos", "bc")
 DEFAULT_OUT = "runs/sweep"
 DEFAULT_RESOURCES: dict[str, float] = {"cpu": 1}
 RAY_DIR = "_ray"
@@ -142,10 +140,6 @@ class SweepConfig:
     checkpoint_freq: int | None = None
     resources_per_trial: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_RESOURCES))
     raw: dict[str, Any] = field(default_factory=dict)
-
-    def uses(self, key: str) -> bool:
-        """Whether the file sets ``key`` (``backend``, ``demos``, ``bc``) for an algorithm."""
-        return any(value is not None for value in getattr(self, key).values())
 
     def with_out(self, out: str | Path) -> SweepConfig:
         """The same sweep written below ``out`` (the CLI's ``--out``)."""
