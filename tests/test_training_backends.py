@@ -249,6 +249,14 @@ def test_settings_for_sbx_list_what_changed(sbx) -> None:
     assert changes["policy_kwargs.optimizer_kwargs.weight_decay"]["used"] is None
     assert changes["policy_kwargs.activation_fn"]["used"] == "flax.linen.tanh"
     json.dumps(hp.to_manifest())
+    import torch  # a torch class without a JAX twin of its name: SBX's default, and why
+
+    odd = hyperparameters_from_mapping({"policy_kwargs": {"activation_fn": torch.nn.Hardswish}},
+                                       "sac", backend="sbx")
+    assert odd.kwargs["policy_kwargs"] == {}
+    assert odd.backend_changes == [{
+        "key": "policy_kwargs.activation_fn", "given": "torch.nn.modules.activation.Hardswish",
+        "used": None, "why": "no Flax function of that name; SBX's default activation is used"}]
     with pytest.raises(HyperparameterError, match="'qf_learning_rate' for SAC"):
         hyperparameters_from_mapping({"qf_learning_rate": 1e-3}, "sac")  # SBX only
 
