@@ -369,6 +369,16 @@ def test_demos_with_several_envs_cut_unfinished_episodes() -> None:
     venv.close()
 
 
+def test_demos_larger_than_the_replay_buffer_are_refused() -> None:
+    from stable_baselines3 import SAC
+
+    from rehabbot.rl.planning import TrainingUsageError
+
+    model = SAC("MlpPolicy", gym.make(FULL_ID), buffer_size=50, policy_kwargs={"net_arch": [8]})
+    with pytest.raises(TrainingUsageError, match=r"buffer_size=50\) is too small for 1 expert"):
+        demonstrations.fill_replay_buffer(model, FULL_ID, {}, 1, 100)  # a 419-step episode
+
+
 # --------------------------------------------------------------------------- --bc
 
 

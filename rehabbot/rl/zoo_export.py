@@ -102,14 +102,8 @@ def _torch_module_ops(module: Any) -> list[Op]:
             ops.append(("dense", {"weight": _f32(m.weight), "bias": _f32(bias)}))
         elif isinstance(m, (nn.Identity, nn.Flatten, nn.Dropout)):
             continue  # nothing to do at inference on a batch of vectors
-        elif isinstance(m, nn.ReLU):
-            ops.append(("relu", {}))
-        elif isinstance(m, nn.Tanh):
-            ops.append(("tanh", {}))
-        elif isinstance(m, nn.SiLU):
-            ops.append(("silu", {}))
-        elif isinstance(m, nn.Sigmoid):
-            ops.append(("sigmoid", {}))
+        elif name in ("ReLU", "Tanh", "SiLU", "Sigmoid"):
+            ops.append((name.lower(), {}))
         elif isinstance(m, nn.ELU):
             ops.append(("elu", {"alpha": m.alpha}))
         elif isinstance(m, nn.LeakyReLU):
@@ -194,18 +188,15 @@ def sbx_actor_ops(model: Any) -> list[Op]:
     params = state.params.get("params", state.params)
     activation = _jax_activation(policy.activation_fn)
     n_hidden = len(actor.net_arch)
+    mlp = [op for k in range(n_hidden) for op in (_dense(params, k), activation)]
     ops: list[Op] = []
     if kind in ("sbx.common.policies.SquashedGaussianActor",  # SAC, TQC: tanh(mean)
                 "sbx.td3.policies.Actor"):  # TD3: tanh of the output layer
-        for k in range(n_hidden):
-            ops += [_dense(params, k), activation]
-        ops += [_dense(params, n_hidden), ("tanh", {})]
+        ops = [*mlp, _dense(params, n_hidden), ("tanh", {})]
     elif kind == "sbx.ppo.policies.Actor":
         if actor.features_extractor is not None or actor.num_discrete_choices is not None:
             raise ExportError("the zoo exports SBX PPO with an MLP on a Box action space only")
-        for k in range(n_hidden):
-            ops += [_dense(params, k), activation]
-        ops.append(_dense(params, n_hidden))
+        ops = [*mlp, _dense(params, n_hidden)]
     elif kind == "sbx.crossq.policies.Actor":
         from sbx.common.jax_layers import BatchRenorm
 
