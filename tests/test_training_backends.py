@@ -20,7 +20,7 @@ pytest.importorskip("yaml", reason="hyperparameter files need PyYAML")
 from rehabbot.cli import CliError, main
 from rehabbot.cli.train import add_train_parser, cmd_train
 from rehabbot.rl import backends, demonstrations
-from rehabbot.rl.algorithms import algo_class, detect_algo, detect_model
+from rehabbot.rl.algorithms import PolicyError, algo_class, detect_algo, detect_model
 from rehabbot.rl.hyperparams import (
     HyperparameterError,
     hyperparameters_from_mapping,
@@ -193,6 +193,14 @@ def test_detect_model_knows_tqc_and_crossq(tmp_path: Path) -> None:
         model.save(tmp_path / algo)
         assert detect_model(tmp_path / f"{algo}.zip") == (algo, "sb3")
         assert detect_algo(tmp_path / f"{algo}.zip") == algo
+    # PPO's policy class is SB3's common one, which A2C uses too: told apart by PPO's arguments.
+    from stable_baselines3 import A2C, PPO
+
+    for cls in (PPO, A2C):
+        cls("MlpPolicy", env, policy_kwargs={"net_arch": [8]}).save(tmp_path / cls.__name__)
+    assert detect_model(tmp_path / "PPO.zip") == ("ppo", "sb3")
+    with pytest.raises(PolicyError, match="saved by an algorithm rehabbot does not run"):
+        detect_model(tmp_path / "A2C.zip")
 
 
 @pytest.mark.slow

@@ -30,12 +30,9 @@ DISTRIBUTIONS = {"stable_baselines3": "stable-baselines3", "sb3_contrib": "sb3-c
                  "sbx": "sbx-rl"}
 # Top-level package of a saved model's policy class -> backend.
 POLICY_PACKAGE_BACKENDS = {"stable_baselines3": "sb3", "sb3_contrib": "sb3", "sbx": "sbx"}
-# Each SB3 algorithm saves its own constructor arguments: they tell the algorithms apart when
-# the module of the policy class names none (PPO's is stable_baselines3.common.policies).
-SIGNATURE_KEYS = {"td3": ("policy_delay", "target_policy_noise"),
-                  "tqc": ("top_quantiles_to_drop_per_net",),
-                  "sac": ("target_entropy", "ent_coef", "target_update_interval"),
-                  "ppo": ("clip_range", "n_epochs")}
+# SB3's PPO policy lives in stable_baselines3.common.policies, whose name gives no algorithm:
+# PPO's saved constructor arguments tell it apart (from A2C, which rehabbot does not run).
+PPO_SIGNATURE = ("clip_range", "n_epochs")
 
 
 class PolicyError(DataError):
@@ -134,8 +131,8 @@ def read_model_data(path: Path) -> dict[str, Any]:
 
 def detect_model(path: Path) -> tuple[str, str]:
     """``(algo, backend)`` of the model zip ``path``, from its metadata: the module of the
-    saved policy class (``sbx.tqc.policies`` -> tqc on sbx), else the constructor arguments
-    the algorithm saved.
+    saved policy class (``sbx.tqc.policies`` -> tqc on sbx; SB3's PPO by the arguments it
+    saved).
 
     Raises:
         PolicyError: not a model zip of SB3, sb3-contrib or SBX, or one of another algorithm.
@@ -146,10 +143,8 @@ def detect_model(path: Path) -> tuple[str, str]:
     backend = POLICY_PACKAGE_BACKENDS.get(parts[0])
     if backend is not None and len(parts) > 1 and parts[1] in ALGORITHMS:
         return parts[1], backend
-    if backend is not None:
-        for algo, keys in SIGNATURE_KEYS.items():
-            if all(key in data for key in keys):
-                return algo, backend
+    if module == "stable_baselines3.common.policies" and all(k in data for k in PPO_SIGNATURE):
+        return "ppo", "sb3"
     raise PolicyError(f"{str(path)!r} was saved by an algorithm rehabbot does not run "
                       f"(policy module {module!r}); supported: {list(ALGORITHMS)} on "
                       f"{' or '.join(BACKENDS)}")

@@ -35,7 +35,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from rehabbot.common.errors import RehabbotError, UsageError
+from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import BILATERAL_IDS, ENV_SPECS, env_short_name, resolve_env_id
 from rehabbot.rl.algorithms import (
     ALGO_NAMES,
@@ -445,6 +445,28 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     return hp
 
 
+def read_yaml(path: Path, what: str, error: type[Exception], name: str | None = None) -> Any:
+    """The YAML document in ``path`` (``{}`` for an empty file).
+
+    Raises:
+        error: PyYAML is missing, or the file is unreadable or not YAML (the message names
+            ``what`` and the file, as ``name`` if given).
+    """
+    name = str(path) if name is None else name
+    try:
+        import yaml
+    except ImportError as err:
+        raise error(f"reading a {what} needs PyYAML: pip install pyyaml") from err
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as err:
+        raise error(f"cannot read {what} {name!r}: "
+                    f"{getattr(err, 'strerror', None) or err}") from err
+    except yaml.YAMLError as err:
+        raise error(f"{what} {name!r} is not valid YAML: {' '.join(str(err).split())}") from err
+    return {} if data is None else data
+
+
 def _looks_like_env_key(key: Any) -> bool:
     if not isinstance(key, str):
         return False
@@ -465,24 +487,7 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str,
     env_id = _resolve_env_id(env_id)
     algo = _check_algo(algo)
     file = settings_path(path)
-    try:
-        import yaml
-    except ImportError as err:
-        raise RehabbotError("reading hyperparameter files needs PyYAML: pip install pyyaml"
-                            ) from err
-    try:
-        text = file.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise HyperparameterError(f"cannot read hyperparameter file {str(path)!r}: "
-                                  f"{err}") from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        detail = " ".join(str(err).split())
-        raise HyperparameterError(f"hyperparameter file {str(path)!r} is not valid YAML: "
-                                  f"{detail}") from err
-    if data is None:
-        data = {}
+    data = read_yaml(file, "hyperparameter file", HyperparameterError, str(path))
     if not isinstance(data, dict):
         raise HyperparameterError(f"hyperparameter file {str(path)!r} must hold a mapping, "
                                   f"not a {type(data).__name__}")

@@ -24,7 +24,6 @@ and its status, and is rewritten as trials finish. Ray is imported only inside f
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import shutil
@@ -40,7 +39,7 @@ from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
 from rehabbot.rl import runs
 from rehabbot.rl.backends import DEFAULT_BACKEND
-from rehabbot.rl.planning import check_demonstrations, find_resume_point
+from rehabbot.rl.planning import check_demonstrations, find_resume_point, run_is_complete
 from rehabbot.rl.sweep_config import (
     RAY_DIR,
     SWEEP_FILE,
@@ -101,9 +100,7 @@ def trial_state(trial: Trial) -> str:
         manifest = runs.read_manifest(run_dir)
     except DataError:
         return "resume"  # train_run names the damaged manifest
-    if (manifest is not None and manifest.get("status") == "finished"
-            and int(manifest.get("timesteps_done", 0)) >= trial.total_timesteps
-            and (run_dir / runs.MODEL_NAME).is_file()):
+    if run_is_complete(run_dir, manifest, trial.total_timesteps):
         return "complete"
     if find_resume_point(run_dir, manifest) is not None:
         return "resume"
@@ -461,19 +458,3 @@ def format_table(records: Sequence[Mapping[str, Any]]) -> str:
              .rstrip() for row in rows]
     lines.insert(1, "  ".join("-" * width for width in widths))
     return "\n".join(lines)
-
-
-def read_sweep_file(out: str | Path) -> dict[str, Any]:
-    """``OUT/sweep.json`` as a mapping.
-
-    Raises:
-        DataError: missing or not a sweep file.
-    """
-    path = Path(out) / SWEEP_FILE
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise DataError(f"{path} is not a readable sweep file: {err}") from err
-    if not isinstance(data, dict) or not isinstance(data.get("trials"), list):
-        raise DataError(f"{path} is not a sweep file: it lacks the list of trials")
-    return data

@@ -15,6 +15,7 @@ This module imports neither Ray nor Stable-Baselines3.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -35,6 +36,7 @@ from rehabbot.rl.hyperparams import (
     coerce_number,
     hyperparameters_from_mapping,
     jsonable,
+    read_yaml,
 )
 from rehabbot.rl.planning import DEFAULT_TIMESTEPS
 
@@ -97,25 +99,14 @@ class Trial:
 
     def to_json(self) -> dict[str, Any]:
         """The trial as JSON-able data (the Ray trial's config, an entry of sweep.json)."""
-        return {
-            "key": self.key, "env_id": self.env_id, "algo": self.algo, "seed": self.seed,
-            "total_timesteps": self.total_timesteps, "out_dir": str(self.out_dir),
-            "run_dir": str(self.run_dir), "variant": self.variant,
-            "overrides": jsonable(self.overrides), "hyperparams": jsonable(self.hyperparams),
-            "env_kwargs": jsonable(self.env_kwargs), "n_envs": self.n_envs,
-            "eval_freq": self.eval_freq, "eval_episodes": self.eval_episodes,
-            "checkpoint_freq": self.checkpoint_freq, "backend": self.backend,
-            "demos": self.demos, "bc": self.bc,
-        }
+        return {"key": self.key, **jsonable(dataclasses.asdict(self)),
+                "out_dir": str(self.out_dir), "run_dir": str(self.run_dir)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> Trial:
         """The inverse of :meth:`to_json`."""
-        fields = {name: data[name] for name in (
-            "env_id", "algo", "seed", "total_timesteps", "variant", "overrides", "hyperparams",
-            "env_kwargs", "n_envs", "eval_freq", "eval_episodes", "checkpoint_freq", "backend",
-            "demos", "bc")}
-        return cls(out_dir=Path(data["out_dir"]), **fields)
+        values = {item.name: data[item.name] for item in dataclasses.fields(cls)}
+        return cls(**{**values, "out_dir": Path(data["out_dir"])})
 
 
 @dataclass(frozen=True)
@@ -143,10 +134,8 @@ class SweepConfig:
 
     def with_out(self, out: str | Path) -> SweepConfig:
         """The same sweep written below ``out`` (the CLI's ``--out``)."""
-        values = {name: getattr(self, name) for name in self.__dataclass_fields__}
-        values["out"] = Path(out).expanduser().absolute()
-        values["raw"] = {**self.raw, "out": str(out)}
-        return SweepConfig(**values)
+        return dataclasses.replace(self, out=Path(out).expanduser().absolute(),
+                                   raw={**self.raw, "out": str(out)})
 
     def trials(self) -> list[Trial]:
         """Every trial, in the order env, algorithm, variant, seed.
@@ -434,19 +423,5 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
     Raises:
         SweepConfigError: the file is missing, unreadable, not YAML, or holds a bad setting.
     """
-    try:
-        import yaml
-    except ImportError as err:
-        raise SweepConfigError("reading sweep files needs PyYAML: pip install pyyaml") from err
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise SweepConfigError(f"cannot read sweep file {str(path)!r}: "
-                               f"{getattr(err, 'strerror', None) or err}") from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise SweepConfigError(f"sweep file {str(path)!r} is not valid YAML: "
-                               f"{' '.join(str(err).split())}") from err
-    return parse_sweep_config({} if data is None else data, source=str(path))
+    return parse_sweep_config(read_yaml(Path(path), "sweep file", SweepConfigError),
+                              source=str(path))
