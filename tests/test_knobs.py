@@ -30,8 +30,8 @@ from rehabbot.envs.config import (
     RehabEnvConfig,
 )
 from rehabbot.envs.registration import CONDITION_VARIANTS
+from rehabbot.rl.hyperparam_checks import VALUE_RANGES
 from rehabbot.rl.hyperparams import (
-    VALUE_RANGES,
     HyperparameterError,
     hyperparameters_from_mapping,
     load_hyperparameters,

@@ -4,8 +4,7 @@ also take), booleans for :data:`BOOL_KEYS`, ``train_freq`` as ``n`` or ``[n, uni
 infinity anywhere (:func:`check_value`); numbers written as YAML strings (:func:`coerce_number`)
 and ``"lin_<float>"`` schedules (:func:`parse_schedule`).
 
-:mod:`rehabbot.rl.hyperparams` reads whole files and mappings with these and re-exports the
-public names.
+:mod:`rehabbot.rl.hyperparams` reads whole files and mappings with these.
 """
 
 from __future__ import annotations

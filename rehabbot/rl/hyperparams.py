@@ -45,19 +45,14 @@ from rehabbot.rl.algorithms import (
     check_algo,
     removed_policy,
 )
-from rehabbot.rl.hyperparam_checks import BOOL_KEYS as BOOL_KEYS  # re-exported
-from rehabbot.rl.hyperparam_checks import SCHEDULE_KEYS as SCHEDULE_KEYS  # re-exported
-from rehabbot.rl.hyperparam_checks import TRAIN_FREQ_UNITS as TRAIN_FREQ_UNITS  # re-exported
-from rehabbot.rl.hyperparam_checks import VALUE_RANGES as VALUE_RANGES  # re-exported
-from rehabbot.rl.hyperparam_checks import (  # re-exported
-    HyperparameterError as HyperparameterError,
+from rehabbot.rl.hyperparam_checks import (
+    SCHEDULE_KEYS,
+    HyperparameterError,
+    check_value,
+    coerce_number,
+    parse_schedule,
 )
-from rehabbot.rl.hyperparam_checks import check_value as check_value  # re-exported
-from rehabbot.rl.hyperparam_checks import coerce_number as coerce_number  # re-exported
-from rehabbot.rl.hyperparam_checks import parse_schedule
-from rehabbot.rl.zoo_strings import TORCH_NAMES as TORCH_NAMES  # re-exported
-from rehabbot.rl.zoo_strings import _resolve_torch_names
-from rehabbot.rl.zoo_strings import parse_python_expression as parse_python_expression
+from rehabbot.rl.zoo_strings import _resolve_torch_names, parse_python_expression
 
 DEFAULT_POLICY = "MlpPolicy"
 DEFAULT_NOISE_STD = 0.1

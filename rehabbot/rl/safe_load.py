@@ -5,10 +5,11 @@ every attribute JSON cannot hold (spaces, schedules, classes, SBX's networks) as
 cloudpickle: loading such a zip runs whatever code the pickle names. RehabBot therefore:
 
 * loads with SB3's ``custom_objects`` for **every** pickled entry of ``data``, so SB3 never
-  unpickles one: spaces come from the env, classes, schedules and settings are rebuilt from
-  the run's manifest (``hyperparameters.given``, the same settings that built the model) or
-  the algorithm's defaults; an entry it cannot rebuild is refused (:class:`DataError`
-  naming it). The weights (``*.pth``) are read by PyTorch with ``weights_only=True``;
+  unpickles one: spaces come from the env, the policy class is the algorithm's own that the
+  zip names in its readable metadata, schedules and settings are rebuilt from the run's
+  manifest (``hyperparameters.given``, the same settings that built the model) or the
+  algorithm's defaults; an entry it cannot rebuild is refused (:class:`DataError` naming it).
+  The weights (``*.pth``) are read by PyTorch with ``weights_only=True``;
 * saves SBX (JAX) models without their pickled networks: the train states (parameters,
   optimiser states, step counts) go into the zip as a msgpack entry (:data:`JAX_STATE_ENTRY`,
   plain arrays, read with flax's msgpack reader), and the networks are rebuilt on loading.
@@ -113,16 +114,13 @@ def pickled_entries(data: Mapping[str, Any]) -> list[str]:
                   if isinstance(value, dict) and ":serialized:" in value)
 
 
-def _saved_hyperparameters(cls: Any, algo: str, backend: str,
-                           manifest: Mapping[str, Any] | None) -> Any:
+def _saved_hyperparameters(algo: str, backend: str, manifest: Mapping[str, Any] | None) -> Any:
     """The run's hyperparameters rebuilt from its manifest (what the user gave), else the
     defaults; classes only from the packages the settings files may name."""
     from rehabbot.rl.hyperparams import hyperparameters_from_mapping
 
     block = (manifest or {}).get("hyperparameters") or {}
     given = dict(block.get("given") or {}) if isinstance(block, Mapping) else {}
-    if isinstance(block, Mapping) and isinstance(block.get("policy"), str):
-        given.setdefault("policy", block["policy"])
     try:
         return hyperparameters_from_mapping(given, algo, source="the run's manifest",
                                             backend=backend)
@@ -132,8 +130,8 @@ def _saved_hyperparameters(cls: Any, algo: str, backend: str,
 
 
 def _policy_class_from_data(cls: Any, data: Mapping[str, Any]) -> Any:
-    """The policy class a zip without a manifest names in its readable metadata: one of the
-    algorithm's own (``policy_aliases``) by its name, else its MlpPolicy."""
+    """The policy class a zip names in its readable metadata: one of the algorithm's own
+    (``policy_aliases``) by its name, else its MlpPolicy."""
     name = saved_policy_class(data)[1].rpartition(".")[2]
     own = {policy.__name__: policy for policy in cls.policy_aliases.values()}
     return own.get(name, cls.policy_aliases["MlpPolicy"])
@@ -191,7 +189,7 @@ def safe_custom_objects(cls: Any, path: Path, data: Mapping[str, Any], env: Any,
     """
     from stable_baselines3.common.utils import FloatSchedule
 
-    hp = _saved_hyperparameters(cls, algo, backend, manifest)
+    hp = _saved_hyperparameters(algo, backend, manifest)
     spec = getattr(env, "spec", None)
     env_name = spec.id if spec is not None else type(env).__name__
     replacements: dict[str, Any] = {}
@@ -200,11 +198,8 @@ def safe_custom_objects(cls: Any, path: Path, data: Mapping[str, Any], env: Any,
             space = getattr(env, key)
             _check_space(path, key, data[key], space, env_name)
             replacements[key] = space
-        elif key == "policy_class" and not (manifest or {}).get("hyperparameters"):
-            replacements[key] = _policy_class_from_data(cls, data)
         elif key == "policy_class":
-            replacements[key] = hp.policy if isinstance(hp.policy, type) \
-                else cls.policy_aliases[hp.policy]
+            replacements[key] = _policy_class_from_data(cls, data)
         elif key in SCHEDULE_KEYS or key == "lr_schedule" or key == "clip_range_schedule":
             source = {"lr_schedule": "learning_rate",
                       "clip_range_schedule": "clip_range"}.get(key, key)
