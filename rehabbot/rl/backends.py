@@ -17,9 +17,9 @@ translates a settings file and lists what it changed.
 from __future__ import annotations
 
 import importlib.util
-from importlib import metadata
 
 from rehabbot.common.errors import UsageError
+from rehabbot.common.provenance import distribution_version
 from rehabbot.rl.algorithms import (
     ALGO_CLASSES,
     ALGO_NAMES,
@@ -87,18 +87,11 @@ def saved_backend(manifest: dict | None) -> str:
     return value if value in BACKENDS else "sb3"
 
 
-def _version(distribution: str) -> str | None:
-    try:
-        return metadata.version(distribution)
-    except metadata.PackageNotFoundError:
-        return None
-
-
 def backend_version(backend: str) -> str | None:
     """The version of the library that implements ``backend`` (None: not installed)."""
-    return _version(BACKEND_LIBRARY[backend])
+    return distribution_version(BACKEND_LIBRARY[backend])
 
 
 def backend_versions(backend: str) -> dict[str, str | None]:
     """Versions of the libraries a run on ``backend`` depends on, by import name."""
-    return {name: _version(dist) for name, dist in BACKEND_PACKAGES[backend]}
+    return {name: distribution_version(dist) for name, dist in BACKEND_PACKAGES[backend]}

@@ -77,6 +77,18 @@ def coerce_number(value: Any) -> Any:
     return value
 
 
+def as_count(value: Any, what: str, minimum: int = 1,
+             error: type[Exception] = HyperparameterError) -> int:
+    """``value`` as an integer >= ``minimum`` (``"1e5"`` and ``100000.0`` count too); else
+    ``error`` naming ``what``."""
+    number = coerce_number(value)
+    if isinstance(number, float) and number.is_integer():
+        number = int(number)
+    if isinstance(number, bool) or not isinstance(number, int) or number < minimum:
+        raise error(f"{what} must be an integer >= {minimum}, got {value!r}")
+    return number
+
+
 def _range_text(key: str, extras: bool = True) -> str:
     low, high, low_open, integer = VALUE_RANGES[key]
     kind = "an integer" if integer else "a finite number"

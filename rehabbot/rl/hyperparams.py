@@ -48,6 +48,7 @@ from rehabbot.rl.algorithms import (
 from rehabbot.rl.hyperparam_checks import (
     SCHEDULE_KEYS,
     HyperparameterError,
+    as_count,
     check_value,
     coerce_number,
     parse_schedule,
@@ -243,15 +244,6 @@ class Hyperparameters:
         }
 
 
-def _as_count(value: Any, key: str, where: str, minimum: int = 1) -> int:
-    value = coerce_number(value)
-    if isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise HyperparameterError(f"{where}: {key} must be an integer >= {minimum}, got {value!r}")
-    return value
-
-
 def _parse_normalize(value: Any, where: str) -> dict[str, Any] | None:
     if isinstance(value, str):
         lowered = value.strip().lower()
@@ -294,15 +286,11 @@ def _parse_policy_kwargs(value: Any, where: str) -> dict[str, Any]:
     return {str(key): _resolve_torch_names(item) for key, item in value.items()}
 
 
-def _class_name(value: type) -> str:
-    return f"{value.__module__}.{value.__qualname__}"
-
-
 def _policy_error(where: str, raw: Any, cls: Any, why: str,
                   packages: tuple[str, ...] = POLICY_PACKAGES) -> HyperparameterError:
     return HyperparameterError(
         f"{where}: policy {raw!r} {why}; valid: {', '.join(cls.policy_aliases)}, or the dotted "
-        f"name of a subclass of {_class_name(cls.policy_aliases[DEFAULT_POLICY])} under "
+        f"name of a subclass of {jsonable(cls.policy_aliases[DEFAULT_POLICY])} under "
         f"{' or '.join(f'{package}.' for package in packages)}")
 
 
@@ -327,7 +315,7 @@ def parse_policy(raw: Any, cls: Any, where: str,
         raise _policy_error(where, raw, cls, f"cannot be imported ({err})", packages) from None
     base = cls.policy_aliases[DEFAULT_POLICY]
     if not (isinstance(policy, type) and issubclass(policy, base)):
-        raise _policy_error(where, raw, cls, f"is not a subclass of {_class_name(base)}",
+        raise _policy_error(where, raw, cls, f"is not a subclass of {jsonable(base)}",
                             packages)
     return policy
 
@@ -368,9 +356,9 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
         if not isinstance(key, str):
             raise HyperparameterError(f"{where}: hyperparameter names must be strings, got {key!r}")
         if key == "n_timesteps":
-            hp.n_timesteps = _as_count(raw, key, where)
+            hp.n_timesteps = as_count(raw, f"{where}: {key}")
         elif key == "n_envs":
-            hp.n_envs = _as_count(raw, key, where)
+            hp.n_envs = as_count(raw, f"{where}: {key}")
         elif key == "policy" and sbx and sbx_settings.is_torch_policy(raw):
             hp.policy = DEFAULT_POLICY
             hp.backend_changes.append(sbx_settings.policy_change(raw))

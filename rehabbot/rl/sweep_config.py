@@ -30,6 +30,7 @@ from rehabbot.envs.registration import env_short_name, resolve_env_id
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import ALGORITHMS
 from rehabbot.rl.backends import DEFAULT_BACKEND, check_backend_choice, resolve_backend
+from rehabbot.rl.hyperparam_checks import as_count
 from rehabbot.rl.hyperparams import (
     Hyperparameters,
     as_hyperparameters,
@@ -233,12 +234,7 @@ def variants(grid: Mapping[str, list[Any]]) -> list[tuple[str | None, dict[str, 
 
 
 def _count(value: Any, where: str, minimum: int) -> int:
-    number = coerce_number(value)
-    if isinstance(number, float) and number.is_integer():
-        number = int(number)
-    if isinstance(number, bool) or not isinstance(number, int) or number < minimum:
-        raise SweepConfigError(f"{where} must be an integer >= {minimum}, got {value!r}")
-    return number
+    return as_count(value, where, minimum, SweepConfigError)
 
 
 def _optional_count(data: Mapping[str, Any], key: str, where: str, minimum: int) -> int | None:

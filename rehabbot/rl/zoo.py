@@ -77,7 +77,6 @@ ZOO_PREFIX = "zoo:"
 SUFFIX = ".npz"
 FORMAT_VERSION = 1
 METADATA_KEY = "metadata"
-SPACE_KEYS = ("observation_low", "observation_high", "action_low", "action_high")
 DEFAULT_EPISODES = 20
 DEFAULT_SEED = 1000
 # op name -> the parameters it needs
@@ -237,6 +236,9 @@ class ZooPolicy:
             self.action_space = gym.spaces.Box(arrays["action_low"], arrays["action_high"],
                                                dtype=np.float32)
             names = [str(name) for name in np.atleast_1d(arrays["ops"])]
+            unknown = [name for name in names if name not in OP_PARAMS]
+            if unknown:
+                raise ValueError(f"unknown ops {unknown}")
             self._ops = []
             for k, name in enumerate(names):
                 params = {key: np.asarray(arrays[f"op{k}.{key}"])
@@ -260,9 +262,8 @@ class ZooPolicy:
         except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as err:
             raise ZooError(f"{path} is not a readable zoo file ({type(err).__name__}: "
                            f"{err})") from err
-        missing = [key for key in (METADATA_KEY, "ops", *SPACE_KEYS) if key not in arrays]
-        if missing:
-            raise ZooError(f"{path} is not a valid zoo file: it lacks {', '.join(missing)}")
+        if METADATA_KEY not in arrays:
+            raise ZooError(f"{path} is not a valid zoo file: it lacks {METADATA_KEY}")
         try:
             metadata = json.loads(str(arrays[METADATA_KEY]))
         except json.JSONDecodeError as err:
@@ -273,20 +274,13 @@ class ZooPolicy:
         if metadata.get("format") != FORMAT_VERSION:
             raise ZooError(f"{path} has zoo format {metadata.get('format')!r}; this rehabbot "
                            f"reads format {FORMAT_VERSION}")
-        names = [str(name) for name in np.atleast_1d(arrays["ops"])]
-        unknown = [name for name in names if name not in OP_PARAMS]
-        if unknown:
-            raise ZooError(f"{path} is not a valid zoo file: unknown ops {unknown}")
-        lacking = [f"op{k}.{key}" for k, name in enumerate(names) for key in OP_PARAMS[name]
-                   if f"op{k}.{key}" not in arrays]
-        if lacking:
-            raise ZooError(f"{path} is not a valid zoo file: it lacks {', '.join(lacking)}")
+        policy = cls(arrays, metadata, path)  # ZooError: an array it lacks, an unknown op
         expected = metadata.get("weights_sha256")
         actual = weights_sha256(arrays)
         if expected != actual:
             raise ZooError(f"{path} is damaged or was modified: its arrays' sha256 is "
                            f"{actual}, its metadata says {expected}")
-        return cls(arrays, metadata, path)
+        return policy
 
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, None]:
@@ -490,14 +484,6 @@ def full_model_path(env_id: str, algo: str, root: Path | None = None) -> Path:
     return zoo_path(env_id, algo, root).with_suffix(FULL_MODEL_SUFFIX)
 
 
-def _file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
     """The trained model (SB3 or SBX, with its critics) behind the zoo's agent for ``env_id``
     and ``algo``, loaded without unpickling anything
@@ -517,7 +503,7 @@ def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
     if not path.is_file():
         raise UsageError(f"the zoo keeps only the actor of {_short(meta['env_id'])}/"
                          f"{meta['algo']} (no {path.name}); load(...) gives the actor")
-    if _file_sha256(path) != meta.get("full_model_sha256"):
+    if hashlib.sha256(path.read_bytes()).hexdigest() != meta.get("full_model_sha256"):
         raise ZooError(f"{path} is not the model this agent was exported from (its SHA-256 "
                        "differs from the agent's full_model_sha256)")
     env = env if env is not None else gym.make(meta["env_id"], **(meta.get("env_kwargs") or {}))
@@ -536,4 +522,4 @@ def ship_full_model(model_path: str | Path, out_npz: Path) -> dict[str, str]:
     data = source.read_bytes()
     target.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(target, lambda stream: stream.write(data))
-    return {"full_model_sha256": _file_sha256(target)}
+    return {"full_model_sha256": hashlib.sha256(data).hexdigest()}
