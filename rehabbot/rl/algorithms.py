@@ -10,6 +10,7 @@ import importlib
 import json
 import re
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -66,21 +67,18 @@ def saved_policy_class(data: dict[str, Any]) -> tuple[str, str]:
     return module, f"{module}.{names[0]}" if names else module
 
 
-def check_algo(algo: str) -> str:
-    """The lower-case algorithm name; :class:`UsageError` unless it is one of
-    :data:`ALGORITHMS`."""
-    name = str(algo).strip().lower()
-    if name not in ALGORITHMS:
-        raise UsageError(f"unknown algorithm {algo!r}; valid: {', '.join(ALGORITHMS)}")
+def one_of(value: Any, valid: Sequence[str], what: str,
+           error: type[UsageError] = UsageError) -> str:
+    """``value`` in lower case; ``error`` naming it and the valid ones unless it is one."""
+    name = str(value).strip().lower()
+    if name not in valid:
+        raise error(f"unknown {what} {value!r}; valid: {', '.join(valid)}")
     return name
 
 
-def check_backend(backend: str) -> str:
-    """The lower-case backend name; :class:`UsageError` unless it is sb3 or sbx."""
-    name = str(backend).strip().lower()
-    if name not in BACKENDS:
-        raise UsageError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
-    return name
+def check_algo(algo: str, error: type[UsageError] = UsageError) -> str:
+    """The lower-case algorithm name, one of :data:`ALGORITHMS` (else ``error``)."""
+    return one_of(algo, ALGORITHMS, "algorithm", error)
 
 
 def algo_class(algo: str, backend: str = "sb3") -> Any:
@@ -89,7 +87,7 @@ def algo_class(algo: str, backend: str = "sb3") -> Any:
     Raises:
         BackendUnavailableError: the library is not installed, or has no such class.
     """
-    algo, backend = check_algo(algo), check_backend(backend)
+    algo, backend = check_algo(algo), one_of(backend, BACKENDS, "backend")
     module_name, class_name = ALGO_CLASSES[(backend, algo)]
     try:
         module = importlib.import_module(module_name)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import importlib.util
 
-from rehabbot.common.errors import UsageError
 from rehabbot.common.provenance import distribution_version
 from rehabbot.rl.algorithms import (
     ALGO_CLASSES,
@@ -28,6 +27,7 @@ from rehabbot.rl.algorithms import (
     BackendUnavailableError,
     algo_class,
     check_algo,
+    one_of,
 )
 
 BACKEND_CHOICES = ("auto", *BACKENDS)
@@ -49,10 +49,7 @@ def sbx_available() -> bool:
 
 def check_backend_choice(backend: str) -> str:
     """``auto``, ``sb3`` or ``sbx`` in lower case; :class:`UsageError` otherwise."""
-    name = str(backend).strip().lower()
-    if name not in BACKEND_CHOICES:
-        raise UsageError(f"unknown backend {backend!r}; valid: {', '.join(BACKEND_CHOICES)}")
-    return name
+    return one_of(backend, BACKEND_CHOICES, "backend")
 
 
 def resolve_backend(backend: str, algo: str) -> str:

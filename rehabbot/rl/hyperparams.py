@@ -66,13 +66,6 @@ POLICY_PACKAGES = ("stable_baselines3",)
 SBX_POLICY_PACKAGES = ("sbx",)
 
 
-def _check_algo(algo: str) -> str:
-    try:
-        return check_algo(algo)
-    except UsageError as err:
-        raise HyperparameterError(str(err)) from None
-
-
 def _resolve_env_id(env_id: str) -> str:
     try:
         return resolve_env_id(env_id)
@@ -102,7 +95,7 @@ def shipped_settings(algo: str) -> str | None:
     """The name of the settings file shipped for ``algo`` (``"sac"`` for SAC: an entry per
     ``-v2`` id), or None when there is none. ``rehabbot train`` uses it when no
     ``--hyperparams`` is given."""
-    algo = _check_algo(algo)
+    algo = check_algo(algo, HyperparameterError)
     return algo if algo in settings_names() else None
 
 
@@ -338,7 +331,7 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     Raises:
         HyperparameterError: an unknown key (named, with the algorithm) or a bad value.
     """
-    algo = _check_algo(algo)
+    algo = check_algo(algo, HyperparameterError)
     where = source if entry is None else f"{source} [{entry}]"
     hp = Hyperparameters(algo=algo, source=source, entry=entry, backend=backend)
     if mapping is None:
@@ -468,7 +461,7 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str,
             unknown key or bad value (the message names the file and the key).
     """
     env_id = _resolve_env_id(env_id)
-    algo = _check_algo(algo)
+    algo = check_algo(algo, HyperparameterError)
     file = settings_path(path)
     data = read_yaml(file, "hyperparameter file", HyperparameterError, str(path))
     if not isinstance(data, dict):

@@ -44,8 +44,8 @@ from rehabbot.rl.sweep_config import (
     RAY_DIR,
     SWEEP_FILE,
     SweepConfig,
-    SweepConfigError,
     Trial,
+    naming,
 )
 
 SWEEP_FORMAT = 1
@@ -276,16 +276,11 @@ def check_sweep(config: SweepConfig) -> list[Trial]:
 
     trials = config.trials()
     for algo in config.algos:
-        try:
+        with naming(f"{config.source}: {algo}"):
             check_demonstrations(algo, config.demos[algo], bool(config.bc[algo]))
-        except UsageError as err:
-            raise SweepConfigError(f"{config.source}: {algo}: {err}") from err
-    if config.env_kwargs is not None:
-        for env_id in config.envs:
-            try:
-                check_env_kwargs(env_id, config.env_kwargs)
-            except UsageError as err:
-                raise SweepConfigError(f"{config.source}: env_kwargs: {err}") from err
+    for env_id in config.envs if config.env_kwargs is not None else ():
+        with naming(f"{config.source}: env_kwargs"):
+            check_env_kwargs(env_id, config.env_kwargs)
     check_writable_dir(config.out)
     return trials
 

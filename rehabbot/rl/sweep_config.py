@@ -15,12 +15,13 @@ This module imports neither Ray nor Stable-Baselines3.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import itertools
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,7 +29,7 @@ from typing import Any
 from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import env_short_name, resolve_env_id
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import ALGORITHMS
+from rehabbot.rl.algorithms import ALGORITHMS, check_algo
 from rehabbot.rl.backends import DEFAULT_BACKEND, check_backend_choice, resolve_backend
 from rehabbot.rl.hyperparam_checks import as_count
 from rehabbot.rl.hyperparams import (
@@ -55,6 +56,16 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._+=,-]")
 
 class SweepConfigError(UsageError):
     """A sweep file that cannot be read or holds a bad key or value (CLI exit code 2)."""
+
+
+@contextlib.contextmanager
+def naming(where: str) -> Iterator[None]:
+    """A :class:`UsageError` raised inside, as a :class:`SweepConfigError` that names
+    ``where`` (the file and the setting)."""
+    try:
+        yield
+    except UsageError as err:
+        raise SweepConfigError(f"{where}: {err}") from err
 
 
 @dataclass(frozen=True)
@@ -148,9 +159,10 @@ class SweepConfig:
         trials: list[Trial] = []
         for env_id in self.envs:
             for algo in self.algos:
-                backend = _backend(self.backend[algo], algo, self.source)
-                base = _base_hyperparameters(self.hyperparams[algo], env_id, algo, backend,
-                                             self.source)
+                with naming(f"{self.source}: backend of {algo}"):
+                    backend = resolve_backend(self.backend[algo] or DEFAULT_BACKEND, algo)
+                with naming(f"{self.source}: hyperparams of {algo} on {env_short_name(env_id)}"):
+                    base = as_hyperparameters(self.hyperparams[algo], env_id, algo, backend)
                 for variant, overrides in variants(self.grid.get(algo, {})):
                     trials += self._trials_of(env_id, algo, base, backend, variant,
                                               overrides)
@@ -160,12 +172,9 @@ class SweepConfig:
                    variant: str | None, overrides: dict[str, Any]) -> list[Trial]:
         source = base.source if variant is None else f"{base.source} [{variant}]"
         given = {**base.given, **jsonable(overrides)}
-        try:
+        with naming(f"{self.source}: grid of {algo} on {env_short_name(env_id)}"):
             hp = hyperparameters_from_mapping(given, algo, source=source, entry=base.entry,
                                               backend=backend)
-        except UsageError as err:
-            raise SweepConfigError(f"{self.source}: grid of {algo} on "
-                                   f"{env_short_name(env_id)}: {err}") from err
         total = self.timesteps[algo] or hp.n_timesteps or DEFAULT_TIMESTEPS
         out_dir = self.out / variant if variant else self.out
         return [Trial(env_id=env_id, algo=algo, seed=seed, total_timesteps=total,
@@ -176,23 +185,6 @@ class SweepConfig:
                       checkpoint_freq=self.checkpoint_freq, backend=self.backend[algo],
                       demos=self.demos[algo], bc=self.bc[algo])
                 for seed in self.seeds]
-
-
-def _backend(choice: str | None, algo: str, where: str) -> str:
-    """The backend (``sb3`` or ``sbx``) that trains ``algo`` here, to check its settings."""
-    try:
-        return resolve_backend(choice or DEFAULT_BACKEND, algo)
-    except UsageError as err:
-        raise SweepConfigError(f"{where}: backend of {algo}: {err}") from err
-
-
-def _base_hyperparameters(name: str | None, env_id: str, algo: str, backend: str,
-                          where: str) -> Hyperparameters:
-    try:
-        return as_hyperparameters(name, env_id, algo, backend)
-    except UsageError as err:
-        raise SweepConfigError(f"{where}: hyperparams of {algo} on {env_short_name(env_id)}: "
-                               f"{err}") from err
 
 
 def variant_name(overrides: Mapping[str, Any]) -> str:
@@ -252,10 +244,8 @@ def _names(data: Mapping[str, Any], key: str, where: str) -> list[Any]:
 
 
 def _check_algo_name(name: Any, where: str) -> str:
-    if not isinstance(name, str) or name.lower() not in ALGORITHMS:
-        raise SweepConfigError(f"{where}: unknown algorithm {name!r} (valid: "
-                               f"{', '.join(ALGORITHMS)})")
-    return name.lower()
+    with naming(where):
+        return check_algo(name)
 
 
 def _per_algo(data: Mapping[str, Any], key: str, algos: tuple[str, ...], where: str,
@@ -283,10 +273,8 @@ def _settings_name(value: Any, where: str) -> str:
 
 
 def _backend_choice(value: Any, where: str) -> str:
-    try:
+    with naming(where):
         return check_backend_choice(value)
-    except UsageError as err:
-        raise SweepConfigError(f"{where}: {err}") from err
 
 
 def _flag(value: Any, where: str) -> bool:
@@ -376,12 +364,8 @@ def parse_sweep_config(data: Any, source: str = "sweep config") -> SweepConfig:
     if missing:
         raise SweepConfigError(f"{source}: missing key {missing[0]!r} (required: "
                                f"{', '.join(REQUIRED_KEYS)})")
-    envs = []
-    for name in _names(data, "envs", source):
-        try:
-            envs.append(resolve_env_id(str(name)))
-        except UsageError as err:
-            raise SweepConfigError(f"{source}: envs: {err}") from err
+    with naming(f"{source}: envs"):
+        envs = [resolve_env_id(str(name)) for name in _names(data, "envs", source)]
     algos = tuple(dict.fromkeys(_check_algo_name(name, f"{source}: algos")
                                 for name in _names(data, "algos", source)))
     seeds = tuple(_count(seed, f"{source}: seeds", 0) for seed in _names(data, "seeds", source))
