@@ -72,11 +72,6 @@ def check_expert(env_id: str, env_kwargs: dict[str, Any]) -> None:
         env.close()
 
 
-def _describe_expert(expert: ScriptedExpert) -> dict[str, Any]:
-    return {"class": "rehabbot.rl.experts.ScriptedExpert", "gain": expert.gain,
-            "speed_fraction": expert.speed_fraction}
-
-
 @dataclass
 class ExpertEpisodes:
     """The transitions of the expert's episodes, one row per env step, in order."""
@@ -120,7 +115,9 @@ def _expert_rows(env_id: str, env_kwargs: dict[str, Any], n_envs: int, episodes:
     try:
         experts = [_expert(env) for env in envs]
         record.update(seeds=[], returns=[], lengths=[], successes=[],
-                      expert=_describe_expert(experts[0]))
+                      expert={"class": "rehabbot.rl.experts.ScriptedExpert",
+                              "gain": experts[0].gain,
+                              "speed_fraction": experts[0].speed_fraction})
         current: list[np.ndarray | None] = [None] * n_envs
         running = [[0.0, 0] for _ in range(n_envs)]
         while len(record["returns"]) < episodes:

@@ -62,7 +62,7 @@ class ScriptedExpert:
         n_joints = low.size
         self._agent = config.observation == "agent"
         if self._agent:
-            n_arms = 2 if _is_bilateral(config) else 1
+            n_arms = 2 if hasattr(config, "bilateral_table") else 1  # a BilateralEnv's
             layout = agent_layout(n_joints // n_arms, n_arms, 1)
             self._fine = layout.slice("joint_error_fine")
             self._coarse = layout.slice("joint_error")
@@ -135,10 +135,6 @@ def _config_of(env) -> RehabEnvConfig:
     if hasattr(env, "envs"):
         return _rehab_env(env.envs[0]).config
     raise ValueError(f"cannot find the config of {env!r}")
-
-
-def _is_bilateral(config: RehabEnvConfig) -> bool:
-    return hasattr(config, "bilateral_table")
 
 
 def native_action_box(env, config: RehabEnvConfig) -> tuple[np.ndarray, np.ndarray]:

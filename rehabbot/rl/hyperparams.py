@@ -344,7 +344,6 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     sbx = backend == "sbx"
     if sbx:
         from rehabbot.rl import sbx_settings
-    noise_std_given = False
     for key, raw in mapping.items():
         if not isinstance(key, str):
             raise HyperparameterError(f"{where}: hyperparameter names must be strings, got {key!r}")
@@ -372,13 +371,12 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
                 raise HyperparameterError(f"{where}: noise_std must be a positive number, got "
                                     f"{raw!r}")
             hp.noise_std = float(value)
-            noise_std_given = True
         elif key in MANAGED_KEYS:
             raise HyperparameterError(f"{where}: {key!r} cannot be set in a hyperparameter "
                                       f"file ({MANAGED_KEYS[key]})")
         elif sbx and (key not in params or key == "self") \
                 and (why := sbx_settings.dropped_key_reason(key, algo)) is not None:
-            hp.backend_changes.append(sbx_settings.change(key, jsonable(raw), None, why))
+            hp.backend_changes.append(sbx_settings.change(key, raw, None, why))
         elif key not in params or key == "self":
             valid = [name for name in params
                      if name not in ("self", *MANAGED_KEYS, *OBJECT_KEYS)]
@@ -404,7 +402,7 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
                 value = parse_schedule(value, key, where)
             hp.kwargs[key] = value
         hp.given[key] = jsonable(raw)
-    if noise_std_given and hp.noise_type is None:
+    if hp.noise_std is not None and hp.noise_type is None:
         raise HyperparameterError(f"{where}: noise_std needs noise_type "
                                   f"({' or '.join(NOISE_TYPES)})")
     if sbx and "policy_kwargs" in hp.kwargs:

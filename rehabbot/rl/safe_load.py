@@ -34,6 +34,7 @@ from rehabbot.rl.algorithms import (
     read_model_data,
     saved_policy_class,
 )
+from rehabbot.rl.hyperparam_checks import SCHEDULE_KEYS
 
 JAX_STATE_ENTRY = "rehabbot_jax_state.msgpack"
 # Attributes of SBX models that are networks or JAX states (pickled by SB3): not saved in
@@ -41,7 +42,6 @@ JAX_STATE_ENTRY = "rehabbot_jax_state.msgpack"
 SBX_EXCLUDED = ("policy", "actor", "qf", "vf", "ent_coef", "ent_coef_state", "key")
 SBX_MODEL_STATES = ("ent_coef_state",)
 SPACE_KEYS = ("observation_space", "action_space")
-SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 # Where training stopped (last observation, episode statistics): the next ``learn`` resets
 # the env and starts the statistics afresh when they are None.
 RUNTIME_KEYS = ("_last_obs", "_last_episode_starts", "_last_original_obs", "ep_info_buffer",

@@ -120,20 +120,22 @@ def tracking_error_features(obs: np.ndarray, center: np.ndarray, half_range: np.
     return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
 
 
+# The steps without parameters, in float32.
+ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "relu": lambda x: np.maximum(x, np.float32(0)), "tanh": np.tanh,
+    "sigmoid": lambda x: np.float32(1) / (np.float32(1) + np.exp(-x)),
+    "silu": lambda x: x / (np.float32(1) + np.exp(-x)),
+}
+
+
 def _op(name: str, p: Mapping[str, np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
     """The function of one step of the actor's program."""
     f32 = np.float32
     if name == "dense":
         weight, bias = p["weight"], p["bias"]
         return lambda x: x @ weight.T + bias
-    if name == "relu":
-        return lambda x: np.maximum(x, f32(0))
-    if name == "tanh":
-        return np.tanh
-    if name == "sigmoid":
-        return lambda x: f32(1) / (f32(1) + np.exp(-x))
-    if name == "silu":
-        return lambda x: x / (f32(1) + np.exp(-x))
+    if name in ACTIVATIONS:
+        return ACTIVATIONS[name]
     if name == "elu":
         alpha = f32(p["alpha"])
         return lambda x: np.where(x > 0, x, alpha * np.expm1(np.minimum(x, f32(0))))
