@@ -32,14 +32,14 @@ from rehabbot.rl.algorithms import (
 
 BACKEND_CHOICES = ("auto", *BACKENDS)
 DEFAULT_BACKEND = "auto"
-# The libraries whose versions a run of each backend records (import name, distribution).
+# The libraries whose versions a run of each backend records (import name, distribution), the
+# backend's own first.
 BACKEND_PACKAGES = {
     "sb3": (("stable_baselines3", "stable-baselines3"), ("sb3_contrib", "sb3-contrib"),
             ("torch", "torch")),
     "sbx": (("sbx", "sbx-rl"), ("jax", "jax"), ("jaxlib", "jaxlib"), ("flax", "flax"),
             ("optax", "optax"), ("stable_baselines3", "stable-baselines3")),
 }
-BACKEND_LIBRARY = {"sb3": "stable-baselines3", "sbx": "sbx-rl"}
 
 
 def sbx_available() -> bool:
@@ -86,7 +86,7 @@ def saved_backend(manifest: dict | None) -> str:
 
 def backend_version(backend: str) -> str | None:
     """The version of the library that implements ``backend`` (None: not installed)."""
-    return distribution_version(BACKEND_LIBRARY[backend])
+    return distribution_version(BACKEND_PACKAGES[backend][0][1])
 
 
 def backend_versions(backend: str) -> dict[str, str | None]:

@@ -30,7 +30,7 @@ import shutil
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -72,18 +72,11 @@ class SweepResult:
     out: Path
     records: list[dict[str, Any]]
     interrupted: bool = False
-    experiment: Path | None = None
-    counts: dict[str, int] = field(default_factory=dict)
 
     @property
     def failed(self) -> list[dict[str, Any]]:
         """The records of trials that failed."""
         return [r for r in self.records if r["status"] == "failed"]
-
-    @property
-    def ok(self) -> bool:
-        """Every trial finished."""
-        return all(r["status"] == "finished" for r in self.records)
 
 
 # --------------------------------------------------------------------------- run folders
@@ -434,9 +427,8 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
         interrupted = _run_on_ray(state, pending, address, local_cpus)
     if not dry_run:
         state.write()
-    experiment = config.out / RAY_DIR / state.experiment if state.experiment else None
     return SweepResult(out=config.out, records=list(state.records.values()),
-                       interrupted=interrupted, experiment=experiment, counts=counts)
+                       interrupted=interrupted)
 
 
 def format_table(records: Sequence[Mapping[str, Any]]) -> str:
