@@ -66,13 +66,6 @@ POLICY_PACKAGES = ("stable_baselines3",)
 SBX_POLICY_PACKAGES = ("sbx",)
 
 
-def _resolve_env_id(env_id: str) -> str:
-    try:
-        return resolve_env_id(env_id)
-    except UsageError as err:
-        raise HyperparameterError(str(err)) from None
-
-
 def _settings_root():
     return resources.files("rehabbot.rl").joinpath(SETTINGS_FOLDER)
 
@@ -458,7 +451,10 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str,
         HyperparameterError: missing or unreadable file, invalid YAML, no entry for ``env_id``,
             unknown key or bad value (the message names the file and the key).
     """
-    env_id = _resolve_env_id(env_id)
+    try:
+        env_id = resolve_env_id(env_id)
+    except UsageError as err:
+        raise HyperparameterError(str(err)) from None
     algo = check_algo(algo, HyperparameterError)
     file = settings_path(path)
     data = read_yaml(file, "hyperparameter file", HyperparameterError, str(path))

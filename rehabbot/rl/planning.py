@@ -34,11 +34,6 @@ class NothingToResumeError(TrainingError):
     """``resume`` was asked for a run that has no checkpoint."""
 
 
-def mapping_equal(a: Any, b: Any) -> bool:
-    """Whether two JSON-able mappings hold the same values."""
-    return json.dumps(jsonable(a), sort_keys=True) == json.dumps(jsonable(b), sort_keys=True)
-
-
 @dataclass
 class ResumePoint:
     checkpoint: Path
@@ -209,7 +204,8 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
             raise TrainingUsageError(f"cannot resume {run_dir} with {n_envs} envs: it was "
                                      f"trained with n_envs={saved_n_envs}")
         saved_kwargs = manifest.get("env_kwargs") or {}
-        if env_kwargs is not None and not mapping_equal(env_kwargs, saved_kwargs):
+        if env_kwargs is not None and json.dumps(jsonable(env_kwargs), sort_keys=True) \
+                != json.dumps(jsonable(saved_kwargs), sort_keys=True):
             raise TrainingUsageError(f"cannot resume {run_dir} with env kwargs "
                                      f"{json.dumps(env_kwargs)}: it was trained with "
                                      f"{json.dumps(saved_kwargs)}")

@@ -317,14 +317,6 @@ def _keep_worker_logs(session_dir: Path | None, destination: Path) -> None:
             continue
 
 
-def _trial_dirname(trial: Any) -> str:
-    return f"trial_{trial.trial_id}"
-
-
-def _trial_name(trial: Any) -> str:
-    return str(trial.config.get("trial", {}).get("key", trial.trial_id))
-
-
 def _run_on_ray(state: _SweepState, pending: list[Trial], address: str | None,
                 cpus: int | None) -> bool:
     """Run ``pending`` as one Ray Tune experiment; returns whether it was interrupted."""
@@ -347,8 +339,9 @@ def _run_on_ray(state: _SweepState, pending: list[Trial], address: str | None,
             tune.with_resources(_ray_trial, dict(resources)),
             param_space={"command": state.command,
                          "trial": tune.grid_search([t.to_json() for t in pending])},
-            tune_config=tune.TuneConfig(trial_name_creator=_trial_name,
-                                        trial_dirname_creator=_trial_dirname),
+            tune_config=tune.TuneConfig(  # trials named by their run folder below OUT
+                trial_name_creator=lambda trial: str(trial.config["trial"]["key"]),
+                trial_dirname_creator=lambda trial: f"trial_{trial.trial_id}"),
             run_config=tune.RunConfig(
                 name=state.experiment, storage_path=str(state.config.out / RAY_DIR),
                 verbose=0, callbacks=[_progress_callback(state)],

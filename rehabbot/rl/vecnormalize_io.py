@@ -71,14 +71,6 @@ def save_vecnormalize(venv: Any, path: str | Path) -> None:
         "obs_rms": rms(venv.obs_rms), "ret_rms": rms(venv.ret_rms)})
 
 
-def legacy_pickle_error(path: Path) -> DataError:
-    """The refusal for a ``vecnormalize*.pkl`` of an earlier version (a pickle is code)."""
-    return DataError(
-        f"{path} is a pickled VecNormalize file of an earlier RehabBot; loading a pickle runs "
-        "code, so it is not read. If you trust the file, convert it once with: python -c "
-        f"\"from rehabbot.rl.vecnormalize_io import convert_legacy_pickle as c; c('{path}')\"")
-
-
 def _number(data: dict[str, Any], key: str, path: Path) -> float:
     value = data.get(key)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(
@@ -107,7 +99,11 @@ def read_vecnormalize(path: str | Path) -> VecNormalizeStats:
     """
     path = Path(path)
     if path.suffix == LEGACY_SUFFIX:
-        raise legacy_pickle_error(path)
+        raise DataError(  # a pickle is code
+            f"{path} is a pickled VecNormalize file of an earlier RehabBot; loading a pickle "
+            "runs code, so it is not read. If you trust the file, convert it once with: python "
+            f"-c \"from rehabbot.rl.vecnormalize_io import convert_legacy_pickle as c; "
+            f"c('{path}')\"")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:

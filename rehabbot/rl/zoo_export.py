@@ -25,7 +25,6 @@ only inside the functions that read their models; this module never imports
 from __future__ import annotations
 
 import shlex
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -79,29 +78,18 @@ def _output_ops(action_space: gym.spaces.Box, squashed: bool) -> list[Op]:
 # --------------------------------------------------------------------------- SB3 (PyTorch)
 
 
-def _modules(module: Any) -> Iterator[Any]:
-    """The leaf modules of nested ``nn.Sequential`` containers, in order."""
-    from torch import nn
-
-    if isinstance(module, nn.Sequential):
-        for child in module:
-            yield from _modules(child)
-    else:
-        yield module
-
-
 def _torch_module_ops(module: Any) -> list[Op]:
     """The zoo steps of one PyTorch module (a Sequential, a Linear, an activation ...)."""
     from torch import nn
 
     ops: list[Op] = []
-    for m in _modules(module):
+    for m in module.modules():  # the module, then what it holds, in order
         name = type(m).__name__
         if isinstance(m, nn.Linear):
             bias = m.bias if m.bias is not None else np.zeros(m.out_features)
             ops.append(("dense", {"weight": _f32(m.weight), "bias": _f32(bias)}))
-        elif isinstance(m, (nn.Identity, nn.Flatten, nn.Dropout)):
-            continue  # nothing to do at inference on a batch of vectors
+        elif isinstance(m, (nn.Sequential, nn.Identity, nn.Flatten, nn.Dropout)):
+            continue  # a container, or nothing to do at inference on a batch of vectors
         elif name in ("ReLU", "Tanh", "SiLU", "Sigmoid"):
             ops.append((name.lower(), {}))
         elif isinstance(m, nn.ELU):
