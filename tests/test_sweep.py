@@ -26,6 +26,7 @@ from rehabbot.rl.sweep_config import (
     load_sweep_config,
     parse_sweep_config,
     variant_name,
+    variants,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,6 +96,9 @@ def test_variant_names_are_folder_names() -> None:
         "policy_kwargs=__net_arch___64,64__"
     long = variant_name({"policy_kwargs": "dict(net_arch=[" + "64, " * 40 + "64])"})
     assert len(long) <= 80 and "/" not in long
+    # Two grid values that read the same as a folder name get two folders.
+    (first, _), (second, _) = variants({"gamma": [0.9, "0.9"]})
+    assert first == "gamma=0.9" and second.startswith("gamma=0.9-") and len(second) == 18
 
 
 def test_the_shipped_sweep_files_load() -> None:

@@ -197,9 +197,12 @@ def variant_name(overrides: Mapping[str, Any]) -> str:
         parts.append(f"{key}={text}")
     name = _UNSAFE.sub("_", ",".join(parts))
     if len(name) > MAX_VARIANT_CHARS:
-        digest = hashlib.sha1(name.encode("utf-8")).hexdigest()[:8]
-        name = f"{name[:MAX_VARIANT_CHARS - 9]}-{digest}"
+        name = f"{name[:MAX_VARIANT_CHARS - 9]}-{_digest(name)}"
     return name
+
+
+def _digest(text: str) -> str:
+    return hashlib.sha1(text.encode("utf-8")).hexdigest()[:8]
 
 
 def variants(grid: Mapping[str, list[Any]]) -> list[tuple[str | None, dict[str, Any]]]:
@@ -207,17 +210,12 @@ def variants(grid: Mapping[str, list[Any]]) -> list[tuple[str | None, dict[str, 
     ``(None, {})`` without a grid."""
     if not grid:
         return [(None, {})]
-    keys = list(grid)
     found: list[tuple[str | None, dict[str, Any]]] = []
-    names: set[str] = set()
-    for values in itertools.product(*(grid[key] for key in keys)):
-        overrides = dict(zip(keys, values, strict=True))
+    for values in itertools.product(*grid.values()):
+        overrides = dict(zip(grid, values, strict=True))
         name = variant_name(overrides)
-        if name in names:  # two values that read the same in a folder name
-            digest = hashlib.sha1(json.dumps(jsonable(overrides), sort_keys=True)
-                                  .encode("utf-8")).hexdigest()[:8]
-            name = f"{name}-{digest}"
-        names.add(name)
+        if name in (other for other, _ in found):  # two values that read the same as a folder
+            name = f"{name}-{_digest(json.dumps(jsonable(overrides), sort_keys=True))}"
         found.append((name, overrides))
     return found
 

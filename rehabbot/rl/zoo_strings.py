@@ -36,15 +36,6 @@ def parse_python_expression(text: str) -> Any:
     return _literal(tree.body)
 
 
-def _dotted_name(node: ast.AST) -> str | None:
-    if isinstance(node, ast.Name):
-        return node.id
-    if isinstance(node, ast.Attribute):
-        base = _dotted_name(node.value)
-        return None if base is None else f"{base}.{node.attr}"
-    return None
-
-
 def _literal(node: ast.AST) -> Any:
     if isinstance(node, ast.Constant) and (
         node.value is None or isinstance(node.value, (bool, int, float, str))
@@ -67,8 +58,8 @@ def _literal(node: ast.AST) -> Any:
             and node.func.id == "dict" and not node.args
             and all(keyword.arg is not None for keyword in node.keywords)):
         return {keyword.arg: _literal(keyword.value) for keyword in node.keywords}
-    dotted = _dotted_name(node)
-    if dotted is not None and dotted in TORCH_NAMES:
+    dotted = ast.unparse(node) if isinstance(node, (ast.Name, ast.Attribute)) else None
+    if dotted in TORCH_NAMES:
         return _torch_object(dotted)
     allowed = sorted({name for name in TORCH_NAMES if name.startswith(("nn.", "optim."))})
     raise ValueError(
