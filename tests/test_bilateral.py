@@ -325,7 +325,11 @@ def test_the_cli_trains_evaluates_renders_and_plots_the_bilateral_id(tmp_path, c
     from rehabbot.cli import main
 
     runs = tmp_path / "runs"
+    small = tmp_path / "sac.yml"  # the shipped settings have no -v1 entries; a small network
+    small.write_text("learning_starts: 100\nbuffer_size: 5000\npolicy_kwargs: "
+                     "'dict(net_arch=[32, 32])'\n")
     assert main(["train", "rehab-bilateral-v1", "--algo", "sac", "--backend", "sb3",
+                 "--hyperparams", str(small),
                  "--timesteps", "300", "--demos", "1", "--eval-freq", "150",
                  "--eval-episodes", "1", "--checkpoint-freq", "150", "--out", str(runs),
                  "--no-progress"]) == 0

@@ -87,11 +87,9 @@ def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
     import gymnasium as gym
 
     mode = env_kwargs.get("render_mode")
-    if mode is not None and not isinstance(mode, str):  # gym.make calls mode.endswith first
-        raise TrainingUsageError(f"cannot make {env_id} with env kwargs "
-                                 f"{json.dumps(env_kwargs)}: render_mode must be a "
-                                 f"string or null, got {mode!r}")
     try:
+        if mode is not None and not isinstance(mode, str):  # gym.make calls mode.endswith
+            raise ValueError(f"render_mode must be a string or null, got {mode!r}")
         env = gym.make(env_id, **env_kwargs)
     except (TypeError, ValueError) as err:
         raise TrainingUsageError(f"cannot make {env_id} with env kwargs "
