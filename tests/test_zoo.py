@@ -24,12 +24,12 @@ from rehabbot.rl import zoo
 from rehabbot.rl.zoo import (
     ZooError,
     available,
-    export_policy,
     load,
     load_file,
     tracking_error_features,
     write_zoo_file,
 )
+from rehabbot.rl.zoo_export import export_policy
 from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
 
 FULL_ID = "rehabbot/rehab-reach-v0"

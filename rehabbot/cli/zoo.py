@@ -69,8 +69,9 @@ def cmd_zoo_show(args: argparse.Namespace) -> int:
 def cmd_zoo_export(args: argparse.Namespace) -> int:
     """Export a model's deterministic actor to a zoo file, then measure its success rate."""
     from rehabbot.rl import zoo
+    from rehabbot.rl.zoo_export import export_policy
 
-    meta = zoo.export_policy(args.source, args.env, args.algo, args.out, metadata=args.note,
+    meta = export_policy(args.source, args.env, args.algo, args.out, metadata=args.note,
                              episodes=args.episodes, seed=args.seed, full=args.full)
     out = args.out or zoo.zoo_path(meta["env_id"], meta["algo"])
     print(f"wrote {out}: {meta['env_id']} {meta['algo']} ({meta['backend']}), success rate "

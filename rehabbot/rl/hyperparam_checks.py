@@ -1,8 +1,9 @@
 """Checks of single hyperparameter values, before anything trains: the valid range of each
 numeric constructor argument (:data:`VALUE_RANGES`, with the strings and ``None`` some of them
 also take), booleans for :data:`BOOL_KEYS`, ``train_freq`` as ``n`` or ``[n, unit]``, no NaN or
-infinity anywhere (:func:`check_value`); numbers written as YAML strings (:func:`coerce_number`)
-and ``"lin_<float>"`` schedules (:func:`parse_schedule`).
+infinity anywhere (:func:`check_value`); numbers written as YAML strings (:func:`coerce_number`),
+counts (:func:`as_count`) and ``"lin_<float>"`` schedules (:func:`parse_schedule`); values as
+JSON (:func:`jsonable`, classes by dotted name).
 
 :mod:`rehabbot.rl.hyperparams` reads whole files and mappings with these.
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 from typing import Any
 
 from rehabbot.common.errors import UsageError
@@ -176,3 +178,25 @@ def parse_schedule(value: Any, key: str, where: str) -> Any:
         # progress_remaining goes 1 -> 0 over the run: start -> 0, linearly.
         return LinearSchedule(start, 0.0, 1.0)
     return value
+
+
+def jsonable(value: Any) -> Any:
+    """A JSON-able version of a hyperparameter value (classes by dotted name)."""
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, int):
+        return int(value)
+    if isinstance(value, float):
+        return value if math.isfinite(value) else repr(value)
+    if isinstance(value, Mapping):
+        return {str(key): jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(item) for item in value]
+    if isinstance(value, type):
+        return f"{value.__module__}.{value.__qualname__}"
+    if callable(value) and isinstance(getattr(value, "__qualname__", None), str):
+        return f"{value.__module__}.{value.__qualname__}"  # e.g. flax.linen.relu
+    item = getattr(value, "item", None)
+    if callable(item) and getattr(value, "shape", None) == ():
+        return jsonable(item())
+    return repr(value)

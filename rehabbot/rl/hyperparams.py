@@ -51,6 +51,7 @@ from rehabbot.rl.hyperparam_checks import (
     as_count,
     check_value,
     coerce_number,
+    jsonable,
     parse_schedule,
 )
 from rehabbot.rl.zoo_strings import _resolve_torch_names, parse_python_expression
@@ -509,27 +510,3 @@ def as_hyperparameters(hyperparams: Any, env_id: str, algo: str,
         return hyperparameters_from_mapping(hyperparams, algo, backend=backend)
     raise HyperparameterError(f"hyperparams must be a file path, a settings name or a "
                               f"mapping, got {type(hyperparams).__name__}")
-
-
-def jsonable(value: Any) -> Any:
-    """A JSON-able version of a hyperparameter value (classes by dotted name)."""
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, int):
-        return int(value)
-    if isinstance(value, float):
-        return value if math.isfinite(value) else repr(value)
-    if isinstance(value, Mapping):
-        return {str(key): jsonable(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(item) for item in value]
-    if isinstance(value, type):
-        return f"{value.__module__}.{value.__qualname__}"
-    if callable(value) and isinstance(getattr(value, "__qualname__", None), str):
-        return f"{value.__module__}.{value.__qualname__}"  # e.g. flax.linen.relu
-    item = getattr(value, "item", None)
-    if callable(item) and getattr(value, "shape", None) == ():
-        return jsonable(item())
-    return repr(value)
-
-

@@ -37,7 +37,7 @@ import importlib
 import inspect
 from typing import Any
 
-from rehabbot.rl.hyperparams import jsonable
+from rehabbot.rl.hyperparam_checks import jsonable
 
 TORCH_POLICY_PACKAGES = ("stable_baselines3", "sb3_contrib")
 SBX_POLICY = "MlpPolicy"

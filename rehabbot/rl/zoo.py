@@ -10,9 +10,9 @@ PyTorch, JAX or Stable-Baselines3, no download).
 ``load_full_model(env_id, algo)``    the whole trained SB3/SBX model behind an agent, where the
                                     zoo keeps it (``<algo>.zip`` beside the ``.npz``): for
                                     ``learn`` (fine-tuning), critics included
-``export_policy(model, env_id,      write a zoo file from a trained SB3 model (SAC, TD3, PPO;
-algo, out_path, metadata)``         TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
-                                    PPO, TQC, CrossQ), a model zip or a run folder
+``rehabbot.rl.zoo_export.           write a zoo file from a trained SB3 model (SAC, TD3, PPO;
+export_policy(model, env_id, algo,  TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
+out_path, metadata)``               PPO, TQC, CrossQ), a model zip or a run folder
                                     (``rehabbot zoo export RUN_DIR``; default output: the zoo
                                     folder of the package)
 =================================== ======================================================
@@ -91,7 +91,7 @@ OP_PARAMS: dict[str, tuple[str, ...]] = {
     "unscale": ("low", "high"),
 }
 
-__all__ = ["ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy", "available", "export_policy",
+__all__ = ["ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy", "available",
            "full_model_path", "is_zoo_spec", "load", "load_file", "load_full_model", "load_spec",
            "parse_spec", "ship_full_model", "weights_sha256", "write_zoo_file", "zoo_dir",
            "zoo_path"]
@@ -409,71 +409,6 @@ def parse_spec(spec: str) -> tuple[str, str]:
 def load_spec(spec: str) -> ZooPolicy:
     """The agent a ``zoo:ENV/ALGO`` spec names."""
     return load(*parse_spec(spec))
-
-
-# --------------------------------------------------------------------------- export
-
-
-def measure_success(policy: ZooPolicy, env_id: str, env_kwargs: Mapping[str, Any] | None,
-                    episodes: int, seed: int) -> dict[str, Any]:
-    """Run ``policy`` for ``episodes`` episodes reset with seeds ``seed, seed + 1, ...``;
-    the success rate and what was run."""
-    env = gym.make(env_id, **dict(env_kwargs or {}))
-    successes = []
-    try:
-        for k in range(episodes):
-            obs, info = env.reset(seed=seed + k)
-            while True:
-                obs, _reward, terminated, truncated, info = env.step(policy(obs))
-                if terminated or truncated:
-                    break
-            successes.append(bool(info.get("is_success", False)))
-    finally:
-        env.close()
-    return {"success_rate": float(np.mean(successes)) if successes else None,
-            "evaluation": {"episodes": episodes, "seed": seed, "deterministic": True,
-                           "successes": int(sum(successes))}}
-
-
-def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | None = None,
-                  out_path: str | Path | None = None, metadata: Mapping[str, Any] | None = None,
-                  episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED,
-                  full: bool = False) -> dict[str, Any]:
-    """Export the deterministic actor of a trained model to the zoo file ``out_path``
-    (default: the zoo's file for its env and algorithm, :func:`zoo_path`).
-
-    ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
-    train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
-    command, and its ``vecnormalize.json`` the observation normalisation). ``metadata`` adds
-    or overrides metadata fields. ``full`` also keeps the model zip beside the zoo file
-    (:func:`ship_full_model`, for :func:`load_full_model`). The exported actor then runs
-    ``episodes`` episodes (seeds ``seed, seed + 1, ...``; 0: none) and its success rate is
-    recorded. Returns the metadata written. Imports the model's library (PyTorch or JAX).
-    """
-    from rehabbot.common.version import VERSION
-    from rehabbot.rl import zoo_export
-
-    source = zoo_export.load_source(model_or_run_dir, algo, env_id)
-    meta: dict[str, Any] = dict(source.metadata)
-    env_id = env_id or meta.get("env_id")
-    if not env_id:
-        raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
-    meta.update(env_id=f"{NAMESPACE}/{_short(env_id)}", rehabbot_version=VERSION)
-    meta.update(dict(metadata or {}))
-    out_path = Path(out_path) if out_path is not None else zoo_path(meta["env_id"], meta["algo"])
-    if full:
-        if not isinstance(model_or_run_dir, (str, Path)):
-            raise UsageError("full=True needs the model's zip or run folder, not a model object")
-        meta.update(ship_full_model(model_or_run_dir, out_path))
-    written = write_zoo_file(out_path, source.ops, source.observation_space,
-                             source.action_space, meta)
-    if episodes > 0:
-        policy = ZooPolicy.from_file(out_path)
-        measured = measure_success(policy, meta["env_id"], meta.get("env_kwargs"), episodes,
-                                   seed)
-        written = write_zoo_file(out_path, source.ops, source.observation_space,
-                                 source.action_space, {**meta, **measured})
-    return written
 
 
 # --------------------------------------------------------------------------- full models

@@ -1,6 +1,6 @@
-"""Reading the deterministic actor out of a trained model, for :func:`rehabbot.rl.zoo.
-export_policy`: the layers of its network as plain float32 arrays, in the step format of
-:mod:`rehabbot.rl.zoo`.
+"""Exporting a trained model to the zoo (:func:`export_policy`): its deterministic actor read
+out as the layers of its network, plain float32 arrays in the step format of
+:mod:`rehabbot.rl.zoo`, written with the model's provenance and measured success rate.
 
 ============ ======================================== =========================================
 backend      algorithms                                actor read
@@ -18,13 +18,14 @@ backend      algorithms                                actor read
 A squashed actor's output in [-1, 1] is mapped to the action box (``unscale``), an unsquashed
 one clipped to it, as the library's ``predict`` does. VecNormalize statistics of a run folder
 become a ``normalize`` step before the network. PyTorch, JAX and the libraries are imported
-only inside the functions that read their models; this module never imports
-:mod:`rehabbot.rl.zoo` (which imports it when exporting).
+only inside the functions that read their models; :mod:`rehabbot.rl.zoo`, which runs the
+files with NumPy alone, never imports this module.
 """
 
 from __future__ import annotations
 
 import shlex
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,10 +34,20 @@ import gymnasium as gym
 import numpy as np
 
 from rehabbot.common.errors import UsageError
+from rehabbot.common.version import VERSION
+from rehabbot.envs.registration import NAMESPACE, env_short_name
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import check_algo
 from rehabbot.rl.policies import env_for, load_model, model_file
 from rehabbot.rl.safe_load import is_sbx
+from rehabbot.rl.zoo import (
+    DEFAULT_EPISODES,
+    DEFAULT_SEED,
+    ZooPolicy,
+    ship_full_model,
+    write_zoo_file,
+    zoo_path,
+)
 
 Op = tuple[str, dict[str, Any]]
 # JAX activation function name -> zoo op (with its default parameter)
@@ -261,3 +272,65 @@ def load_source(model_or_run_dir: Any, algo: str | None = None,
     return ExportSource(ops=normalize + actor,
                         observation_space=model.observation_space,
                         action_space=model.action_space, metadata=metadata)
+
+
+# --------------------------------------------------------------------------- export
+
+
+def measure_success(policy: ZooPolicy, env_id: str, env_kwargs: Mapping[str, Any] | None,
+                    episodes: int, seed: int) -> dict[str, Any]:
+    """Run ``policy`` for ``episodes`` episodes reset with seeds ``seed, seed + 1, ...``;
+    the success rate and what was run."""
+    env = gym.make(env_id, **dict(env_kwargs or {}))
+    successes = []
+    try:
+        for k in range(episodes):
+            obs, info = env.reset(seed=seed + k)
+            while True:
+                obs, _reward, terminated, truncated, info = env.step(policy(obs))
+                if terminated or truncated:
+                    break
+            successes.append(bool(info.get("is_success", False)))
+    finally:
+        env.close()
+    return {"success_rate": float(np.mean(successes)) if successes else None,
+            "evaluation": {"episodes": episodes, "seed": seed, "deterministic": True,
+                           "successes": int(sum(successes))}}
+
+
+def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | None = None,
+                  out_path: str | Path | None = None, metadata: Mapping[str, Any] | None = None,
+                  episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED,
+                  full: bool = False) -> dict[str, Any]:
+    """Export the deterministic actor of a trained model to the zoo file ``out_path``
+    (default: the zoo's file for its env and algorithm, :func:`zoo_path`).
+
+    ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
+    train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
+    command, and its ``vecnormalize.json`` the observation normalisation). ``metadata`` adds
+    or overrides metadata fields. ``full`` also keeps the model zip beside the zoo file
+    (:func:`ship_full_model`, for :func:`load_full_model`). The exported actor then runs
+    ``episodes`` episodes (seeds ``seed, seed + 1, ...``; 0: none) and its success rate is
+    recorded. Returns the metadata written. Imports the model's library (PyTorch or JAX).
+    """
+    source = load_source(model_or_run_dir, algo, env_id)
+    meta: dict[str, Any] = dict(source.metadata)
+    env_id = env_id or meta.get("env_id")
+    if not env_id:
+        raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
+    meta.update(env_id=f"{NAMESPACE}/{env_short_name(env_id)}", rehabbot_version=VERSION)
+    meta.update(dict(metadata or {}))
+    out_path = Path(out_path) if out_path is not None else zoo_path(meta["env_id"], meta["algo"])
+    if full:
+        if not isinstance(model_or_run_dir, (str, Path)):
+            raise UsageError("full=True needs the model's zip or run folder, not a model object")
+        meta.update(ship_full_model(model_or_run_dir, out_path))
+    written = write_zoo_file(out_path, source.ops, source.observation_space,
+                             source.action_space, meta)
+    if episodes > 0:
+        policy = ZooPolicy.from_file(out_path)
+        measured = measure_success(policy, meta["env_id"], meta.get("env_kwargs"), episodes,
+                                   seed)
+        written = write_zoo_file(out_path, source.ops, source.observation_space,
+                                 source.action_space, {**meta, **measured})
+    return written
