@@ -133,11 +133,9 @@ def _sub_env_attr(env, name: str):
 def native_action_box(env, config: RehabEnvConfig) -> tuple[np.ndarray, np.ndarray]:
     """The controller's action box ``(low, high)`` (float64): the env's action space with
     native actions, the box that ``Box(-1, 1)`` maps onto with unit actions."""
-    if config.action_scale == "native" or not hasattr(env, "controller"):
-        if config.action_scale == "unit":  # a vector env: ask a sub-env
-            controller = _sub_env_attr(env, "controller")
-            return (controller.clip_low.astype(float), controller.clip_high.astype(float))
-        space = env.single_action_space if hasattr(env, "single_action_space") \
-            else env.action_space
-        return space.low.astype(float), space.high.astype(float)
-    return env.controller.clip_low.astype(float), env.controller.clip_high.astype(float)
+    if config.action_scale == "unit":  # the controller's (a vector env's: a sub-env's)
+        controller = env.controller if hasattr(env, "controller") \
+            else _sub_env_attr(env, "controller")
+        return controller.clip_low.astype(float), controller.clip_high.astype(float)
+    space = env.single_action_space if hasattr(env, "single_action_space") else env.action_space
+    return space.low.astype(float), space.high.astype(float)

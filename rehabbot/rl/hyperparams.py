@@ -231,16 +231,21 @@ class Hyperparameters:
         }
 
 
+def _expression(text: str, where: str) -> Any:
+    """A zoo string (:func:`parse_python_expression`); a HyperparameterError naming ``where``."""
+    try:
+        return parse_python_expression(text)
+    except ValueError as err:
+        raise HyperparameterError(f"{where}: {err}") from err
+
+
 def _parse_normalize(value: Any, where: str) -> dict[str, Any] | None:
     if isinstance(value, str):
         lowered = value.strip().lower()
         if lowered in ("true", "false", "yes", "no"):
             value = lowered in ("true", "yes")
         else:
-            try:
-                value = parse_python_expression(value)
-            except ValueError as err:
-                raise HyperparameterError(f"{where}: normalize: {err}") from err
+            value = _expression(value, f"{where}: normalize")
     if value is None or value is False:
         return None
     if value is True:
@@ -263,10 +268,7 @@ def _parse_policy_kwargs(value: Any, where: str) -> dict[str, Any]:
     if value is None:
         return {}
     if isinstance(value, str):
-        try:
-            value = parse_python_expression(value)
-        except ValueError as err:
-            raise HyperparameterError(f"{where}: policy_kwargs: {err}") from err
+        value = _expression(value, f"{where}: policy_kwargs")
     if not isinstance(value, dict):
         raise HyperparameterError(f"{where}: policy_kwargs must be a mapping or a 'dict(...)' "
                             f"string, got {value!r}")

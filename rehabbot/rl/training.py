@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import functools
+import importlib.util
 import json
 import os
 import signal
@@ -170,12 +171,8 @@ def _stop_on_signals(stopper: Any):
 
 
 def _progress_bar_available() -> bool:
-    try:
-        import rich  # noqa: F401
-        import tqdm  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether SB3's progress bar can run (it needs rich and tqdm)."""
+    return all(importlib.util.find_spec(name) is not None for name in ("rich", "tqdm"))
 
 
 class _Run:

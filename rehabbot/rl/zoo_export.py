@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import shlex
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -60,16 +59,6 @@ JAX_ACTIVATIONS: dict[str, Op] = {
 
 class ExportError(UsageError):
     """A model whose actor the zoo format cannot hold (the message says which part)."""
-
-
-@dataclass
-class ExportSource:
-    """What a zoo file is written from: the actor's steps, its spaces and provenance."""
-
-    ops: list[Op]
-    observation_space: gym.spaces.Box
-    action_space: gym.spaces.Box
-    metadata: dict[str, Any] = field(default_factory=dict)
 
 
 def _f32(value: Any) -> np.ndarray:
@@ -236,9 +225,10 @@ def _manifest_metadata(manifest: dict[str, Any]) -> dict[str, Any]:
 
 
 def load_source(model_or_run_dir: Any, algo: str | None = None,
-                env_id: str | None = None) -> ExportSource:
-    """The actor and provenance of a model object, or of a model zip or run folder loaded as
-    ``rehabbot evaluate`` loads it, in its run's env (``env_id``: the env of a loose zip)."""
+                env_id: str | None = None) -> tuple[list[Op], Any, dict[str, Any]]:
+    """``(ops, model, metadata)``: the actor's zoo steps, the model and its provenance, for a
+    model object, or a model zip or run folder loaded as ``rehabbot evaluate`` loads it, in
+    its run's env (``env_id``: the env of a loose zip)."""
     algo = check_algo(algo) if algo else None
     manifest: dict[str, Any] = {}
     stats = None
@@ -269,9 +259,7 @@ def load_source(model_or_run_dir: Any, algo: str | None = None,
     normalize = [("normalize", {"mean": stats.obs_mean, "var": stats.obs_var,
                                 "epsilon": stats.epsilon, "clip": stats.clip_obs})
                  ] if stats is not None and stats.norm_obs else []
-    return ExportSource(ops=normalize + actor,
-                        observation_space=model.observation_space,
-                        action_space=model.action_space, metadata=metadata)
+    return normalize + actor, model, metadata
 
 
 # --------------------------------------------------------------------------- export
@@ -313,8 +301,7 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
     ``episodes`` episodes (seeds ``seed, seed + 1, ...``; 0: none) and its success rate is
     recorded. Returns the metadata written. Imports the model's library (PyTorch or JAX).
     """
-    source = load_source(model_or_run_dir, algo, env_id)
-    meta: dict[str, Any] = dict(source.metadata)
+    ops, model, meta = load_source(model_or_run_dir, algo, env_id)
     env_id = env_id or meta.get("env_id")
     if not env_id:
         raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
@@ -325,12 +312,10 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
         if not isinstance(model_or_run_dir, (str, Path)):
             raise UsageError("full=True needs the model's zip or run folder, not a model object")
         meta.update(ship_full_model(model_or_run_dir, out_path))
-    written = write_zoo_file(out_path, source.ops, source.observation_space,
-                             source.action_space, meta)
+    written = write_zoo_file(out_path, ops, model.observation_space, model.action_space, meta)
     if episodes > 0:
-        policy = ZooPolicy.from_file(out_path)
-        measured = measure_success(policy, meta["env_id"], meta.get("env_kwargs"), episodes,
-                                   seed)
-        written = write_zoo_file(out_path, source.ops, source.observation_space,
-                                 source.action_space, {**meta, **measured})
+        measured = measure_success(ZooPolicy.from_file(out_path), meta["env_id"],
+                                   meta.get("env_kwargs"), episodes, seed)
+        written = write_zoo_file(out_path, ops, model.observation_space, model.action_space,
+                                 {**meta, **measured})
     return written
