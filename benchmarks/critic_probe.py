@@ -61,7 +61,7 @@ def probe(model_path: str, episodes: int, seed: int) -> list[dict]:
     env_id, env_kwargs = env_for([model_path], None)
     env = gym.make(env_id, **env_kwargs)
     loaded = load_policy(model_path, env)
-    if loaded.kind != "model" or loaded.normalize_obs is not None:
+    if loaded.kind != "model" or loaded.vecnormalize is not None:
         raise ValueError("critic_probe needs a model file of a run without normalised "
                          "observations")
     model = loaded.policy

@@ -10,7 +10,8 @@ Two differences from the printed listing, both marked below:
   (Stable-Baselines3 reads ``.5`` as the file's suffix, so it adds no ``.zip``).
 
 200k steps take about an hour on one CPU core. For checkpoints, evaluation, several seeds
-and a manifest, use ``rehabbot train rehab-reach-v0 --algo sac`` instead.
+and a manifest, use ``rehabbot train rehab-reach-v0 --algo sac --hyperparams
+sb3-defaults/sac`` (the same library defaults) instead.
 """
 
 # The listing keeps the paper's import grouping and its unused import.

@@ -11,7 +11,7 @@ The layers, each importing only those below it (``docs/architecture.md``):
 ``sim``        robots, the patient, scenes, inverse kinematics, statics
 ``tasks``      exercises, targets, observation layout, reward terms, safety rules
 ``envs``       ``RehabEnv``, its validated config, controllers, rendering, the ids
-``rl``         training (Stable-Baselines3), rollouts, policies, experts, features
+``rl``         training (Stable-Baselines3, SBX), rollouts, policies, experts, zoo
 ``analysis``   clinical metrics, evaluation reports, traces, figures, video
 ``cli``        the ``rehabbot`` command
 ============== =====================================================================

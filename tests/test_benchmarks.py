@@ -94,7 +94,7 @@ def test_expert_agreement_tells_a_trained_agent_from_one_that_pushes_the_wrong_w
 
 @pytest.mark.slow
 def test_critic_probe_reads_the_critic_and_scores_its_ranking(tmp_path, monkeypatch) -> None:
-    """A trained SBX SAC run with the JAX tracking-error features is probed end to end (one
+    """A trained SBX SAC run (the library's MlpPolicy) is probed end to end (one
     row per target the expert visited, every state counted once); then a critic that prefers
     the expert's direction is ranked right on every state, and its negation on none."""
     pytest.importorskip("sbx")
@@ -110,10 +110,8 @@ def test_critic_probe_reads_the_critic_and_scores_its_ranking(tmp_path, monkeypa
 
     hp = tmp_path / "hp.yml"
     hp.write_text(yaml.safe_dump({
-        "policy": "rehabbot.rl.features.TrackingErrorSACPolicy", "learning_starts": 100,
-        "buffer_size": 2000, "batch_size": 32, "train_freq": 4, "gradient_steps": 4,
-        "policy_kwargs": "dict(features_extractor_kwargs=dict(fine_scale_rad=0.05), "
-                         "net_arch=[16, 16])"}))
+        "policy": "MlpPolicy", "learning_starts": 100, "buffer_size": 2000, "batch_size": 32,
+        "train_freq": 4, "gradient_steps": 4, "policy_kwargs": "dict(net_arch=[16, 16])"}))
     parser = argparse.ArgumentParser(prog="rehabbot")
     add_train_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["train", "rehab-reach-v1", "--algo", "sac", "--backend", "sbx",

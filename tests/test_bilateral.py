@@ -319,10 +319,7 @@ def test_one_pattern_table_and_reproducible_episodes():
 
 
 def test_layouts_by_size_and_tracking_features_read_both_robots(env):
-    import torch
-
-    from rehabbot.rl.features import TrackingErrorFeatures
-    from rehabbot.rl.features_numpy import bounds_scaling, tracking_error_features
+    from rehabbot.rl.zoo import tracking_error_features
     from rehabbot.tasks.observation import layout_for_size, paper_layout
 
     assert layout_for_size(23) == paper_layout(6)
@@ -331,19 +328,18 @@ def test_layouts_by_size_and_tracking_features_read_both_robots(env):
     with pytest.raises(ValueError, match="30 values"):
         layout_for_size(30)
     space = env.observation_space
-    extractor = TrackingErrorFeatures(space, fine_scale_rad=0.05)
-    assert extractor.features_dim == 44 + 12 + 6 + 12
     obs, _ = env.reset(seed=0)
     batch = obs[None].copy()
     batch[0, 18:30] += 0.01 * np.arange(12)  # theta of both robots
-    torch_features = extractor(torch.as_tensor(batch)).numpy()
-    center, half = bounds_scaling(space.low, space.high)
-    numpy_features = tracking_error_features(batch, center, half, 0.05)
-    np.testing.assert_allclose(torch_features, numpy_features, rtol=1e-6, atol=1e-6)
+    center, half = (space.high + space.low) / 2, (space.high - space.low) / 2
+    features = tracking_error_features(batch, center, half, 0.05)  # the -v1 agents' input
+    assert features.shape == (1, 44 + 12 + 6 + 12)
     joint_error = (batch[0, 0:12] - batch[0, 18:30]) / 0.5
-    np.testing.assert_allclose(numpy_features[0, 44:56], joint_error, rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(numpy_features[0, 56:62], (batch[0, 12:18] - batch[0, 30:36]) / 0.1,
+    np.testing.assert_allclose(features[0, 44:56], joint_error, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(features[0, 56:62], (batch[0, 12:18] - batch[0, 30:36]) / 0.1,
                                rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(features[0, 62:], np.tanh(joint_error / 0.1), rtol=1e-5,
+                               atol=1e-6)
 
 
 @pytest.mark.slow
@@ -355,7 +351,11 @@ def test_the_cli_trains_evaluates_renders_and_plots_the_bilateral_id(tmp_path, c
     from rehabbot.cli import main
 
     runs = tmp_path / "runs"
+    small = tmp_path / "sac.yml"  # the shipped settings have no -v1 entries; a small network
+    small.write_text("learning_starts: 100\nbuffer_size: 5000\npolicy_kwargs: "
+                     "'dict(net_arch=[32, 32])'\n")
     assert main(["train", "rehab-bilateral-v1", "--algo", "sac", "--backend", "sb3",
+                 "--hyperparams", str(small),
                  "--timesteps", "300", "--demos", "1", "--eval-freq", "150",
                  "--eval-episodes", "1", "--checkpoint-freq", "150", "--out", str(runs),
                  "--no-progress"]) == 0

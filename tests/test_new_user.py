@@ -106,7 +106,7 @@ def test_a_model_runs_on_another_patient_and_weight_level(trained_run, tmp_path,
 @pytest.mark.skipif(not Path("/proc/self").exists(), reason="needs /proc")
 def test_an_unusable_output_folder_is_one_line_and_exit_1(capsys) -> None:
     code = main(["train", ENV, "--algo", "ppo", "--out", "/proc/rehabbot-runs",
-                 "--timesteps", "64"])
+                 "--timesteps", "64", "--hyperparams", "sb3-defaults/ppo"])
     err = capsys.readouterr().err
     assert code == 1
     assert err.startswith("rehabbot: error: cannot write to output folder '/proc/rehabbot-runs'")

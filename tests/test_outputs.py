@@ -320,7 +320,7 @@ def test_an_env_kwarg_out_of_range_is_one_line_in_every_command(command, tmp_pat
         args = ["sweep", str(config), "--cpus", "1"]
     elif command == "train":
         args = ["train", ENV, "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path),
-                "--env-kwargs", json.dumps(kwargs)]
+                "--hyperparams", "sb3-defaults/ppo", "--env-kwargs", json.dumps(kwargs)]
     elif command == "evaluate":
         args = ["evaluate", "expert", "--env", ENV, "--episodes", "1", "--out", str(tmp_path),
                 "--env-kwargs", json.dumps(kwargs)]

@@ -1,8 +1,8 @@
-"""The settings files shipped in ``rehabbot/rl/hyperparams/`` are read unchanged by RL Zoo
-(``python -m rl_zoo3.train --gym-packages rehabbot --conf-file ...``) and by rehabbot's own
-loader, which gives the same settings as before they were respelled for RL Zoo; models with
-rehabbot's policy classes save and load back. The RL Zoo runs are slow (``pytest --full``) and
-skipped without ``rl_zoo3``."""
+"""The settings files shipped in ``rehabbot/rl/hyperparams/`` name only the libraries' classes
+and are read unchanged by RL Zoo (``python -m rl_zoo3.train --gym-packages rehabbot
+--conf-file ...``) and by rehabbot's own loader, which builds the same models; policies are
+named by alias or by a library's dotted class name, anything else is refused by name. The RL
+Zoo runs are slow (``pytest --full``) and skipped without ``rl_zoo3``."""
 
 from __future__ import annotations
 
@@ -26,7 +26,6 @@ import yaml
 import rehabbot  # noqa: F401  (registers the envs)
 from rehabbot.envs.registration import ENV_SPECS
 from rehabbot.rl.algorithms import algo_class
-from rehabbot.rl.features import TRACKING_ERROR_POLICIES, TrackingErrorFeatures
 from rehabbot.rl.hyperparams import (
     SCHEDULE_KEYS,
     HyperparameterError,
@@ -39,38 +38,7 @@ from rehabbot.rl.hyperparams import (
 )
 from rehabbot.rl.policies import load_model
 
-ID = "rehabbot/rehab-reach-v0"
-FINE = "features_extractor_kwargs=dict(fine_scale_rad=0.05), "
-# The shipped settings as they were spelled before RL Zoo could read them (a flat mapping, the
-# extractor class named in policy_kwargs); rehabbot's loader still reads this spelling.
-OLD_SPELLING: dict[str, tuple[str, dict[str, Any]]] = {
-    "sac": ("sac", {"n_timesteps": 200000, "n_steps": 10, "policy_kwargs":
-                    f"dict(features_extractor_class=TrackingErrorFeatures, {FINE}"
-                    "net_arch=[64, 64])"}),
-    "td3": ("td3", {"n_timesteps": 200000, "n_steps": 10, "noise_type": "normal",
-                    "noise_std": 0.1, "policy_kwargs":
-                    f"dict(features_extractor_class=TrackingErrorFeatures, {FINE}"
-                    "net_arch=[64, 64])"}),
-    "ppo": ("ppo", {"n_timesteps": 200000,
-                    "policy_kwargs": "dict(features_extractor_class=TrackingErrorFeatures)"}),
-    "ablations/sac-1step": ("sac", {
-        "n_timesteps": 200000,
-        "policy_kwargs": "dict(features_extractor_class=TrackingErrorFeatures, "
-                         "net_arch=[64, 64])"}),
-    "ablations/sac-coarse-features": ("sac", {
-        "n_timesteps": 200000, "n_steps": 10,
-        "policy_kwargs": "dict(features_extractor_class=TrackingErrorFeatures, "
-                         "net_arch=[64, 64])"}),
-    "ablations/sac-gsde": ("sac", {
-        "n_timesteps": 200000, "use_sde": True, "train_freq": 64, "gradient_steps": 64,
-        "learning_starts": 10000,
-        "policy_kwargs": "dict(features_extractor_class=TrackingErrorFeatures, "
-                         "net_arch=[64, 64])"}),
-    "ablations/td3-coarse-features": ("td3", {
-        "n_timesteps": 200000, "n_steps": 10, "noise_type": "normal", "noise_std": 0.1,
-        "policy_kwargs": "dict(features_extractor_class=TrackingErrorFeatures, "
-                         "net_arch=[64, 64])"}),
-}
+ID = "rehabbot/rehab-reach-v2"
 # Keep the off-policy models small: the shipped buffer holds a million transitions.
 SMALL = {"sac": {"buffer_size": 1000}, "td3": {"buffer_size": 1000},
          "tqc": {"buffer_size": 1000}, "crossq": {"buffer_size": 1000},
@@ -92,12 +60,6 @@ def _build(hp: Hyperparameters, env: gym.Env, **overrides: Any) -> Any:
     return algo_class(hp.algo)(hp.policy, env, seed=0, device="cpu", **kwargs)
 
 
-def _extractor(model: Any) -> Any:
-    policy = model.policy
-    return policy.features_extractor if hasattr(policy, "mlp_extractor") \
-        else policy.actor.features_extractor
-
-
 def _structure(model: Any) -> dict[str, Any]:
     """What makes two policies the same network: constructor arguments and weight shapes."""
     params = {key: value for key, value in model.policy._get_constructor_parameters().items()
@@ -116,39 +78,32 @@ def _load(algo: str, path: Path) -> Any:
 # --------------------------------------------------------------------------- rehabbot's loader
 
 
-@pytest.mark.parametrize("name", sorted(OLD_SPELLING))
-def test_loader_gives_the_settings_of_before(env, name: str) -> None:
-    algo, old_mapping = OLD_SPELLING[name]
-    new = load_hyperparameters(name, ID, algo)
-    old = hyperparameters_from_mapping(old_mapping, algo)
-    assert new.entry == "default" and new.policy is TRACKING_ERROR_POLICIES[algo]
-    assert (new.n_timesteps, new.n_envs, new.normalize) == \
-        (old.n_timesteps, old.n_envs, old.normalize)
-    assert (new.noise_type, new.noise_std) == (old.noise_type, old.noise_std)
-    assert {k: v for k, v in new.kwargs.items() if k != "policy_kwargs"} == \
-        {k: v for k, v in old.kwargs.items() if k != "policy_kwargs"}
-    new_model, old_model = _build(new, env), _build(old, env)
-    assert _structure(new_model) == _structure(old_model)
-    assert type(_extractor(new_model)) is TrackingErrorFeatures
+# The shipped entry of ID for each algorithm: (n_timesteps, n_envs, kwargs, policy_kwargs,
+# noise_type, noise_std); every policy is the library's MlpPolicy.
+SHIPPED = {
+    "sac": (200_000, None, {"n_steps": 10, "train_freq": 4, "gradient_steps": 4}, {},
+            None, None),
+    "td3": (200_000, None, {"n_steps": 10, "train_freq": 4, "gradient_steps": 4}, {},
+            "normal", 0.1),
+    "ppo": (1_000_000, 8, {"n_steps": 256}, {"log_std_init": -1.0}, None, None),
+}
 
 
-@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
+@pytest.mark.parametrize("algo", sorted(SHIPPED))
 def test_shipped_settings_values(env, algo: str) -> None:
     hp = load_hyperparameters(algo, ID, algo)
+    steps, n_envs, kwargs, policy_kwargs, noise_type, noise_std = SHIPPED[algo]
+    assert (hp.entry, hp.policy, hp.n_timesteps, hp.n_envs) == (ID, "MlpPolicy", steps, n_envs)
+    assert {k: v for k, v in hp.kwargs.items() if k != "learning_rate"} == \
+        {**kwargs, **({"policy_kwargs": policy_kwargs} if policy_kwargs else {})}
+    assert (hp.noise_type, hp.noise_std) == (noise_type, noise_std)
     model = _build(hp, env)
-    extractor = _extractor(model)
-    assert type(extractor) is TrackingErrorFeatures and hp.n_timesteps == 200_000
-    if algo == "ppo":
-        assert extractor.fine_scale_rad is None and "n_steps" not in hp.kwargs
-        assert model.policy.net_arch == {"pi": [64, 64], "vf": [64, 64]}
-    else:
-        assert extractor.fine_scale_rad == 0.05 and model.policy.net_arch == [64, 64]
-        assert hp.kwargs["n_steps"] == 10 and model.n_steps == 10
-    assert (hp.noise_type, hp.noise_std) == (("normal", 0.1) if algo == "td3" else (None, None))
-    manifest = json.loads(json.dumps(hp.to_manifest()))  # JSON-able, classes by dotted name
-    dotted = f"rehabbot.rl.features.{TRACKING_ERROR_POLICIES[algo].__name__}"
+    assert type(model.policy) is algo_class(algo).policy_aliases["MlpPolicy"]
+    if algo == "ppo":  # a learning rate that decays linearly to 0
+        assert hp.given["learning_rate"] == "lin_3e-4" and model.lr_schedule(0.0) == 0.0
+    manifest = json.loads(json.dumps(hp.to_manifest()))  # JSON-able
     assert manifest["policy"] == manifest["kwargs"]["policy"] == manifest["given"]["policy"] \
-        == dotted
+        == "MlpPolicy"
 
 
 @pytest.mark.parametrize("name", settings_names())
@@ -169,28 +124,24 @@ def test_shipped_files_have_the_shape_rl_zoo_reads(name: str) -> None:
             load_hyperparameters(name, env_id, _algo_of(name))
 
 
-def test_policy_classes_keep_every_sb3_argument(env) -> None:
-    from stable_baselines3.common.torch_layers import FlattenExtractor
-
-    hp = hyperparameters_from_mapping({"policy": "rehabbot.rl.features.TrackingErrorSACPolicy",
-                                       "policy_kwargs": {"features_extractor_class":
-                                                         FlattenExtractor}}, "sac")
-    assert type(_extractor(_build(hp, env))) is FlattenExtractor  # the default is overridable
+def test_a_library_policy_may_be_named_by_its_dotted_name() -> None:
     sb3 = hyperparameters_from_mapping({"policy": "stable_baselines3.sac.policies.MlpPolicy"},
                                        "sac")
+    assert sb3.policy is algo_class("sac").policy_aliases["MlpPolicy"]
     assert sb3.policy_name == "stable_baselines3.sac.policies.SACPolicy"
 
 
 @pytest.mark.parametrize(("algo", "policy", "why"), [
     ("sac", "this.Zen", "outside the packages"),  # `import this` would print: not imported
     ("sac", "os.system", "outside the packages"),
-    ("sac", "rehabbot.rl.features.TrackingErrorTD3Policy",
+    ("sac", "rehabbot.rl.training.TrainingError", "outside the packages"),
+    ("sac", "stable_baselines3.td3.policies.TD3Policy",
      "not a subclass of stable_baselines3.sac.policies.SACPolicy"),
-    ("ppo", "rehabbot.rl.features.TrackingErrorFeatures",
+    ("ppo", "stable_baselines3.common.torch_layers.FlattenExtractor",
      "not a subclass of stable_baselines3.common.policies.ActorCriticPolicy"),
-    ("td3", "rehabbot.rl.features.TRACKING_ERROR_POLICIES", "not a subclass"),
-    ("td3", "rehabbot.rl.features.NoSuchPolicy", "cannot be imported"),
-    ("td3", "rehabbot.no_such_module.Policy", "cannot be imported"),
+    ("td3", "stable_baselines3.td3.policies.__name__", "not a subclass"),
+    ("td3", "stable_baselines3.td3.policies.NoSuchPolicy", "cannot be imported"),
+    ("td3", "stable_baselines3.no_such_module.Policy", "cannot be imported"),
     ("ppo", "Mlp", "neither an alias nor a dotted class name"),
     ("ppo", 3, "neither an alias"),
 ])
@@ -207,22 +158,23 @@ def test_bad_policies_are_refused_by_name(tmp_path: Path, algo: str, policy: Any
         load_hyperparameters(path, ID, algo)
 
 
-@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
-def test_models_with_rehabbot_policies_save_and_load(tmp_path: Path, env, algo: str) -> None:
-    hp = load_hyperparameters(algo, ID, algo)
-    model = _build(hp, env)
-    model.learn(64 if algo == "ppo" else 150)  # a few updates: the weights move
-    path = tmp_path / "model.zip"
-    model.save(path)
-    loaded = _load(algo, path)
-    assert type(loaded.policy) is hp.policy and type(_extractor(loaded)) is TrackingErrorFeatures
-    assert _structure(loaded) == _structure(model)
-    for key, value in model.policy.state_dict().items():
-        assert np.array_equal(loaded.policy.state_dict()[key].numpy(), value.numpy()), key
-    obs, _ = env.reset(seed=1)
-    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0],
-                                  model.predict(obs, deterministic=True)[0])
-    assert load_model(path, env).algo == algo  # what `rehabbot evaluate` does
+@pytest.mark.parametrize("policy", ["rehabbot.rl.features.TrackingErrorSACPolicy",
+                                    "rehabbot.rl.features_jax.TrackingErrorSBXSACPolicy"])
+@pytest.mark.parametrize("backend", ["sb3", "sbx"])
+def test_settings_naming_a_removed_policy_class_say_so(tmp_path: Path, policy: str,
+                                                        backend: str) -> None:
+    """rehabbot 0.3's own policy classes are gone: a settings file that names one is refused
+    with the class, the issue and the release that still has it, on either backend."""
+    if backend == "sbx":
+        pytest.importorskip("sbx")
+    path = tmp_path / "old.yml"
+    path.write_text(yaml.safe_dump({"rehabbot/rehab-reach-v1": {"policy": policy}}))
+    with pytest.raises(HyperparameterError) as caught:
+        load_hyperparameters(path, "rehab-reach-v1", "sac", backend)
+    assert str(caught.value) == (
+        f"{path} [rehabbot/rehab-reach-v1]: the policy class {policy} was removed in this "
+        "version of rehabbot with issue 26 (the -v2 ids observe what an agent needs, and the "
+        "libraries' own MlpPolicy learns them); the 0.3 release of rehabbot loads it")
 
 
 # --------------------------------------------------------------------------- RL Zoo
@@ -255,18 +207,15 @@ def test_rl_zoo_trains_with_the_shipped_file(tmp_path: Path, env, algo: str) -> 
                           env=env_vars, capture_output=True, text=True, timeout=300,
                           check=False)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-    assert "Using 'default' hyperparameters" in done.stdout
     assert conf_file.read_bytes() == before
     zips = list((tmp_path / "logs" / algo).glob("*/*.zip"))
     assert len(zips) == 1, zips
     model = _load(algo, zips[0])
-    entry = yaml.safe_load(before)["default"]
-    policy_kwargs = parse_python_expression(entry.get("policy_kwargs", "dict()"))
-    fine = policy_kwargs.get("features_extractor_kwargs", {}).get("fine_scale_rad")
-    net_arch = policy_kwargs.get("net_arch", {"pi": [64, 64], "vf": [64, 64]})
-    assert f"{type(model.policy).__module__}.{type(model.policy).__name__}" == entry["policy"]
-    assert type(_extractor(model)) is TrackingErrorFeatures
-    assert _extractor(model).fine_scale_rad == fine and model.policy.net_arch == net_arch
+    entry = yaml.safe_load(before)[ID]  # the id's own entry, as rehabbot reads it
+    hp = load_hyperparameters(algo, ID, algo)
+    assert entry["policy"] == "MlpPolicy"
+    assert type(model.policy) is algo_class(algo).policy_aliases["MlpPolicy"]
+    assert _structure(model) == _structure(_build(hp, env, **SMALL[algo]))
     assert model.num_timesteps >= ZOO_TIMESTEPS
     if algo != "ppo":
         assert model.n_steps == entry["n_steps"] == 10

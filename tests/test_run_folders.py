@@ -33,7 +33,7 @@ pytest.importorskip("stable_baselines3", reason='training tests need "rehabbot[t
 from rehabbot.common.errors import DataError, OutputError, UsageError
 from rehabbot.common.files import FolderLock, FolderLockedError, remove_contents, remove_tree
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import PolicyError
+from rehabbot.rl.algorithms import PolicyError, detect_model
 from rehabbot.rl.training import train_run
 
 ENV = "rehab-reach-v0"
@@ -200,6 +200,74 @@ def test_a_crafted_checkpoint_does_not_run_on_resume(tmp_path: Path, finished_ru
     assert runs.read_manifest(run_dir)["timesteps_done"] >= steps + 64
 
 
+# A model saved by rehabbot 0.3 with its own PPO policy: the readable part of the zip's
+# ``policy_class`` (its module and the qualified names of its methods), as SB3 writes it.
+REMOVED_CLASS = "rehabbot.rl.features.TrackingErrorNormalizedActionPolicy"
+OLD_POLICY_CLASS = {
+    ":type:": "<class 'abc.ABCMeta'>", "__module__": "rehabbot.rl.features",
+    "__init__": "<function TrackingErrorNormalizedActionPolicy.__init__ at 0x7f3a2c1b5e40>",
+    "_get_action_dist_from_latent": "<function TrackingErrorNormalizedActionPolicy."
+                                    "_get_action_dist_from_latent at 0x7f3a2c1b5ee0>",
+}
+
+
+def _as_old_run(run_dir: Path, marker: Path) -> None:
+    """Make ``run_dir`` a run of rehabbot 0.3 whose policy class is one removed since: its
+    model and checkpoints name the class (with a pickle that would touch ``marker``), its
+    manifest names it as the settings' policy."""
+    for zip_path in [run_dir / runs.MODEL_NAME, *(p for _, p in runs.checkpoints(run_dir))]:
+        _crafted_zip(zip_path, zip_path, marker, "policy_class")
+        with zipfile.ZipFile(zip_path) as archive:
+            entries = {name: archive.read(name) for name in archive.namelist()}
+        data = json.loads(entries["data"])
+        data["policy_class"] = {**OLD_POLICY_CLASS,
+                                ":serialized:": data["policy_class"][":serialized:"]}
+        entries["data"] = json.dumps(data).encode()
+        with zipfile.ZipFile(zip_path, "w") as archive:
+            for name, content in entries.items():
+                archive.writestr(name, content)
+    manifest = runs.read_manifest(run_dir)
+    manifest["hyperparameters"]["policy"] = REMOVED_CLASS
+    manifest["hyperparameters"]["given"]["policy"] = REMOVED_CLASS
+    (run_dir / runs.MANIFEST_NAME).write_text(json.dumps(manifest))
+
+
+def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, finished_run,
+                                                             capsys) -> None:
+    """evaluate, render, the zoo's export and --resume of a run whose model names a policy
+    class removed with issue 26 fail with one line that names the class and the release that
+    loads it: no import of the class, no traceback, nothing unpickled or changed."""
+    from rehabbot.cli import main
+
+    run_dir = _copy_run(finished_run, tmp_path / "runs")
+    marker = tmp_path / "pwned"
+    _as_old_run(run_dir, marker)
+    before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
+    why = (f"the policy class {REMOVED_CLASS} was removed in this version of rehabbot with "
+           "issue 26 (the -v2 ids observe what an agent needs, and the libraries' own "
+           "MlpPolicy learns them); the 0.3 release of rehabbot loads it")
+    commands = {
+        "evaluate": lambda: main(["evaluate", str(run_dir), "--episodes", "1",
+                                  "--out", str(tmp_path / "evaluation")]),
+        "render": lambda: main(["render", str(run_dir / runs.MODEL_NAME), "--out",
+                                str(tmp_path / "video.gif"), "--width", "64", "--height", "48"]),
+        "zoo export": lambda: main(["zoo", "export", str(run_dir), "--episodes", "0",
+                                    "--out", str(tmp_path / "agent.npz")]),
+        "resume": lambda: main(["train", ENV, "--algo", "ppo", "--timesteps", "256", "--out",
+                                str(tmp_path / "runs"), "--resume", "--no-progress"]),
+    }
+    for name, command in commands.items():
+        assert command() == 1, name
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and why in err and "Traceback" not in err, (name, err)
+        assert "model.zip" in err or "rl_model_128_steps.zip" in err, (name, err)
+    assert "rehabbot.rl.features" not in sys.modules
+    assert not marker.exists() and not (tmp_path / "agent.npz").exists()
+    assert {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()} == before
+    with pytest.raises(PolicyError, match="was removed in this version of rehabbot"):
+        detect_model(run_dir / runs.MODEL_NAME)
+
+
 def test_a_pickled_vecnormalize_is_refused_and_never_run(tmp_path: Path,
                                                          finished_run) -> None:
     from rehabbot.rl.policies import load_policy
@@ -243,13 +311,8 @@ def test_a_normalised_run_writes_json_statistics_only(tmp_path: Path) -> None:
 
 def test_sbx_models_are_saved_without_pickled_networks(tmp_path: Path) -> None:
     sbx = pytest.importorskip("sbx")
-    from rehabbot.rl.safe_load import (
-        JAX_STATE_ENTRY,
-        load_safely,
-        pickled_entries,
-        read_zip_data,
-        save_model,
-    )
+    from rehabbot.rl.algorithms import read_model_data
+    from rehabbot.rl.safe_load import JAX_STATE_ENTRY, load_safely, pickled_entries, save_model
 
     env = gym.make(FULL_ID, **SHORT)
     model = sbx.SAC("MlpPolicy", env, buffer_size=200, learning_starts=10, seed=0,
@@ -258,7 +321,7 @@ def test_sbx_models_are_saved_without_pickled_networks(tmp_path: Path) -> None:
     path = tmp_path / "model.zip"
     with open(path, "wb") as stream:
         save_model(model, stream)
-    assert "policy" not in pickled_entries(read_zip_data(path))
+    assert "policy" not in pickled_entries(read_model_data(path))
     assert JAX_STATE_ENTRY in zipfile.ZipFile(path).namelist()
     loaded = load_safely(sbx.SAC, path, env, "sac", "sbx", None)
     obs, _ = env.reset(seed=3)

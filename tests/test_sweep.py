@@ -19,7 +19,6 @@ import yaml
 
 from benchmarks import results_table
 from rehabbot.cli import main
-from rehabbot.envs.registration import ENV_SPECS
 from rehabbot.rl import sweep as sweep_module
 from rehabbot.rl.sweep import check_sweep, run_sweep, run_trial, trial_state
 from rehabbot.rl.sweep_config import (
@@ -27,6 +26,7 @@ from rehabbot.rl.sweep_config import (
     load_sweep_config,
     parse_sweep_config,
     variant_name,
+    variants,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,18 +65,19 @@ def _manifest(run_dir: Path) -> dict:
 
 def test_a_sweep_file_expands_into_trials_and_run_folders(tmp_path: Path) -> None:
     config = parse_sweep_config(_config(
-        tmp_path, envs=[ENV, "rehabbot/rehab-hip-v0"], algos=["sac", "td3"], seeds=[0, 1],
+        tmp_path, envs=["rehab-reach-v2", "rehabbot/rehab-hip-v2"], algos=["sac", "td3"],
+        seeds=[0, 1],
         timesteps={"sac": 300, "td3": 400}, hyperparams={"sac": "sac", "td3": "td3"},
         grid={"sac": {"learning_rate": [0.001, "3e-4"]}}))
     trials = config.trials()
     assert len(trials) == 2 * (2 + 1) * 2  # envs x (SAC variants + TD3) x seeds
     out = tmp_path / "out"
     keys = [t.key for t in trials]
-    assert keys[:4] == ["learning_rate=0.001/rehab-reach-v0/sac/seed0",
-                        "learning_rate=0.001/rehab-reach-v0/sac/seed1",
-                        "learning_rate=3e-4/rehab-reach-v0/sac/seed0",
-                        "learning_rate=3e-4/rehab-reach-v0/sac/seed1"]
-    assert "rehab-hip-v0/td3/seed1" in keys
+    assert keys[:4] == ["learning_rate=0.001/rehab-reach-v2/sac/seed0",
+                        "learning_rate=0.001/rehab-reach-v2/sac/seed1",
+                        "learning_rate=3e-4/rehab-reach-v2/sac/seed0",
+                        "learning_rate=3e-4/rehab-reach-v2/sac/seed1"]
+    assert "rehab-hip-v2/td3/seed1" in keys
     for trial in trials:
         assert trial.run_dir == out / trial.key
     sac = trials[0]
@@ -95,53 +96,66 @@ def test_variant_names_are_folder_names() -> None:
         "policy_kwargs=__net_arch___64,64__"
     long = variant_name({"policy_kwargs": "dict(net_arch=[" + "64, " * 40 + "64])"})
     assert len(long) <= 80 and "/" not in long
+    # Two grid values that read the same as a folder name get two folders.
+    (first, _), (second, _) = variants({"gamma": [0.9, "0.9"]})
+    assert first == "gamma=0.9" and second.startswith("gamma=0.9-") and len(second) == 18
 
 
 def test_the_shipped_sweep_files_load() -> None:
-    if "rehabbot/rehab-reach-v1" not in ENV_SPECS:
-        pytest.skip("the -v1 ids are not registered")
+    base = {"rehabbot/rehab-reach-v2", "rehabbot/rehab-reach-l-v2", "rehabbot/rehab-hip-v2",
+            "rehabbot/rehab-knee-v2"}
     example = load_sweep_config(ROOT / "sweeps" / "example.yaml")
     assert len(example.trials()) == 12
-    results = load_sweep_config(ROOT / "sweeps" / "results-v1.yaml")
+    results = load_sweep_config(ROOT / "sweeps" / "results-v2.yaml")
     trials = results.trials()
-    assert len(trials) == 4 * 3 * 3
-    assert {t.env_id for t in trials} == {"rehabbot/rehab-reach-v1", "rehabbot/rehab-reach-l-v1",
-                                          "rehabbot/rehab-hip-v1", "rehabbot/rehab-knee-v1"}
+    assert len(trials) == 4 * 3 * 3 and {t.env_id for t in trials} == base
     steps = {t.algo: t.total_timesteps for t in trials}
     assert steps == {"sac": 200_000, "td3": 200_000, "ppo": 1_000_000}
     assert {t.hyperparams["source"] for t in trials} == {"sac", "td3", "ppo"}
     assert {t.algo: t.demos for t in trials} == {"sac": 20, "td3": 20, "ppo": None}
-    # The grids behind the README's -v1 tables: PPO with a cloned start, SAC and TD3 on SBX.
-    ppo = load_sweep_config(ROOT / "sweeps" / "ppo-bc-v1.yaml").trials()
-    assert len(ppo) == 12 and {(t.algo, t.demos, t.bc) for t in ppo} == {("ppo", 40, True)}
-    assert {t.hyperparams["source"] for t in ppo} == {"ablations/ppo-raw-actions"}
-    ppo_v1 = load_sweep_config(ROOT / "sweeps" / "ppo-v1.yaml").trials()
-    assert len(ppo_v1) == 12 and {(t.algo, t.backend, t.demos, t.bc, t.total_timesteps)
-                                  for t in ppo_v1} == {("ppo", "sbx", 40, True, 300_000)}
-    assert {t.hyperparams["given"]["policy"] for t in ppo_v1} == \
-        {"rehabbot.rl.features.TrackingErrorNormalizedActionPolicy"}
-    sac = load_sweep_config(ROOT / "sweeps" / "sac-v1.yaml").trials()
-    assert len(sac) == 12 and {(t.algo, t.backend, t.demos, t.total_timesteps) for t in sac} \
-        == {("sac", "sbx", 20, 100_000)}
-    assert {t.seed for t in sac} == {0, 1, 2}
-    td3 = load_sweep_config(ROOT / "sweeps" / "td3-v1.yaml").trials()
-    assert len(td3) == 12 and {(t.algo, t.backend, t.demos, t.total_timesteps) for t in td3} \
-        == {("td3", "sbx", 20, 100_000)}
-    assert {t.hyperparams["source"] for t in td3} == {"td3"}
-    # The grids behind the README's bilateral and FR3 tables.
-    fr3 = load_sweep_config(ROOT / "sweeps" / "sac-fr3-v1.yaml").trials()
+    # Every grid trains -v2 ids with the libraries' MlpPolicy (the shipped settings).
+    shipped = sorted((ROOT / "sweeps").glob("*.yaml"))
+    for path in shipped:
+        config = load_sweep_config(path)
+        check_sweep(config)  # the settings load for every id, the env kwargs fit
+        assert {t.env_id.rsplit("-", 1)[1] for t in config.trials()} == {"v2"}, path.name
+        assert {t.hyperparams["given"].get("policy") for t in config.trials()} == \
+            {"MlpPolicy"}, path.name
+    ppo = load_sweep_config(ROOT / "sweeps" / "ppo-v2.yaml").trials()
+    assert len(ppo) == 12 and {(t.algo, t.backend, t.demos, t.bc, t.total_timesteps)
+                               for t in ppo} == {("ppo", "sbx", 40, True, 300_000)}
+    for name, algo in (("sac-v2", "sac"), ("td3-v2", "td3")):
+        runs = load_sweep_config(ROOT / "sweeps" / f"{name}.yaml").trials()
+        assert len(runs) == 12 and {t.env_id for t in runs} == base
+        assert {(t.algo, t.backend, t.demos, t.total_timesteps) for t in runs} == \
+            {(algo, "sbx", 20, 100_000)} and {t.seed for t in runs} == {0, 1, 2}
+    fr3 = load_sweep_config(ROOT / "sweeps" / "sac-fr3-v2.yaml").trials()
     assert len(fr3) == 12 and {t.total_timesteps for t in fr3} == {100_000}
     assert all(t.env_kwargs == {"robot": "fr3"} for t in fr3)
-    bilateral = load_sweep_config(ROOT / "sweeps" / "sac-bilateral-v1.yaml").trials()
+    bilateral = load_sweep_config(ROOT / "sweeps" / "sac-bilateral-v2.yaml").trials()
     assert {(t.env_id, t.algo, t.total_timesteps) for t in bilateral} == \
-        {("rehabbot/rehab-bilateral-v1", "sac", 300_000)} and len(bilateral) == 3
-    for name, env_id, env_kwargs in (("ppo-bc-bilateral-v1", "rehabbot/rehab-bilateral-v1", None),
-                                     ("ppo-bc-fr3-hip-v1", "rehabbot/rehab-hip-v1",
+        {("rehabbot/rehab-bilateral-v2", "sac", 300_000)} and len(bilateral) == 3
+    for name, env_id, env_kwargs in (("ppo-bc-bilateral-v2", "rehabbot/rehab-bilateral-v2", None),
+                                     ("ppo-bc-fr3-hip-v2", "rehabbot/rehab-hip-v2",
                                       {"robot": "fr3"})):
         trials = load_sweep_config(ROOT / "sweeps" / f"{name}.yaml").trials()
         assert {(t.env_id, t.algo, t.bc, t.demos, t.total_timesteps) for t in trials} == \
             {(env_id, "ppo", True, 20, 300_000)} and len(trials) == 3
         assert all(t.env_kwargs == env_kwargs for t in trials)
+    conditions = load_sweep_config(ROOT / "sweeps" / "sac-conditions-v2.yaml").trials()
+    assert len(conditions) == 7 and all("-v2" in t.env_id for t in conditions)
+
+
+def test_a_sweep_of_a_paper_observation_id_with_the_shipped_settings_is_refused(
+        tmp_path: Path) -> None:
+    """The shipped settings have no entries for the -v0/-v1 ids; the sweep says which id to
+    train instead before anything starts."""
+    config = parse_sweep_config(_config(tmp_path, envs=["rehab-knee-v1"],
+                                        hyperparams={"sac": "sac"}))
+    with pytest.raises(SweepConfigError, match=r"no entry for rehabbot/rehab-knee-v1: .* train "
+                                               r"rehabbot/rehab-knee-v2"):
+        check_sweep(config)
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize(("change", "message"), [
@@ -172,17 +186,13 @@ def test_bad_sweep_files_are_refused_naming_the_value(tmp_path: Path, change: di
         parse_sweep_config(data, "s.yaml").trials()
 
 
-def test_bad_env_kwargs_and_demos_are_refused_before_anything_runs(tmp_path, monkeypatch):
+def test_bad_env_kwargs_and_demos_are_refused_before_anything_runs(tmp_path):
     config = parse_sweep_config(_config(tmp_path, env_kwargs={"weight_level": 9}))
     with pytest.raises(SweepConfigError, match=r"env_kwargs: .*weight_level=9"):
         check_sweep(config)
-    if sweep_module.train_run_accepts("demos"):  # train_run's own rules, checked up front
-        with pytest.raises(SweepConfigError, match=r"ppo: .*needs --bc"):
-            check_sweep(parse_sweep_config(_config(tmp_path, algos=["ppo"], hyperparams=None,
-                                                   demos=3)))
-    monkeypatch.setattr(sweep_module, "train_run_accepts", lambda name: name != "demos")
-    with pytest.raises(SweepConfigError, match=r"demos: .*does not take .demos."):
-        check_sweep(parse_sweep_config(_config(tmp_path, demos=5)))
+    with pytest.raises(SweepConfigError, match=r"ppo: .*needs --bc"):  # train_run's own rules
+        check_sweep(parse_sweep_config(_config(tmp_path, algos=["ppo"], hyperparams=None,
+                                               demos=3)))
     assert not (tmp_path / "out").exists()
 
 
@@ -216,6 +226,18 @@ def test_run_sweep_refuses_more_cpus_per_trial_than_the_local_ray_has(tmp_path) 
 
 
 # --------------------------------------------------------------------------- trials
+
+
+def test_a_trial_takes_n_envs_from_its_settings_file(tmp_path: Path) -> None:
+    """Without n_envs in the sweep file, a trial trains with the settings file's n_envs (as
+    `rehabbot train` does), not with one env."""
+    data = _config(tmp_path, eval_freq=0, checkpoint_freq=0, timesteps=50)
+    (tmp_path / "sac-small.yml").write_text(yaml.safe_dump({"default": {**SMALL_SAC,
+                                                                        "n_envs": 2}}))
+    (trial,) = parse_sweep_config(data).trials()
+    assert trial.n_envs is None
+    assert run_trial(trial.to_json())["status"] == "finished"
+    assert _manifest(trial.run_dir)["n_envs"] == 2
 
 
 def test_a_trial_trains_then_skips_then_resumes_to_more_steps(tmp_path: Path) -> None:

@@ -37,6 +37,7 @@ from rehabbot.rl.training import TrainingInterrupted, train_run
 
 ENV = "rehab-reach-v0"
 FULL_ID = "rehabbot/rehab-reach-v0"
+V2 = "rehab-reach-v2"  # an id the shipped settings have an entry for
 ENV_KWARGS = {"max_episode_steps": 100}
 SMALL = {
     "ppo": {"n_steps": 256, "batch_size": 64, "n_epochs": 2,
@@ -476,11 +477,11 @@ def test_user_errors_name_the_bad_value(tmp_path: Path) -> None:
     assert "'bogus_rate'" in str(err) and "TD3" in str(err)
     blocker = tmp_path / "file"
     blocker.write_text("")
-    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(blocker / "runs")))
+    err = _cli_error(_parse(V2, "--algo", "sac", "--out", str(blocker / "runs")))
     assert str(blocker / "runs") in str(err) and err.exit_code == 1
-    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--env-kwargs", "{oops"))
+    err = _cli_error(_parse(V2, "--algo", "sac", "--out", str(out), "--env-kwargs", "{oops"))
     assert "--env-kwargs" in str(err)
-    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out),
+    err = _cli_error(_parse(V2, "--algo", "sac", "--out", str(out),
                             "--env-kwargs", '{"bogus_kwarg": 1}'))
     assert "bogus_kwarg" in str(err)
     err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--resume"))
@@ -499,7 +500,8 @@ def test_existing_runs_need_resume_or_overwrite(tmp_path: Path) -> None:
     (run_dir / "manifest.json").write_text(json.dumps(
         {"env_id": FULL_ID, "algo": "td3", "seed": 0, "status": "interrupted",
          "timesteps_done": 500, "total_timesteps": 1000, "n_envs": 1, "env_kwargs": {}}))
-    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out)))
+    err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--hyperparams",
+                            "sb3-defaults/sac"))
     assert "--resume" in str(err) and "--overwrite" in str(err)
     err = _cli_error(_parse(ENV, "--algo", "sac", "--out", str(out), "--resume"))
     assert "algo 'td3'" in str(err) and err.exit_code == 2
@@ -585,3 +587,32 @@ def test_train_without_hyperparams_uses_the_shipped_file_and_says_so(tmp_path: P
     assert "sb3-defaults/ppo trains with the library's defaults" in err
     manifest = _manifest(out / "rehab-reach-v2" / "ppo" / "seed0")
     assert manifest["hyperparameters"]["policy"] == "MlpPolicy"
+
+
+@pytest.mark.parametrize(("env_id", "algo", "words"), [
+    ("rehab-reach-v1", "sac",
+     "the shipped 'sac' settings have no entry for rehabbot/rehab-reach-v1: it observes the "
+     "paper's 23 fields, from which a plain network does not learn (0 % in every "
+     "configuration tried); train rehabbot/rehab-reach-v2 (the same task and reward with the "
+     "agent observation), or pass --hyperparams sb3-defaults/sac to train this id with the "
+     "library's defaults"),
+    ("rehab-bilateral-v1", "ppo", "it observes the paper's 44 fields of both arms"),
+    ("rehab-knee-weak-v1", "td3", "train rehabbot/rehab-knee-weak-v2 (the same task"),
+    ("rehab-hip-v0", "tqc", "rehabbot/rehab-hip-v0: it is the paper's reference"),
+    ("rehab-knee-v0", "crossq", "train rehabbot/rehab-knee-v2 (the same task with the "
+                                "learnable -v1 reward and the agent observation)"),
+])
+def test_train_without_hyperparams_refuses_the_paper_observation_ids(
+        tmp_path: Path, env_id: str, algo: str, words: str) -> None:
+    """The shipped settings name only library options, which learn nothing from the paper's
+    observation: a -v0 or -v1 id without --hyperparams is refused (exit 2) with the -v2 id to
+    train instead, and sb3-defaults/<algo> still trains it."""
+    out = tmp_path / "runs"
+    err = _cli_error(_parse(env_id, "--algo", algo, "--out", str(out)))
+    assert words in str(err) and err.exit_code == 2 and "\n" not in str(err)
+    assert not out.exists()
+    if algo in ("sac", "td3", "ppo"):
+        from rehabbot.rl.training import plan_seeds
+
+        plan = plan_seeds(env_id, algo, [0], None, out, hyperparams=f"sb3-defaults/{algo}")[0]
+        assert plan.hp.entry == f"rehabbot/{env_id}" and plan.hp.policy == "MlpPolicy"

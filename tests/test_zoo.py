@@ -21,8 +21,16 @@ import rehabbot.zoo
 from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import zoo
-from rehabbot.rl.zoo import ZooError, available, export_policy, load, load_file, write_zoo_file
-from rehabbot.tasks.observation import THETA, THETA_STAR
+from rehabbot.rl.zoo import (
+    ZooError,
+    available,
+    load,
+    load_file,
+    tracking_error_features,
+    write_zoo_file,
+)
+from rehabbot.rl.zoo_export import export_policy
+from rehabbot.tasks.observation import P_STAR, THETA, THETA_STAR, P
 
 FULL_ID = "rehabbot/rehab-reach-v0"
 ENV = "rehab-reach-v0"
@@ -94,23 +102,30 @@ def assert_same_actions(model, exported: zoo.ZooPolicy, observations: np.ndarray
 # --------------------------------------------------------------------------- features
 
 
-def test_numpy_features_equal_the_torch_extractor(env, observations) -> None:
-    torch = pytest.importorskip("torch")
-    from rehabbot.rl.features import TrackingErrorFeatures
-    from rehabbot.rl.features_numpy import bounds_scaling, tracking_error_features
-
+def test_the_tracking_error_step_gives_the_v1_networks_input(env, observations,
+                                                              tmp_path) -> None:
+    """The first step of the -v1 agents: the observation scaled to its box, the joint and tool
+    tracking errors (0.5 rad, 0.1 m scales) and, with ``fine_scale_rad``, their tanh at that
+    scale; float32 throughout. A NaN ``fine_scale_rad`` in a file means none."""
     space = env.observation_space
-    for kwargs in ({}, {"fine_scale_rad": 0.05}, {"scale_to_bounds": False,
-                                                  "fine_scale_rad": 0.2}):
-        extractor = TrackingErrorFeatures(space, **kwargs)
-        expected = extractor(torch.as_tensor(observations)).numpy()
-        center, half_range = bounds_scaling(space.low, space.high,
-                                            kwargs.get("scale_to_bounds", True))
-        actual = tracking_error_features(observations, center, half_range,
-                                         kwargs.get("fine_scale_rad"))
-        assert actual.shape == expected.shape and actual.dtype == np.float32
-        np.testing.assert_array_equal(actual[:, :32], expected[:, :32])  # bit for bit
-        np.testing.assert_allclose(actual[:, 32:], expected[:, 32:], rtol=0, atol=1e-6)
+    center = (space.high + space.low) / np.float32(2)
+    half_range = (space.high - space.low) / np.float32(2)
+    joint = (observations[:, THETA_STAR] - observations[:, THETA]) / np.float32(0.5)
+    tool = (observations[:, P_STAR] - observations[:, P]) / np.float32(0.1)
+    coarse = tracking_error_features(observations, center, half_range, None)
+    assert coarse.shape == (len(observations), 23 + 6 + 3) and coarse.dtype == np.float32
+    np.testing.assert_array_equal(coarse, np.concatenate(
+        [(observations - center) / half_range, joint, tool], axis=1))
+    fine = tracking_error_features(observations, center, half_range, 0.05)
+    np.testing.assert_array_equal(fine[:, :32], coarse)
+    np.testing.assert_allclose(fine[:, 32:], np.tanh(joint * 10), rtol=0, atol=1e-6)
+    for value, expected in ((np.nan, coarse), (0.05, fine)):
+        ops = [("tracking_error", {"center": center, "half_range": half_range,
+                                   "fine_scale_rad": value})]
+        write_zoo_file(tmp_path / "f.npz", ops, space, gym.spaces.Box(-1e3, 1e3, (38,)),
+                       {"env_id": FULL_ID, "algo": "f"})
+        features, _ = load_file(tmp_path / "f.npz").predict(observations)
+        np.testing.assert_array_equal(features[:, :expected.shape[1]], expected)
 
 
 # --------------------------------------------------------------------------- export
@@ -133,8 +148,6 @@ def _perturbed(model, seed: int = 0):
 
 
 def _sb3_model(algo: str, env: gym.Env):
-    from rehabbot.rl.features import TRACKING_ERROR_POLICIES
-
     if algo in ("tqc", "crossq"):
         contrib = pytest.importorskip("sb3_contrib")
         cls = getattr(contrib, {"tqc": "TQC", "crossq": "CrossQ"}[algo])
@@ -145,11 +158,7 @@ def _sb3_model(algo: str, env: gym.Env):
     cls = {"sac": sb3.SAC, "td3": sb3.TD3, "ppo": sb3.PPO}[algo]
     kwargs = ({"n_steps": 128, "batch_size": 64, "n_epochs": 1} if algo == "ppo"
               else {"learning_starts": 100, "buffer_size": 1000})
-    policy_kwargs: dict = {"net_arch": [32, 32]}
-    if algo == "sac":
-        policy_kwargs["features_extractor_kwargs"] = {"fine_scale_rad": 0.05}
-    return cls(TRACKING_ERROR_POLICIES[algo], env, seed=0, policy_kwargs=policy_kwargs,
-               **kwargs)
+    return cls("MlpPolicy", env, seed=0, policy_kwargs={"net_arch": [32, 32]}, **kwargs)
 
 
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo", "tqc", "crossq"])
@@ -159,8 +168,7 @@ def test_exported_sb3_actor_reproduces_the_model(algo, env, observations, tmp_pa
     meta = export_policy(model, ENV, algo, tmp_path / f"{algo}.npz", episodes=0)
     exported = load_file(tmp_path / f"{algo}.npz")
     assert meta["backend"] == "sb3" and meta["algo"] == algo and meta["env_id"] == FULL_ID
-    if algo in ("sac", "td3", "ppo"):
-        assert exported.ops[0] == "tracking_error"  # TrackingErrorFeatures, in NumPy
+    assert exported.ops[0] == ("batch_norm" if algo == "crossq" else "dense")
     assert exported.ops[-1] == ("clip" if algo == "ppo" else "unscale")
     assert_same_actions(model, exported, observations, env.action_space)
 
@@ -364,14 +372,19 @@ def test_export_command_writes_the_zoo_file(env, zoo_root, tmp_path, capsys) -> 
     _perturbed(_sb3_model("td3", env)).save(run / "model")
     (run / "manifest.json").write_text(json.dumps({"env_id": FULL_ID, "algo": "td3",
                                                    "seed": 3, "timesteps_done": 10}))
-    assert zoo.main(["export", str(run), "--episodes", "0"]) == 0
-    assert "wrote" in capsys.readouterr().out
-    assert load(ENV, "td3").metadata["seed"] == 3
-    assert zoo.main(["list"]) == 0
+    from rehabbot.cli import main
+
+    assert main(["zoo", "export", str(run), "--episodes", "0", "--note", '{"why": "test"}']) == 0
+    assert f"wrote {zoo_root / ENV / 'td3.npz'}: {FULL_ID} td3 (sb3)" in capsys.readouterr().out
+    assert load(ENV, "td3").metadata["seed"] == 3 and load(ENV, "td3").metadata["why"] == "test"
+    assert main(["zoo", "list"]) == 0
     assert f"{ENV}/td3" in capsys.readouterr().out
-    assert zoo.main(["export", str(run / "model.zip"), "--env", ENV, "--algo", "a2c"]) == 2
-    assert zoo.main(["export", str(tmp_path / "nowhere.zip"), "--env", ENV,
-                     "--algo", "sac"]) == 1
+    assert main(["zoo", "export", str(run / "model.zip"), "--env", ENV, "--algo", "a2c"]) == 2
+    assert main(["zoo", "export", str(tmp_path / "nowhere.zip"), "--env", ENV,
+                 "--algo", "sac"]) == 1
+    with pytest.raises(SystemExit) as stop:  # argparse: --note must be a JSON object
+        main(["zoo", "export", str(run), "--note", "[1]"])
+    assert stop.value.code == 2 and "must be a JSON object" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- shipped agents
@@ -423,7 +436,9 @@ def test_the_full_model_ships_beside_the_actor_and_fine_tunes(zoo_root, tmp_path
                         hyperparams={"learning_starts": 50, "batch_size": 32,
                                      "buffer_size": 1000, "policy_kwargs": "dict(net_arch=[16])"},
                         checkpoint_freq=0, eval_freq=0, progress_bar=False)
-    assert zoo.main(["export", str(run_dir), "--episodes", "0", "--full"]) == 0
+    from rehabbot.cli import main
+
+    assert main(["zoo", "export", str(run_dir), "--episodes", "0", "--full"]) == 0
     agent = load(env_id, "sac")
     assert zoo.full_model_path(env_id, "sac").is_file()
     model = zoo.load_full_model(env_id, "sac")

@@ -154,15 +154,21 @@ def cli_command(func: Callable[[argparse.Namespace], int]) -> Callable[[argparse
     return run
 
 
-def env_kwargs_object(text: str) -> dict:
-    """An argparse type: a JSON object of env keyword arguments. ``render_mode`` must be a
-    string or null (Gymnasium fails on anything else with a traceback)."""
+def json_object(text: str) -> dict:
+    """An argparse type: a JSON object."""
     try:
         value = json.loads(text)
     except json.JSONDecodeError as err:
         raise argparse.ArgumentTypeError(f"not valid JSON: {err}") from None
     if not isinstance(value, dict):
         raise argparse.ArgumentTypeError(f"must be a JSON object, got {text!r}")
+    return value
+
+
+def env_kwargs_object(text: str) -> dict:
+    """An argparse type: a JSON object of env keyword arguments. ``render_mode`` must be a
+    string or null (Gymnasium fails on anything else with a traceback)."""
+    value = json_object(text)
     mode = value.get("render_mode")
     if mode is not None and not isinstance(mode, str):
         raise argparse.ArgumentTypeError(f"render_mode must be a string or null, got {mode!r}")

@@ -48,7 +48,7 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("policies", nargs="+", metavar="MODEL|zoo:ENV/ALGO|expert|aan|random",
                         help="a model .zip saved by `rehabbot train` (or any SB3 PPO/SAC/TD3 "
                              "zip), an agent shipped in the zoo (zoo:rehab-reach-v1/ppo; "
-                             "python -m rehabbot.rl.zoo list), 'expert' (scripted expert), 'aan' "
+                             "rehabbot zoo list), 'expert' (scripted expert), 'aan' "
                              "(assist-as-needed controller) or 'random'")
     parser.add_argument("--env", metavar="ENV",
                         help="env id, with or without 'rehabbot/' (default: the env the "

@@ -13,7 +13,7 @@ from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, cli_command
 SWEEP_EPILOG = """\
 examples:
   rehabbot sweep sweeps/example.yaml                  # a local Ray with one CPU per trial
-  rehabbot sweep sweeps/results-v1.yaml --cpus 16     # the README's results grid
+  rehabbot sweep sweeps/results-v2.yaml --cpus 16     # the -v2 results grid
   rehabbot sweep sweeps/example.yaml --dry-run        # what would run, what is done
   rehabbot sweep sweeps/example.yaml --address ray://head:10001   # an existing cluster
 

@@ -15,7 +15,13 @@ from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_
 from rehabbot.envs.registration import ENV_SPECS, env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
-from rehabbot.rl.hyperparams import coerce_number, settings_names, settings_path, shipped_settings
+from rehabbot.rl.hyperparams import (
+    coerce_number,
+    library_defaults,
+    settings_names,
+    settings_path,
+    shipped_settings,
+)
 from rehabbot.rl.planning import (
     DEFAULT_BC_EPISODES,
     DEFAULT_CHECKPOINT_FREQ,
@@ -75,10 +81,13 @@ examples:
       # the library's defaults
 
 Without --hyperparams a run uses the settings file shipped for the algorithm (sac, td3, ppo,
-tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id (or its default entry), and
-prints which. The -v2 ids are the ones to start with: their entries name only library
-options (MlpPolicy, n_steps, ...). The -v0 ids are the paper's reference (its reward traps
-agents); -v1 ids keep the settings of the 0.3 results. A run too short to update its model
+tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id, and prints which. The files
+hold entries for the -v2 ids, which name only library options (MlpPolicy, n_steps, ...). The
+-v0 ids (the paper's reference: its reward traps agents) and the -v1 ids observe the paper's
+fields, from which a plain network does not learn: without --hyperparams they are refused
+with the -v2 id to train instead (rehabbot 0.3 trained -v1 with its own networks, removed
+with issue 26); --hyperparams sb3-defaults/<algo> trains any id with the library's
+defaults. A run too short to update its model
 (PPO: fewer steps than one rollout, n_steps x n_envs; SAC/TD3/TQC/CrossQ: no more steps than
 learning_starts) is refused.
 
@@ -105,10 +114,12 @@ or one flat mapping. Keys: the SB3 constructor arguments of the algorithm, plus 
 n_envs, policy, normalize (true or VecNormalize arguments), noise_type (normal |
 ornstein-uhlenbeck) and noise_std (SAC/TD3). policy_kwargs may be a mapping or a string such
 as "dict(net_arch=[64, 64], activation_fn=nn.ReLU)"; learning_rate may be "lin_3e-4" (linear
-decay to 0). --hyperparams takes a path or the name of a file shipped with rehabbot: sac, td3
-and ppo hold the settings of the README results, sb3-defaults/<algo> spells out SB3's
-defaults as a template, ablations/<name> the README's ablations (`rehabbot train --help`
-lists them; the files are in rehabbot/rl/hyperparams/).
+decay to 0). policy is MlpPolicy or a library's policy class by dotted name (rehabbot 0.3's
+own classes, rehabbot.rl.features.*, were removed with issue 26 and are refused by name).
+--hyperparams takes a path or the name of a file shipped with rehabbot: sac, td3, ppo, tqc
+and crossq hold the settings of the -v2 ids, sb3-defaults/<algo> spells out SB3's defaults
+as a template, ablations/<name> the plain-network diagnoses of the README (`rehabbot train
+--help` lists them; the files are in rehabbot/rl/hyperparams/).
 
 exit codes: 0 done, 1 runtime failure, 2 bad usage, 130/143 interrupted (resumable)."""
 
@@ -143,7 +154,7 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
                         help="RL-Zoo-style hyperparameter file, or the name of one shipped "
                              f"with rehabbot ({', '.join(settings_names())}); default: "
                              "the shipped file named after the algorithm (sac, td3, ppo, tqc, "
-                             "crossq: the settings of the published results, printed); "
+                             "crossq: entries for the -v2 ids, printed); "
                              "sb3-defaults/<algo> for the library's defaults")
     parser.add_argument("--env-kwargs", metavar="JSON",
                         help="keyword arguments for the env, as a JSON object")
@@ -207,12 +218,9 @@ def cmd_train(args: argparse.Namespace) -> int:
                        vec=args.vec, backend=args.backend, demos=args.demos, bc=args.bc)
     new_runs = [plan for plan in plans if plan.skip is None and plan.resume is None]
     if args.hyperparams is None and new_runs and hyperparams is not None:
-        library = (f"--hyperparams sb3-defaults/{args.algo}" if
-                   f"sb3-defaults/{args.algo}" in settings_names() else
-                   "a --hyperparams file without entries")
         print(f"settings: the shipped {hyperparams!r} file, entry {new_runs[0].hp.entry!r} "
-              f"({settings_path(hyperparams)}); {library} trains with the library's defaults "
-              "instead", file=sys.stderr, flush=True)
+              f"({settings_path(hyperparams)}); {library_defaults(args.algo)} trains with the "
+              "library's defaults instead", file=sys.stderr, flush=True)
     for change in new_runs[0].hp.backend_changes if new_runs else ():
         used = "dropped" if change["used"] is None else f"-> {change['used']}"
         print(f"note: {new_runs[0].backend} backend: {change['key']} {change['given']!r} "

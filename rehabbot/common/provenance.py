@@ -16,18 +16,22 @@ VERSIONED_PACKAGES = (("stable_baselines3", "stable-baselines3"), ("torch", "tor
 @functools.cache
 def package_versions() -> dict[str, str | None]:
     """Versions of Python and of the packages a result depends on (None: not installed)."""
-    from importlib import metadata
-
     from rehabbot.common.version import VERSION
 
     versions: dict[str, str | None] = {"python": platform.python_version(),
                                        "rehabbot": VERSION}
-    for key, dist in VERSIONED_PACKAGES:
-        try:
-            versions[key] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            versions[key] = None
+    versions.update({key: distribution_version(dist) for key, dist in VERSIONED_PACKAGES})
     return versions
+
+
+def distribution_version(distribution: str) -> str | None:
+    """The installed version of the pip package ``distribution`` (None: not installed)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version(distribution)
+    except metadata.PackageNotFoundError:
+        return None
 
 
 @functools.cache

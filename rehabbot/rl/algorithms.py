@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import importlib
 import json
+import re
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -28,24 +30,10 @@ ALGO_CLASSES = {
 DISTRIBUTIONS = {"stable_baselines3": "stable-baselines3", "sb3_contrib": "sb3-contrib",
                  "sbx": "sbx-rl"}
 # Top-level package of a saved model's policy class -> backend.
-POLICY_PACKAGE_BACKENDS = {"stable_baselines3": "sb3", "sb3_contrib": "sb3", "rehabbot": "sb3",
-                           "sbx": "sbx"}
-# RehabBot's own policy modules for SBX (the rest of rehabbot's are PyTorch policies).
-SBX_POLICY_MODULES = ("rehabbot.rl.features_jax",)
-
-
-def policy_module_backend(module: str) -> str | None:
-    """The backend whose policy classes live in ``module`` (None: not a known one)."""
-    if module in SBX_POLICY_MODULES:
-        return "sbx"
-    return POLICY_PACKAGE_BACKENDS.get(module.split(".")[0])
-
-# Each SB3 algorithm saves its own constructor arguments: they tell the three apart when the
-# policy class is RehabBot's own (rehabbot.rl.features), whose module names no algorithm.
-SIGNATURE_KEYS = {"td3": ("policy_delay", "target_policy_noise"),
-                  "tqc": ("top_quantiles_to_drop_per_net",),
-                  "sac": ("target_entropy", "ent_coef", "target_update_interval"),
-                  "ppo": ("clip_range", "n_epochs")}
+POLICY_PACKAGE_BACKENDS = {"stable_baselines3": "sb3", "sb3_contrib": "sb3", "sbx": "sbx"}
+# SB3's PPO policy lives in stable_baselines3.common.policies, whose name gives no algorithm:
+# PPO's saved constructor arguments tell it apart (from A2C, which rehabbot does not run).
+PPO_SIGNATURE = ("clip_range", "n_epochs")
 
 
 class PolicyError(DataError):
@@ -56,21 +44,41 @@ class BackendUnavailableError(UsageError):
     """The library an algorithm needs on the chosen backend is not installed."""
 
 
-def check_algo(algo: str) -> str:
-    """The lower-case algorithm name; :class:`UsageError` unless it is one of
-    :data:`ALGORITHMS`."""
-    name = str(algo).strip().lower()
-    if name not in ALGORITHMS:
-        raise UsageError(f"unknown algorithm {algo!r}; valid: {', '.join(ALGORITHMS)}")
+# The modules of rehabbot's own policy classes (the tracking-error networks of rehabbot 0.3),
+# removed with issue 26: settings and models that name one are refused by name.
+REMOVED_POLICY_MODULES = ("rehabbot.rl.features", "rehabbot.rl.features_jax")
+
+
+def removed_policy(name: str) -> str:
+    """Why the policy class ``name`` (a dotted name in a removed module) does not load."""
+    return (f"the policy class {name} was removed in this version of rehabbot with issue 26 "
+            "(the -v2 ids observe what an agent needs, and the libraries' own MlpPolicy "
+            "learns them); the 0.3 release of rehabbot loads it")
+
+
+def saved_policy_class(data: dict[str, Any]) -> tuple[str, str]:
+    """``(module, dotted name)`` of the policy class a model zip's readable metadata names
+    (its module, and the class in the qualified names of its methods)."""
+    entry = data.get("policy_class")
+    entry = entry if isinstance(entry, dict) else {}
+    module = str(entry.get("__module__", ""))
+    names = sorted({match for value in entry.values() if isinstance(value, str)
+                    for match in re.findall(r"<function ([A-Za-z_]\w*)\.\w+ at ", value)})
+    return module, f"{module}.{names[0]}" if names else module
+
+
+def one_of(value: Any, valid: Sequence[str], what: str,
+           error: type[UsageError] = UsageError) -> str:
+    """``value`` in lower case; ``error`` naming it and the valid ones unless it is one."""
+    name = str(value).strip().lower()
+    if name not in valid:
+        raise error(f"unknown {what} {value!r}; valid: {', '.join(valid)}")
     return name
 
 
-def check_backend(backend: str) -> str:
-    """The lower-case backend name; :class:`UsageError` unless it is sb3 or sbx."""
-    name = str(backend).strip().lower()
-    if name not in BACKENDS:
-        raise UsageError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
-    return name
+def check_algo(algo: str, error: type[UsageError] = UsageError) -> str:
+    """The lower-case algorithm name, one of :data:`ALGORITHMS` (else ``error``)."""
+    return one_of(algo, ALGORITHMS, "algorithm", error)
 
 
 def algo_class(algo: str, backend: str = "sb3") -> Any:
@@ -79,7 +87,7 @@ def algo_class(algo: str, backend: str = "sb3") -> Any:
     Raises:
         BackendUnavailableError: the library is not installed, or has no such class.
     """
-    algo, backend = check_algo(algo), check_backend(backend)
+    algo, backend = check_algo(algo), one_of(backend, BACKENDS, "backend")
     module_name, class_name = ALGO_CLASSES[(backend, algo)]
     try:
         module = importlib.import_module(module_name)
@@ -98,7 +106,12 @@ def algo_class(algo: str, backend: str = "sb3") -> Any:
 
 
 def read_model_data(path: Path) -> dict[str, Any]:
-    """The ``data`` entry of a Stable-Baselines3 / SBX model zip (PolicyError if unreadable)."""
+    """The ``data`` entry of a Stable-Baselines3 / SBX model zip.
+
+    Raises:
+        PolicyError: an unreadable zip, or one saved with a policy class that was removed
+            (:data:`REMOVED_POLICY_MODULES`; the message names it).
+    """
     try:
         with zipfile.ZipFile(path) as archive:
             data = json.loads(archive.read("data"))
@@ -108,30 +121,28 @@ def read_model_data(path: Path) -> dict[str, Any]:
                           f"({type(err).__name__}: {err})") from err
     if not isinstance(data, dict):
         raise PolicyError(f"{str(path)!r} is not a Stable-Baselines3 model zip")
+    module, name = saved_policy_class(data)
+    if module in REMOVED_POLICY_MODULES:
+        raise PolicyError(f"cannot load {str(path)!r}: {removed_policy(name)}")
     return data
 
 
 def detect_model(path: Path) -> tuple[str, str]:
     """``(algo, backend)`` of the model zip ``path``, from its metadata: the module of the
-    saved policy class (``sbx.tqc.policies`` -> tqc on sbx), else the constructor arguments
-    the algorithm saved.
+    saved policy class (``sbx.tqc.policies`` -> tqc on sbx; SB3's PPO by the arguments it
+    saved).
 
     Raises:
         PolicyError: not a model zip of SB3, sb3-contrib or SBX, or one of another algorithm.
     """
     data = read_model_data(path)
-    policy_class = data.get("policy_class", {})
-    module = policy_class.get("__module__", "") if isinstance(policy_class, dict) else ""
-    parts = str(module).split(".")
-    backend = policy_module_backend(str(module))
+    module = saved_policy_class(data)[0]
+    parts = module.split(".")
+    backend = POLICY_PACKAGE_BACKENDS.get(parts[0])
     if backend is not None and len(parts) > 1 and parts[1] in ALGORITHMS:
         return parts[1], backend
-    if module in SBX_POLICY_MODULES and policy_class.get("ALGO") in ALGORITHMS:
-        return policy_class["ALGO"], backend  # rehabbot.rl.features_jax names its algorithm
-    if backend is not None:
-        for algo, keys in SIGNATURE_KEYS.items():
-            if all(key in data for key in keys):
-                return algo, backend
+    if module == "stable_baselines3.common.policies" and all(k in data for k in PPO_SIGNATURE):
+        return "ppo", "sb3"
     raise PolicyError(f"{str(path)!r} was saved by an algorithm rehabbot does not run "
                       f"(policy module {module!r}); supported: {list(ALGORITHMS)} on "
                       f"{' or '.join(BACKENDS)}")

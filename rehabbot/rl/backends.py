@@ -17,9 +17,8 @@ translates a settings file and lists what it changed.
 from __future__ import annotations
 
 import importlib.util
-from importlib import metadata
 
-from rehabbot.common.errors import UsageError
+from rehabbot.common.provenance import distribution_version
 from rehabbot.rl.algorithms import (
     ALGO_CLASSES,
     ALGO_NAMES,
@@ -28,18 +27,19 @@ from rehabbot.rl.algorithms import (
     BackendUnavailableError,
     algo_class,
     check_algo,
+    one_of,
 )
 
 BACKEND_CHOICES = ("auto", *BACKENDS)
 DEFAULT_BACKEND = "auto"
-# The libraries whose versions a run of each backend records (import name, distribution).
+# The libraries whose versions a run of each backend records (import name, distribution), the
+# backend's own first.
 BACKEND_PACKAGES = {
     "sb3": (("stable_baselines3", "stable-baselines3"), ("sb3_contrib", "sb3-contrib"),
             ("torch", "torch")),
     "sbx": (("sbx", "sbx-rl"), ("jax", "jax"), ("jaxlib", "jaxlib"), ("flax", "flax"),
             ("optax", "optax"), ("stable_baselines3", "stable-baselines3")),
 }
-BACKEND_LIBRARY = {"sb3": "stable-baselines3", "sbx": "sbx-rl"}
 
 
 def sbx_available() -> bool:
@@ -49,10 +49,7 @@ def sbx_available() -> bool:
 
 def check_backend_choice(backend: str) -> str:
     """``auto``, ``sb3`` or ``sbx`` in lower case; :class:`UsageError` otherwise."""
-    name = str(backend).strip().lower()
-    if name not in BACKEND_CHOICES:
-        raise UsageError(f"unknown backend {backend!r}; valid: {', '.join(BACKEND_CHOICES)}")
-    return name
+    return one_of(backend, BACKEND_CHOICES, "backend")
 
 
 def resolve_backend(backend: str, algo: str) -> str:
@@ -87,18 +84,11 @@ def saved_backend(manifest: dict | None) -> str:
     return value if value in BACKENDS else "sb3"
 
 
-def _version(distribution: str) -> str | None:
-    try:
-        return metadata.version(distribution)
-    except metadata.PackageNotFoundError:
-        return None
-
-
 def backend_version(backend: str) -> str | None:
     """The version of the library that implements ``backend`` (None: not installed)."""
-    return _version(BACKEND_LIBRARY[backend])
+    return distribution_version(BACKEND_PACKAGES[backend][0][1])
 
 
 def backend_versions(backend: str) -> dict[str, str | None]:
     """Versions of the libraries a run on ``backend`` depends on, by import name."""
-    return {name: _version(dist) for name, dist in BACKEND_PACKAGES[backend]}
+    return {name: distribution_version(dist) for name, dist in BACKEND_PACKAGES[backend]}

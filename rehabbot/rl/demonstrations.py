@@ -29,6 +29,8 @@ imported inside functions only.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -70,11 +72,6 @@ def check_expert(env_id: str, env_kwargs: dict[str, Any]) -> None:
         env.close()
 
 
-def _describe_expert(expert: ScriptedExpert) -> dict[str, Any]:
-    return {"class": "rehabbot.rl.experts.ScriptedExpert", "gain": expert.gain,
-            "speed_fraction": expert.speed_fraction}
-
-
 @dataclass
 class ExpertEpisodes:
     """The transitions of the expert's episodes, one row per env step, in order."""
@@ -107,39 +104,61 @@ def _step(env: gym.Env, expert: ScriptedExpert, obs: np.ndarray) -> tuple[Any, .
     return action, next_obs, float(reward), bool(terminated), bool(truncated), info
 
 
+def _expert_rows(env_id: str, env_kwargs: dict[str, Any], n_envs: int, episodes: int,
+                 first_seed: int, record: dict[str, Any]) -> Iterator[tuple[list, list]]:
+    """Run the scripted expert in ``n_envs`` envs side by side (episode seeds ``first_seed``,
+    ``first_seed + 1``, ... in the order the episodes start) until ``episodes`` episodes have
+    ended; yield each row: the envs' observations and their steps (:func:`_step`).
+    ``record`` gets the seeds, returns, lengths and successes of the episodes and the expert;
+    at the end, ``cut``: the envs whose episode was still running."""
+    envs = [gym.make(env_id, **env_kwargs) for _ in range(n_envs)]
+    try:
+        experts = [_expert(env) for env in envs]
+        record.update(seeds=[], returns=[], lengths=[], successes=[],
+                      expert={"class": "rehabbot.rl.experts.ScriptedExpert",
+                              "gain": experts[0].gain,
+                              "speed_fraction": experts[0].speed_fraction})
+        current: list[np.ndarray | None] = [None] * n_envs
+        running = [[0.0, 0] for _ in range(n_envs)]
+        while len(record["returns"]) < episodes:
+            for j in range(n_envs):
+                if current[j] is None:
+                    record["seeds"].append(first_seed + len(record["seeds"]))
+                    current[j], _ = envs[j].reset(seed=record["seeds"][-1])
+                    running[j] = [0.0, 0]
+            steps = [_step(envs[j], experts[j], current[j]) for j in range(n_envs)]
+            yield list(current), steps
+            for j, (_, next_obs, reward, terminated, truncated, info) in enumerate(steps):
+                running[j] = [running[j][0] + reward, running[j][1] + 1]
+                current[j] = next_obs
+                if terminated or truncated:
+                    record["returns"].append(running[j][0])
+                    record["lengths"].append(running[j][1])
+                    record["successes"].append(bool(info.get("is_success", False)))
+                    current[j] = None
+        record["cut"] = [j for j in range(n_envs) if current[j] is not None]
+    finally:
+        for env in envs:
+            env.close()
+
+
 def collect_expert_episodes(env_id: str, env_kwargs: dict[str, Any], episodes: int,
                             first_seed: int) -> ExpertEpisodes:
     """Run the scripted expert for ``episodes`` episodes of ``env_id`` seeded
     ``first_seed``, ``first_seed + 1``, ...; every transition, in order."""
-    env = gym.make(env_id, **env_kwargs)
-    expert = _expert(env)
-    rows: dict[str, list] = {key: [] for key in ("obs", "next", "act", "rew", "term", "trunc")}
-    seeds, returns, lengths, successes = [], [], [], []
-    try:
-        for i in range(episodes):
-            seeds.append(first_seed + i)
-            obs, _ = env.reset(seed=first_seed + i)
-            total, length, done, info = 0.0, 0, False, {}
-            while not done:
-                action, next_obs, reward, terminated, truncated, info = _step(env, expert, obs)
-                for key, value in zip(rows, (obs, next_obs, action, reward, terminated,
-                                             truncated), strict=True):
-                    rows[key].append(value)
-                total, length, obs = total + reward, length + 1, next_obs
-                done = terminated or truncated
-            returns.append(total)
-            lengths.append(length)
-            successes.append(bool(info.get("is_success", False)))
-    finally:
-        env.close()
+    record: dict[str, Any] = {}
+    rows = [(obs[0], *steps[0][:5]) for obs, steps in
+            _expert_rows(env_id, env_kwargs, 1, episodes, first_seed, record)]
+    obs, actions, next_obs, rewards, terminated, truncated = (
+        list(column) for column in zip(*rows, strict=True)) if rows else ([],) * 6
     return ExpertEpisodes(
-        observations=np.asarray(rows["obs"], dtype=np.float32),
-        next_observations=np.asarray(rows["next"], dtype=np.float32),
-        actions=np.asarray(rows["act"], dtype=np.float32),
-        rewards=np.asarray(rows["rew"], dtype=np.float32),
-        terminated=np.asarray(rows["term"], dtype=bool),
-        truncated=np.asarray(rows["trunc"], dtype=bool), seeds=seeds, returns=returns,
-        lengths=lengths, successes=successes, expert=_describe_expert(expert))
+        observations=np.asarray(obs, dtype=np.float32),
+        next_observations=np.asarray(next_obs, dtype=np.float32),
+        actions=np.asarray(actions, dtype=np.float32),
+        rewards=np.asarray(rewards, dtype=np.float32),
+        terminated=np.asarray(terminated, dtype=bool), truncated=np.asarray(truncated, dtype=bool),
+        seeds=record["seeds"], returns=record["returns"], lengths=record["lengths"],
+        successes=record["successes"], expert=record["expert"])
 
 
 # --------------------------------------------------------------------------- replay buffer
@@ -161,56 +180,31 @@ def fill_replay_buffer(model: Any, env_id: str, env_kwargs: dict[str, Any], epis
     """
     buffer = model.replay_buffer
     n_envs = int(buffer.n_envs)
-    envs = [gym.make(env_id, **env_kwargs) for _ in range(n_envs)]
-    experts = [_expert(env) for env in envs]
-    seeds: list[int] = []
-    returns: list[float] = []
-    lengths: list[int] = []
-    successes: list[bool] = []
-    current: list[np.ndarray | None] = [None] * n_envs
-    running = [[0.0, 0] for _ in range(n_envs)]
+    record: dict[str, Any] = {}
     rows = 0
-    try:
-        while len(returns) < episodes:
-            for j in range(n_envs):
-                if current[j] is None:
-                    seeds.append(first_seed + len(seeds))
-                    current[j], _ = envs[j].reset(seed=seeds[-1])
-                    running[j] = [0.0, 0]
+    expert_rows = _expert_rows(env_id, env_kwargs, n_envs, episodes, first_seed, record)
+    with contextlib.closing(expert_rows):  # a full buffer closes the envs at once
+        for current, steps in expert_rows:
             if buffer.full:
                 raise TrainingUsageError(
-                    f"the replay buffer (buffer_size={buffer.buffer_size * n_envs}) is too small "
-                    f"for {episodes} expert episodes; raise buffer_size or lower --demos")
-            steps = [_step(envs[j], experts[j], current[j]) for j in range(n_envs)]
+                    f"the replay buffer (buffer_size={buffer.buffer_size * n_envs}) is too "
+                    f"small for {episodes} expert episodes; raise buffer_size or lower --demos")
             actions = np.stack([model.policy.scale_action(step[0]) for step in steps])
             buffer.add(np.stack(current), np.stack([step[1] for step in steps]), actions,
                        np.array([step[2] for step in steps], dtype=np.float32),
                        np.array([step[3] or step[4] for step in steps]),
                        [{"TimeLimit.truncated": step[4] and not step[3]} for step in steps])
             rows += 1
-            for j, (_, next_obs, reward, terminated, truncated, info) in enumerate(steps):
-                running[j][0] += reward
-                running[j][1] += 1
-                current[j] = next_obs
-                if terminated or truncated:
-                    returns.append(running[j][0])
-                    lengths.append(running[j][1])
-                    successes.append(bool(info.get("is_success", False)))
-                    current[j] = None
-        last = (buffer.pos - 1) % buffer.buffer_size
-        for j in range(n_envs):
-            if current[j] is not None:  # cut: bootstrap from its last next observation
-                buffer.dones[last, j] = True
-                buffer.timeouts[last, j] = True
-    finally:
-        for env in envs:
-            env.close()
-    return {"episodes": episodes, "episodes_started": len(seeds), "seeds": seeds,
-            "first_seed": first_seed, "seed_rule": f"run seed + {DEMO_SEED_OFFSET} + i",
-            "transitions": rows * n_envs, "episode_lengths": lengths,
-            "mean_return": round(float(np.mean(returns)), 4),
-            "success_rate": float(np.mean(successes)),
-            "expert": _describe_expert(experts[0])}
+    last = (buffer.pos - 1) % buffer.buffer_size
+    for j in record["cut"]:  # cut: bootstrap from its last next observation
+        buffer.dones[last, j] = True
+        buffer.timeouts[last, j] = True
+    return {"episodes": episodes, "episodes_started": len(record["seeds"]),
+            "seeds": record["seeds"], "first_seed": first_seed,
+            "seed_rule": f"run seed + {DEMO_SEED_OFFSET} + i", "transitions": rows * n_envs,
+            "episode_lengths": record["lengths"],
+            "mean_return": round(float(np.mean(record["returns"])), 4),
+            "success_rate": float(np.mean(record["successes"])), "expert": record["expert"]}
 
 
 # --------------------------------------------------------------------------- behaviour cloning

@@ -41,7 +41,7 @@ class ScriptedExpert:
         if not (0.0 < speed_fraction <= 1.0):
             raise ValueError(f"speed_fraction={speed_fraction!r} must be in (0, 1]")
         base = _rehab_env(env)
-        config = base.config if base is not None else _config_of(env)
+        config = base.config if base is not None else _sub_env_attr(env, "config")
         mode = config.control_mode
         if mode not in SUPPORTED_MODES:
             raise ValueError(f"ScriptedExpert supports control_mode in {list(SUPPORTED_MODES)}, "
@@ -62,7 +62,7 @@ class ScriptedExpert:
         n_joints = low.size
         self._agent = config.observation == "agent"
         if self._agent:
-            n_arms = 2 if _is_bilateral(config) else 1
+            n_arms = 2 if hasattr(config, "bilateral_table") else 1  # a BilateralEnv's
             layout = agent_layout(n_joints // n_arms, n_arms, 1)
             self._fine = layout.slice("joint_error_fine")
             self._coarse = layout.slice("joint_error")
@@ -71,7 +71,7 @@ class ScriptedExpert:
             self._theta_star, self._theta = layout.slice("theta_star"), layout.slice("theta")
         # Largest setpoint change per decision [rad] that the mode allows.
         if mode == "joint_velocity":
-            self._dt_s = base.dt_s if base is not None else _first_dt(env)
+            self._dt_s = float(base.dt_s if base is not None else _sub_env_attr(env, "dt_s"))
             self._step_max = high * self._dt_s
         elif mode == "joint_position":
             self._step_max = np.full(n_joints, PAPER_DELTA_RAD)
@@ -114,13 +114,6 @@ class ScriptedExpert:
         return self.predict(observation)[0]
 
 
-def _first_dt(env) -> float:
-    """The decision period of a vector env's sub-envs."""
-    if hasattr(env, "get_attr"):
-        return float(env.get_attr("dt_s")[0])
-    return float(_rehab_env(env.envs[0]).dt_s)
-
-
 def _rehab_env(env) -> RehabEnv | None:
     """The RehabEnv under ``env``'s wrappers (or a PopulationEnv, which passes every attribute
     on to its episode's RehabEnv), or None for a vector env."""
@@ -128,28 +121,21 @@ def _rehab_env(env) -> RehabEnv | None:
     return unwrapped if isinstance(getattr(unwrapped, "config", None), RehabEnvConfig) else None
 
 
-def _config_of(env) -> RehabEnvConfig:
-    """The config of a vector env's sub-envs (Gymnasium or SB3 vector env)."""
+def _sub_env_attr(env, name: str):
+    """The attribute ``name`` of a vector env's first sub-env (Gymnasium or SB3 vector env)."""
     if hasattr(env, "get_attr"):
-        return env.get_attr("config")[0]
+        return env.get_attr(name)[0]
     if hasattr(env, "envs"):
-        return _rehab_env(env.envs[0]).config
-    raise ValueError(f"cannot find the config of {env!r}")
-
-
-def _is_bilateral(config: RehabEnvConfig) -> bool:
-    return hasattr(config, "bilateral_table")
+        return getattr(_rehab_env(env.envs[0]), name)
+    raise ValueError(f"cannot find the {name} of {env!r}")
 
 
 def native_action_box(env, config: RehabEnvConfig) -> tuple[np.ndarray, np.ndarray]:
     """The controller's action box ``(low, high)`` (float64): the env's action space with
     native actions, the box that ``Box(-1, 1)`` maps onto with unit actions."""
-    if config.action_scale == "native" or not hasattr(env, "controller"):
-        if config.action_scale == "unit":  # a vector env: ask a sub-env
-            controller = (env.get_attr("controller")[0] if hasattr(env, "get_attr")
-                          else _rehab_env(env.envs[0]).controller)
-            return (controller.clip_low.astype(float), controller.clip_high.astype(float))
-        space = env.single_action_space if hasattr(env, "single_action_space") \
-            else env.action_space
-        return space.low.astype(float), space.high.astype(float)
-    return env.controller.clip_low.astype(float), env.controller.clip_high.astype(float)
+    if config.action_scale == "unit":  # the controller's (a vector env's: a sub-env's)
+        controller = env.controller if hasattr(env, "controller") \
+            else _sub_env_attr(env, "controller")
+        return controller.clip_low.astype(float), controller.clip_high.astype(float)
+    space = env.single_action_space if hasattr(env, "single_action_space") else env.action_space
+    return space.low.astype(float), space.high.astype(float)

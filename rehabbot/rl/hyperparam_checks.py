@@ -1,17 +1,18 @@
 """Checks of single hyperparameter values, before anything trains: the valid range of each
 numeric constructor argument (:data:`VALUE_RANGES`, with the strings and ``None`` some of them
 also take), booleans for :data:`BOOL_KEYS`, ``train_freq`` as ``n`` or ``[n, unit]``, no NaN or
-infinity anywhere (:func:`check_value`); numbers written as YAML strings (:func:`coerce_number`)
-and ``"lin_<float>"`` schedules (:func:`parse_schedule`).
+infinity anywhere (:func:`check_value`); numbers written as YAML strings (:func:`coerce_number`),
+counts (:func:`as_count`) and ``"lin_<float>"`` schedules (:func:`parse_schedule`); values as
+JSON (:func:`jsonable`, classes by dotted name).
 
-:mod:`rehabbot.rl.hyperparams` reads whole files and mappings with these and re-exports the
-public names.
+:mod:`rehabbot.rl.hyperparams` reads whole files and mappings with these.
 """
 
 from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 from typing import Any
 
 from rehabbot.common.errors import UsageError
@@ -76,6 +77,18 @@ def coerce_number(value: Any) -> Any:
         text = value.strip().replace("_", "")
         return int(text) if _INT_RE.match(text) else float(text)
     return value
+
+
+def as_count(value: Any, what: str, minimum: int = 1,
+             error: type[Exception] = HyperparameterError) -> int:
+    """``value`` as an integer >= ``minimum`` (``"1e5"`` and ``100000.0`` count too); else
+    ``error`` naming ``what``."""
+    number = coerce_number(value)
+    if isinstance(number, float) and number.is_integer():
+        number = int(number)
+    if isinstance(number, bool) or not isinstance(number, int) or number < minimum:
+        raise error(f"{what} must be an integer >= {minimum}, got {value!r}")
+    return number
 
 
 def _range_text(key: str, extras: bool = True) -> str:
@@ -165,3 +178,25 @@ def parse_schedule(value: Any, key: str, where: str) -> Any:
         # progress_remaining goes 1 -> 0 over the run: start -> 0, linearly.
         return LinearSchedule(start, 0.0, 1.0)
     return value
+
+
+def jsonable(value: Any) -> Any:
+    """A JSON-able version of a hyperparameter value (classes by dotted name)."""
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, int):
+        return int(value)
+    if isinstance(value, float):
+        return value if math.isfinite(value) else repr(value)
+    if isinstance(value, Mapping):
+        return {str(key): jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(item) for item in value]
+    if isinstance(value, type):
+        return f"{value.__module__}.{value.__qualname__}"
+    if callable(value) and isinstance(getattr(value, "__qualname__", None), str):
+        return f"{value.__module__}.{value.__qualname__}"  # e.g. flax.linen.relu
+    item = getattr(value, "item", None)
+    if callable(item) and getattr(value, "shape", None) == ():
+        return jsonable(item())
+    return repr(value)

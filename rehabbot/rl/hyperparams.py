@@ -6,20 +6,21 @@ A file holds either env ids (full, or without ``rehabbot/``) mapped to hyperpara
 ``default`` entry for every other id (as RL Zoo reads it), or one flat mapping. Keys: the SB3
 constructor arguments of the algorithm plus the zoo keys ``n_timesteps``, ``n_envs``,
 ``policy``, ``normalize``, ``noise_type`` and ``noise_std``; ``policy`` is an SB3 alias
-(``MlpPolicy``) or, as in RL Zoo, the dotted name of a policy class under ``rehabbot.`` or
-``stable_baselines3.`` (``rehabbot.rl.features.TrackingErrorSACPolicy``); ``policy_kwargs`` may
-be a mapping or a zoo string such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``,
-parsed without ``eval`` (:mod:`rehabbot.rl.zoo_strings`);
-``learning_rate``/``clip_range``/``clip_range_vf`` may be ``"lin_<float>"``. Each value
-is checked against its valid range (:mod:`rehabbot.rl.hyperparam_checks`).
+(``MlpPolicy``) or, as in RL Zoo, the dotted name of a policy class under
+``stable_baselines3.`` (``sbx.`` for SBX); ``policy_kwargs`` may be a mapping or a zoo string
+such as ``"dict(net_arch=[64, 64], activation_fn=nn.ReLU)"``, parsed without ``eval``
+(:mod:`rehabbot.rl.zoo_strings`); ``learning_rate``/``clip_range``/``clip_range_vf`` may be
+``"lin_<float>"``. Each value is checked against its valid range
+(:mod:`rehabbot.rl.hyperparam_checks`).
 
 Files are read for one backend (``backend="sb3"``, the default, or ``"sbx"``): keys are checked
 against that library's class; for SBX, what only PyTorch can run is translated or dropped and
 listed (:mod:`rehabbot.rl.sbx_settings`).
 
-The settings shipped with the package are written so that RL Zoo reads them unchanged too
-(``python -m rl_zoo3.train --gym-packages rehabbot --conf-file .../sac.yml``): a ``default``
-entry, classes named only as ``policy``, ``policy_kwargs`` as a string of literals.
+The settings shipped with the package name only the libraries' own classes and options, so
+that RL Zoo reads them unchanged too (``python -m rl_zoo3.train --gym-packages rehabbot
+--conf-file .../sac.yml``): full env ids, classes named only as ``policy``, ``policy_kwargs``
+as a string of literals.
 """
 
 from __future__ import annotations
@@ -34,22 +35,26 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from rehabbot.common.errors import RehabbotError, UsageError
-from rehabbot.envs.registration import ENV_SPECS, env_short_name, resolve_env_id
-from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
-from rehabbot.rl.hyperparam_checks import BOOL_KEYS as BOOL_KEYS  # re-exported
-from rehabbot.rl.hyperparam_checks import SCHEDULE_KEYS as SCHEDULE_KEYS  # re-exported
-from rehabbot.rl.hyperparam_checks import TRAIN_FREQ_UNITS as TRAIN_FREQ_UNITS  # re-exported
-from rehabbot.rl.hyperparam_checks import VALUE_RANGES as VALUE_RANGES  # re-exported
-from rehabbot.rl.hyperparam_checks import (  # re-exported
-    HyperparameterError as HyperparameterError,
+from rehabbot.common.errors import UsageError
+from rehabbot.envs.registration import BILATERAL_IDS, ENV_SPECS, env_short_name, resolve_env_id
+from rehabbot.rl.algorithms import (
+    ALGO_NAMES,
+    OFF_POLICY,
+    REMOVED_POLICY_MODULES,
+    algo_class,
+    check_algo,
+    removed_policy,
 )
-from rehabbot.rl.hyperparam_checks import check_value as check_value  # re-exported
-from rehabbot.rl.hyperparam_checks import coerce_number as coerce_number  # re-exported
-from rehabbot.rl.hyperparam_checks import parse_schedule
-from rehabbot.rl.zoo_strings import TORCH_NAMES as TORCH_NAMES  # re-exported
-from rehabbot.rl.zoo_strings import _resolve_torch_names
-from rehabbot.rl.zoo_strings import parse_python_expression as parse_python_expression
+from rehabbot.rl.hyperparam_checks import (
+    SCHEDULE_KEYS,
+    HyperparameterError,
+    as_count,
+    check_value,
+    coerce_number,
+    jsonable,
+    parse_schedule,
+)
+from rehabbot.rl.zoo_strings import _resolve_torch_names, parse_python_expression
 
 DEFAULT_POLICY = "MlpPolicy"
 DEFAULT_NOISE_STD = 0.1
@@ -58,22 +63,8 @@ DEFAULT_SOURCES = {"sb3": HYPERPARAMS_DEFAULT_SOURCE, "sbx": "sbx defaults"}
 SETTINGS_FOLDER = "hyperparams"  # package data of rehabbot.rl
 DEFAULT_ENTRY = "default"  # RL Zoo's entry for every env id without its own
 # Packages a dotted ``policy`` may be imported from (a hyperparameter file names no other code).
-POLICY_PACKAGES = ("rehabbot", "stable_baselines3")
+POLICY_PACKAGES = ("stable_baselines3",)
 SBX_POLICY_PACKAGES = ("sbx",)
-
-
-def _check_algo(algo: str) -> str:
-    try:
-        return check_algo(algo)
-    except UsageError as err:
-        raise HyperparameterError(str(err)) from None
-
-
-def _resolve_env_id(env_id: str) -> str:
-    try:
-        return resolve_env_id(env_id)
-    except UsageError as err:
-        raise HyperparameterError(str(err)) from None
 
 
 def _settings_root():
@@ -95,11 +86,41 @@ def settings_names() -> list[str]:
 
 
 def shipped_settings(algo: str) -> str | None:
-    """The name of the settings file shipped for ``algo`` (``"sac"`` for SAC: the file of the
-    published results, with an entry per id), or None when there is none. ``rehabbot train``
-    uses it when no ``--hyperparams`` is given."""
-    algo = _check_algo(algo)
+    """The name of the settings file shipped for ``algo`` (``"sac"`` for SAC: an entry per
+    ``-v2`` id), or None when there is none. ``rehabbot train`` uses it when no
+    ``--hyperparams`` is given."""
+    algo = check_algo(algo, HyperparameterError)
     return algo if algo in settings_names() else None
+
+
+def library_defaults(algo: str) -> str:
+    """The ``--hyperparams`` that trains ``algo`` with the library's defaults on any id."""
+    name = f"sb3-defaults/{algo}"
+    return f"--hyperparams {name}" if name in settings_names() else \
+        "a --hyperparams file without entries"
+
+
+def _no_entry(path: str | Path, file: Path, env_id: str, algo: str,
+              entries: list[Any]) -> HyperparameterError:
+    """The error for a file without an entry for ``env_id``: for a shipped file and a ``-v0``
+    or ``-v1`` id, why it has none and what to train instead."""
+    shipped = file.parent.resolve() == Path(str(_settings_root())).resolve()
+    stem, _, version = env_id.rpartition("-")
+    if shipped and version in ("v0", "v1") and f"{stem}-v2" in ENV_SPECS:
+        fields = "44 fields of both arms" if env_id in BILATERAL_IDS else "23 fields"
+        what = ("is the paper's reference (its observation and reward), on which a plain "
+                "network does not learn" if version == "v0" else
+                f"observes the paper's {fields}, from which a plain network does not learn "
+                "(0 % in every configuration tried)")
+        same = "the same task with the learnable -v1 reward and" if version == "v0" else \
+            "the same task and reward with"
+        return HyperparameterError(
+            f"the shipped {file.stem!r} settings have no entry for {env_id}: it {what}; train "
+            f"{stem}-v2 ({same} the agent observation), or pass {library_defaults(algo)} to "
+            "train this id with the library's defaults")
+    return HyperparameterError(f"hyperparameter file {str(path)!r} has no entry for {env_id} "
+                               f"and no {DEFAULT_ENTRY!r} entry (entries: "
+                               f"{', '.join(map(str, entries))})")
 
 
 def settings_path(name: str | Path) -> Path:
@@ -210,13 +231,12 @@ class Hyperparameters:
         }
 
 
-def _as_count(value: Any, key: str, where: str, minimum: int = 1) -> int:
-    value = coerce_number(value)
-    if isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise HyperparameterError(f"{where}: {key} must be an integer >= {minimum}, got {value!r}")
-    return value
+def _expression(text: str, where: str) -> Any:
+    """A zoo string (:func:`parse_python_expression`); a HyperparameterError naming ``where``."""
+    try:
+        return parse_python_expression(text)
+    except ValueError as err:
+        raise HyperparameterError(f"{where}: {err}") from err
 
 
 def _parse_normalize(value: Any, where: str) -> dict[str, Any] | None:
@@ -225,10 +245,7 @@ def _parse_normalize(value: Any, where: str) -> dict[str, Any] | None:
         if lowered in ("true", "false", "yes", "no"):
             value = lowered in ("true", "yes")
         else:
-            try:
-                value = parse_python_expression(value)
-            except ValueError as err:
-                raise HyperparameterError(f"{where}: normalize: {err}") from err
+            value = _expression(value, f"{where}: normalize")
     if value is None or value is False:
         return None
     if value is True:
@@ -251,28 +268,19 @@ def _parse_policy_kwargs(value: Any, where: str) -> dict[str, Any]:
     if value is None:
         return {}
     if isinstance(value, str):
-        try:
-            value = parse_python_expression(value)
-        except ValueError as err:
-            raise HyperparameterError(f"{where}: policy_kwargs: {err}") from err
+        value = _expression(value, f"{where}: policy_kwargs")
     if not isinstance(value, dict):
         raise HyperparameterError(f"{where}: policy_kwargs must be a mapping or a 'dict(...)' "
                             f"string, got {value!r}")
     return {str(key): _resolve_torch_names(item) for key, item in value.items()}
 
 
-def _class_name(value: type) -> str:
-    return f"{value.__module__}.{value.__qualname__}"
-
-
 def _policy_error(where: str, raw: Any, cls: Any, why: str,
                   packages: tuple[str, ...] = POLICY_PACKAGES) -> HyperparameterError:
     return HyperparameterError(
         f"{where}: policy {raw!r} {why}; valid: {', '.join(cls.policy_aliases)}, or the dotted "
-        f"name of a subclass of {_class_name(cls.policy_aliases[DEFAULT_POLICY])} under "
-        f"{' or '.join(f'{package}.' for package in packages)}"
-        + (" (rehabbot.rl.features has one for each algorithm)" if "rehabbot" in packages
-           else ""))
+        f"name of a subclass of {jsonable(cls.policy_aliases[DEFAULT_POLICY])} under "
+        f"{' or '.join(f'{package}.' for package in packages)}")
 
 
 def parse_policy(raw: Any, cls: Any, where: str,
@@ -285,6 +293,8 @@ def parse_policy(raw: Any, cls: Any, where: str,
         raise _policy_error(where, raw, cls, "is neither an alias nor a dotted class name",
                             packages)
     module_name, _, attr = raw.strip().rpartition(".")
+    if module_name in REMOVED_POLICY_MODULES:
+        raise HyperparameterError(f"{where}: {removed_policy(raw.strip())}")
     if module_name.split(".")[0] not in packages:
         raise _policy_error(where, raw, cls, "is outside the packages policies may come from",
                             packages)
@@ -294,7 +304,7 @@ def parse_policy(raw: Any, cls: Any, where: str,
         raise _policy_error(where, raw, cls, f"cannot be imported ({err})", packages) from None
     base = cls.policy_aliases[DEFAULT_POLICY]
     if not (isinstance(policy, type) and issubclass(policy, base)):
-        raise _policy_error(where, raw, cls, f"is not a subclass of {_class_name(base)}",
+        raise _policy_error(where, raw, cls, f"is not a subclass of {jsonable(base)}",
                             packages)
     return policy
 
@@ -317,7 +327,7 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     Raises:
         HyperparameterError: an unknown key (named, with the algorithm) or a bad value.
     """
-    algo = _check_algo(algo)
+    algo = check_algo(algo, HyperparameterError)
     where = source if entry is None else f"{source} [{entry}]"
     hp = Hyperparameters(algo=algo, source=source, entry=entry, backend=backend)
     if mapping is None:
@@ -330,19 +340,16 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
     sbx = backend == "sbx"
     if sbx:
         from rehabbot.rl import sbx_settings
-    noise_std_given = False
     for key, raw in mapping.items():
         if not isinstance(key, str):
             raise HyperparameterError(f"{where}: hyperparameter names must be strings, got {key!r}")
         if key == "n_timesteps":
-            hp.n_timesteps = _as_count(raw, key, where)
+            hp.n_timesteps = as_count(raw, f"{where}: {key}")
         elif key == "n_envs":
-            hp.n_envs = _as_count(raw, key, where)
+            hp.n_envs = as_count(raw, f"{where}: {key}")
         elif key == "policy" and sbx and sbx_settings.is_torch_policy(raw):
-            counterpart = sbx_settings.jax_counterpart(raw, algo)
-            hp.policy = DEFAULT_POLICY if counterpart is None else counterpart
-            hp.backend_changes.append(sbx_settings.policy_change(raw) if counterpart is None
-                                      else sbx_settings.counterpart_change(raw, counterpart))
+            hp.policy = DEFAULT_POLICY
+            hp.backend_changes.append(sbx_settings.policy_change(raw))
         elif key == "policy":
             hp.policy = parse_policy(raw, cls, where,
                                       SBX_POLICY_PACKAGES if sbx else POLICY_PACKAGES)
@@ -360,13 +367,12 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
                 raise HyperparameterError(f"{where}: noise_std must be a positive number, got "
                                     f"{raw!r}")
             hp.noise_std = float(value)
-            noise_std_given = True
         elif key in MANAGED_KEYS:
             raise HyperparameterError(f"{where}: {key!r} cannot be set in a hyperparameter "
                                       f"file ({MANAGED_KEYS[key]})")
         elif sbx and (key not in params or key == "self") \
                 and (why := sbx_settings.dropped_key_reason(key, algo)) is not None:
-            hp.backend_changes.append(sbx_settings.change(key, jsonable(raw), None, why))
+            hp.backend_changes.append(sbx_settings.change(key, raw, None, why))
         elif key not in params or key == "self":
             valid = [name for name in params
                      if name not in ("self", *MANAGED_KEYS, *OBJECT_KEYS)]
@@ -392,7 +398,7 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
                 value = parse_schedule(value, key, where)
             hp.kwargs[key] = value
         hp.given[key] = jsonable(raw)
-    if noise_std_given and hp.noise_type is None:
+    if hp.noise_std is not None and hp.noise_type is None:
         raise HyperparameterError(f"{where}: noise_std needs noise_type "
                                   f"({' or '.join(NOISE_TYPES)})")
     if sbx and "policy_kwargs" in hp.kwargs:
@@ -407,6 +413,28 @@ def hyperparameters_from_mapping(mapping: Mapping[str, Any] | None, algo: str,
         if hp.noise_std is None:
             hp.noise_std = DEFAULT_NOISE_STD
     return hp
+
+
+def read_yaml(path: Path, what: str, error: type[Exception], name: str | None = None) -> Any:
+    """The YAML document in ``path`` (``{}`` for an empty file).
+
+    Raises:
+        error: PyYAML is missing, or the file is unreadable or not YAML (the message names
+            ``what`` and the file, as ``name`` if given).
+    """
+    name = str(path) if name is None else name
+    try:
+        import yaml
+    except ImportError as err:
+        raise error(f"reading a {what} needs PyYAML: pip install pyyaml") from err
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as err:
+        raise error(f"cannot read {what} {name!r}: "
+                    f"{getattr(err, 'strerror', None) or err}") from err
+    except yaml.YAMLError as err:
+        raise error(f"{what} {name!r} is not valid YAML: {' '.join(str(err).split())}") from err
+    return {} if data is None else data
 
 
 def _looks_like_env_key(key: Any) -> bool:
@@ -426,27 +454,13 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str,
         HyperparameterError: missing or unreadable file, invalid YAML, no entry for ``env_id``,
             unknown key or bad value (the message names the file and the key).
     """
-    env_id = _resolve_env_id(env_id)
-    algo = _check_algo(algo)
+    try:
+        env_id = resolve_env_id(env_id)
+    except UsageError as err:
+        raise HyperparameterError(str(err)) from None
+    algo = check_algo(algo, HyperparameterError)
     file = settings_path(path)
-    try:
-        import yaml
-    except ImportError as err:
-        raise RehabbotError("reading hyperparameter files needs PyYAML: pip install pyyaml"
-                            ) from err
-    try:
-        text = file.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise HyperparameterError(f"cannot read hyperparameter file {str(path)!r}: "
-                                  f"{err}") from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        detail = " ".join(str(err).split())
-        raise HyperparameterError(f"hyperparameter file {str(path)!r} is not valid YAML: "
-                                  f"{detail}") from err
-    if data is None:
-        data = {}
+    data = read_yaml(file, "hyperparameter file", HyperparameterError, str(path))
     if not isinstance(data, dict):
         raise HyperparameterError(f"hyperparameter file {str(path)!r} must hold a mapping, "
                                   f"not a {type(data).__name__}")
@@ -463,9 +477,7 @@ def load_hyperparameters(path: str | Path, env_id: str, algo: str,
     if not matches and DEFAULT_ENTRY in data:
         matches = [DEFAULT_ENTRY]
     if not matches:
-        raise HyperparameterError(f"hyperparameter file {source!r} has no entry for {env_id} "
-                                  f"and no {DEFAULT_ENTRY!r} entry (entries: "
-                                  f"{', '.join(map(str, data))})")
+        raise _no_entry(path, file, env_id, algo, list(data))
     if len(matches) > 1:
         raise HyperparameterError(f"hyperparameter file {source!r} has two entries for "
                                   f"{env_id}: {', '.join(matches)}")
@@ -500,27 +512,3 @@ def as_hyperparameters(hyperparams: Any, env_id: str, algo: str,
         return hyperparameters_from_mapping(hyperparams, algo, backend=backend)
     raise HyperparameterError(f"hyperparams must be a file path, a settings name or a "
                               f"mapping, got {type(hyperparams).__name__}")
-
-
-def jsonable(value: Any) -> Any:
-    """A JSON-able version of a hyperparameter value (classes by dotted name)."""
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, int):
-        return int(value)
-    if isinstance(value, float):
-        return value if math.isfinite(value) else repr(value)
-    if isinstance(value, Mapping):
-        return {str(key): jsonable(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(item) for item in value]
-    if isinstance(value, type):
-        return f"{value.__module__}.{value.__qualname__}"
-    if callable(value) and isinstance(getattr(value, "__qualname__", None), str):
-        return f"{value.__module__}.{value.__qualname__}"  # e.g. flax.linen.relu
-    item = getattr(value, "item", None)
-    if callable(item) and getattr(value, "shape", None) == ():
-        return jsonable(item())
-    return repr(value)
-
-

@@ -10,7 +10,7 @@ from typing import Any
 
 from rehabbot.common.errors import RehabbotError, UsageError
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import ALGO_NAMES, BACKENDS, OFF_POLICY
+from rehabbot.rl.algorithms import ALGO_NAMES, BACKENDS, OFF_POLICY, read_model_data
 from rehabbot.rl.backends import check_backend_choice, saved_backend, sbx_available
 from rehabbot.rl.hyperparams import Hyperparameters, jsonable
 
@@ -32,11 +32,6 @@ class TrainingUsageError(TrainingError, UsageError):
 
 class NothingToResumeError(TrainingError):
     """``resume`` was asked for a run that has no checkpoint."""
-
-
-def mapping_equal(a: Any, b: Any) -> bool:
-    """Whether two JSON-able mappings hold the same values."""
-    return json.dumps(jsonable(a), sort_keys=True) == json.dumps(jsonable(b), sort_keys=True)
 
 
 @dataclass
@@ -98,15 +93,6 @@ def check_demonstrations(algo: str, demos: int | None, bc: bool) -> tuple[int, b
     return episodes, bool(bc)
 
 
-def _companion_file(path: Path) -> Path | None:
-    """``path`` if it exists, else its legacy pickled twin (refused with a message that
-    says how to convert it when it is loaded), else None."""
-    if path.is_file():
-        return path
-    legacy = path.with_suffix(".pkl")
-    return legacy if legacy.is_file() else None
-
-
 def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumePoint | None:
     """The newest checkpoint (by step count); model.zip of a finished run without any."""
     found = runs.checkpoints(run_dir)
@@ -114,11 +100,11 @@ def find_resume_point(run_dir: Path, manifest: dict[str, Any] | None) -> ResumeP
         steps, path = found[0]
         replay_buffer, vecnormalize = runs.companions(path.parent, steps)
         return ResumePoint(path, steps, replay_buffer if replay_buffer.is_file() else None,
-                           _companion_file(vecnormalize))
+                           runs.stored(vecnormalize))
     model = run_dir / runs.MODEL_NAME
     if model.is_file() and manifest and manifest.get("status") == "finished":
         return ResumePoint(model, int(manifest.get("timesteps_done", 0)), None,
-                           _companion_file(run_dir / runs.VECNORMALIZE_NAME))
+                           runs.stored(run_dir / runs.VECNORMALIZE_NAME))
     return None
 
 
@@ -218,7 +204,8 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
             raise TrainingUsageError(f"cannot resume {run_dir} with {n_envs} envs: it was "
                                      f"trained with n_envs={saved_n_envs}")
         saved_kwargs = manifest.get("env_kwargs") or {}
-        if env_kwargs is not None and not mapping_equal(env_kwargs, saved_kwargs):
+        if env_kwargs is not None and json.dumps(jsonable(env_kwargs), sort_keys=True) \
+                != json.dumps(jsonable(saved_kwargs), sort_keys=True):
             raise TrainingUsageError(f"cannot resume {run_dir} with env kwargs "
                                      f"{json.dumps(env_kwargs)}: it was trained with "
                                      f"{json.dumps(saved_kwargs)}")
@@ -246,6 +233,7 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
         if normalize is not None and point.vecnormalize is None:
             raise TrainingError(f"cannot resume {run_dir}: checkpoint {point.checkpoint.name} "
                                 "lacks its VecNormalize statistics")
+        read_model_data(point.checkpoint)  # PolicyError now: unreadable, or a removed class
         total = total_timesteps if total_timesteps is not None \
             else int(manifest.get("total_timesteps", DEFAULT_TIMESTEPS))
         plan = RunPlan(

@@ -27,8 +27,9 @@ Stable-Baselines3 (or SBX) is imported only when a model is loaded.
 
 from __future__ import annotations
 
+import importlib
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,7 +39,7 @@ import numpy as np
 
 from rehabbot.common.errors import DataError, UsageError
 from rehabbot.envs.registration import resolve_env_id
-from rehabbot.rl import runs
+from rehabbot.rl import runs, zoo
 from rehabbot.rl.algorithms import (
     BackendUnavailableError,
     PolicyError,
@@ -48,9 +49,12 @@ from rehabbot.rl.algorithms import (
 )
 from rehabbot.rl.backends import saved_backend
 from rehabbot.rl.safe_load import load_safely
-from rehabbot.rl.vecnormalize_io import read_vecnormalize
+from rehabbot.rl.vecnormalize_io import VecNormalizeStats, read_vecnormalize
 
 POLICY_KEYWORDS = ("expert", "aan", "random")
+# The scripted controllers a keyword names: (module, class).
+CONTROLLERS = {"expert": ("rehabbot.rl.experts", "ScriptedExpert"),
+               "aan": ("rehabbot.rl.assist_as_needed", "AssistAsNeeded")}
 
 __all__ = ["POLICY_KEYWORDS", "LoadedPolicy", "PolicyError", "RandomPolicy", "check_spaces",
            "detect_algo", "env_for", "load_model", "load_policy", "load_zoo_policy",
@@ -84,12 +88,12 @@ class LoadedPolicy:
     model_path: Path | None = None
     run_dir: Path | None = None
     manifest: dict = field(default_factory=dict)
-    normalize_obs: Callable[[np.ndarray], np.ndarray] | None = None
+    vecnormalize: VecNormalizeStats | None = None  # the run's observation normalisation
 
     def act(self, observation: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """One action for one observation."""
-        if self.normalize_obs is not None:
-            observation = self.normalize_obs(observation)
+        if self.vecnormalize is not None:
+            observation = self.vecnormalize.normalize_obs(observation)
         action, _ = self.policy.predict(observation, deterministic=deterministic)
         return action
 
@@ -101,7 +105,7 @@ class LoadedPolicy:
                 "run_dir": str(self.run_dir) if self.run_dir else None,
                 "train_seed": self.manifest.get("seed"),
                 "train_timesteps": self.manifest.get("timesteps_done"),
-                "obs_normalized": self.normalize_obs is not None}
+                "obs_normalized": self.vecnormalize is not None}
 
 
 def model_file(spec: str | Path) -> Path:
@@ -139,23 +143,16 @@ def check_spaces(model_obs: gym.Space, model_act: gym.Space, env: gym.Env, what:
                               f"env's is {theirs}")
 
 
-def _load_normalizer(run_dir: Path | None) -> Callable[[np.ndarray], np.ndarray] | None:
-    """The observation normalisation of the run's ``vecnormalize.json`` (None without one).
+def _load_normalizer(run_dir: Path | None) -> VecNormalizeStats | None:
+    """The run's ``vecnormalize.json`` statistics (None without one).
 
     Raises:
         PolicyError: damaged statistics, or a legacy pickled ``vecnormalize.pkl`` only (it
             is not unpickled; the message says how to convert a trusted one).
     """
-    if run_dir is None:
-        return None
-    path = run_dir / runs.VECNORMALIZE_NAME
-    if not path.is_file():
-        legacy = run_dir / runs.LEGACY_VECNORMALIZE_NAME
-        if not legacy.is_file():
-            return None
-        path = legacy
+    path = runs.stored(run_dir / runs.VECNORMALIZE_NAME) if run_dir is not None else None
     try:
-        return read_vecnormalize(path).normalize_obs
+        return read_vecnormalize(path) if path is not None else None
     except DataError as err:
         raise PolicyError(str(err)) from err
 
@@ -188,7 +185,7 @@ def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
     return LoadedPolicy(policy=model, label=label, kind="model", algo=algo, backend=backend,
                         model_path=path,
                         run_dir=run_dir, manifest=manifest,
-                        normalize_obs=_load_normalizer(run_dir))
+                        vecnormalize=_load_normalizer(run_dir))
 
 
 def model_label(algo: str, seed: Any, path: Path) -> str:
@@ -210,26 +207,17 @@ def load_policy(spec: str | Path, env: gym.Env, seed: int | None = None) -> Load
     """``"expert"``, ``"aan"`` (the assist-as-needed controller,
     :mod:`rehabbot.rl.assist_as_needed`), ``"random"`` (seeded with ``seed``) or a model file,
     for ``env``."""
-    if str(spec) == "expert":
-        from rehabbot.rl.experts import ScriptedExpert
-
+    if str(spec) in CONTROLLERS:
+        module, name = CONTROLLERS[str(spec)]
         try:
-            expert = ScriptedExpert(env)
+            controller = getattr(importlib.import_module(module), name)(env)
         except ValueError as err:
             raise PolicyError(str(err)) from err
-        return LoadedPolicy(policy=expert, label="expert", kind="expert")
-    if str(spec) == "aan":
-        from rehabbot.rl.assist_as_needed import AssistAsNeeded
-
-        try:
-            controller = AssistAsNeeded(env)
-        except ValueError as err:
-            raise PolicyError(str(err)) from err
-        return LoadedPolicy(policy=controller, label="aan", kind="expert")
+        return LoadedPolicy(policy=controller, label=str(spec), kind="expert")
     if str(spec) == "random":
         return LoadedPolicy(policy=RandomPolicy(env.action_space, seed), label="random",
                             kind="random")
-    if _is_zoo(spec):
+    if zoo.is_zoo_spec(spec):
         return load_zoo_policy(str(spec), env)
     return load_model(model_file(spec), env)
 
@@ -250,7 +238,7 @@ def env_for(specs: Sequence[str], env_id: str | None = None,
     if env_id is not None:
         resolved = resolve_env_id(env_id)
         for spec in specs:
-            if _is_zoo(spec):
+            if zoo.is_zoo_spec(spec):
                 _zoo_env(spec)  # UsageError / ZooError for a bad zoo spec, now
             elif spec not in POLICY_KEYWORDS:
                 model_file(spec)  # PolicyError for a missing file, now
@@ -259,7 +247,7 @@ def env_for(specs: Sequence[str], env_id: str | None = None,
     for spec in specs:
         if spec in POLICY_KEYWORDS:
             continue
-        if _is_zoo(spec):
+        if zoo.is_zoo_spec(spec):
             found[spec] = _zoo_env(spec)
             continue
         path = model_file(spec)
@@ -289,22 +277,14 @@ def env_for(specs: Sequence[str], env_id: str | None = None,
 # ``zoo:ENV/ALGO`` specs (rehabbot.rl.zoo): NumPy actors shipped with the package.
 
 
-def _is_zoo(spec: str | Path) -> bool:
-    return isinstance(spec, str) and spec.startswith("zoo:")
-
-
 def _zoo_env(spec: str) -> tuple[str, dict]:
     """The env id and kwargs a zoo agent was trained with."""
-    from rehabbot.rl import zoo
-
     policy = zoo.load_spec(spec)
     return policy.env_id, dict(policy.metadata.get("env_kwargs") or {})
 
 
 def load_zoo_policy(spec: str, env: gym.Env) -> LoadedPolicy:
     """The zoo agent of ``spec`` (``zoo:ENV/ALGO``), checked against ``env``."""
-    from rehabbot.rl import zoo
-
     policy = zoo.load_spec(spec)
     check_spaces(policy.observation_space, policy.action_space, env, f"zoo agent {spec!r}")
     meta = policy.metadata

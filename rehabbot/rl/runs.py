@@ -113,6 +113,15 @@ def companions(checkpoint_dir: Path, steps: int) -> tuple[Path, Path]:
             checkpoint_dir / f"{CHECKPOINT_PREFIX}_vecnormalize_{steps}_steps.json")
 
 
+def stored(path: Path) -> Path | None:
+    """``path`` if it exists, else its legacy pickled twin (``.pkl``: refused, with a message
+    that says how to convert it, when it is read), else None."""
+    if path.is_file():
+        return path
+    legacy = path.with_suffix(".pkl")
+    return legacy if legacy.is_file() else None
+
+
 def has_content(run_dir: Path) -> bool:
     """Whether ``run_dir`` holds anything besides its lock file."""
     run_dir = Path(run_dir)

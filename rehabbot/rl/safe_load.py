@@ -5,10 +5,11 @@ every attribute JSON cannot hold (spaces, schedules, classes, SBX's networks) as
 cloudpickle: loading such a zip runs whatever code the pickle names. RehabBot therefore:
 
 * loads with SB3's ``custom_objects`` for **every** pickled entry of ``data``, so SB3 never
-  unpickles one: spaces come from the env, classes, schedules and settings are rebuilt from
-  the run's manifest (``hyperparameters.given``, the same settings that built the model) or
-  the algorithm's defaults; an entry it cannot rebuild is refused (:class:`DataError`
-  naming it). The weights (``*.pth``) are read by PyTorch with ``weights_only=True``;
+  unpickles one: spaces come from the env, the policy class is the algorithm's own that the
+  zip names in its readable metadata, schedules and settings are rebuilt from the run's
+  manifest (``hyperparameters.given``, the same settings that built the model) or the
+  algorithm's defaults; an entry it cannot rebuild is refused (:class:`DataError` naming it).
+  The weights (``*.pth``) are read by PyTorch with ``weights_only=True``;
 * saves SBX (JAX) models without their pickled networks: the train states (parameters,
   optimiser states, step counts) go into the zip as a msgpack entry (:data:`JAX_STATE_ENTRY`,
   plain arrays, read with flax's msgpack reader), and the networks are rebuilt on loading.
@@ -21,13 +22,19 @@ from __future__ import annotations
 
 import inspect
 import io
-import json
 import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from rehabbot.common.errors import DataError, RehabbotError
+from rehabbot.rl.algorithms import (
+    ALGORITHMS,
+    PolicyError,
+    read_model_data,
+    saved_policy_class,
+)
+from rehabbot.rl.hyperparam_checks import SCHEDULE_KEYS
 
 JAX_STATE_ENTRY = "rehabbot_jax_state.msgpack"
 # Attributes of SBX models that are networks or JAX states (pickled by SB3): not saved in
@@ -35,7 +42,6 @@ JAX_STATE_ENTRY = "rehabbot_jax_state.msgpack"
 SBX_EXCLUDED = ("policy", "actor", "qf", "vf", "ent_coef", "ent_coef_state", "key")
 SBX_MODEL_STATES = ("ent_coef_state",)
 SPACE_KEYS = ("observation_space", "action_space")
-SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf")
 # Where training stopped (last observation, episode statistics): the next ``learn`` resets
 # the env and starts the statistics afresh when they are None.
 RUNTIME_KEYS = ("_last_obs", "_last_episode_starts", "_last_original_obs", "ep_info_buffer",
@@ -102,39 +108,19 @@ def save_model(model: Any, stream: io.BufferedIOBase) -> None:
 # --------------------------------------------------------------------------- loading
 
 
-def read_zip_data(path: Path) -> dict[str, Any]:
-    """The ``data`` JSON of an SB3 zip.
-
-    Raises:
-        DataError: not a zip, or no readable ``data`` (the message names the file).
-    """
-    try:
-        with zipfile.ZipFile(path) as archive:
-            data = json.loads(archive.read("data").decode("utf-8"))
-    except (OSError, KeyError, UnicodeDecodeError, json.JSONDecodeError,
-            zipfile.BadZipFile) as err:
-        raise DataError(f"{path} is not a Stable-Baselines3 model zip: {err}") from err
-    if not isinstance(data, dict):
-        raise DataError(f"{path} is not a Stable-Baselines3 model zip: data is not an object")
-    return data
-
-
 def pickled_entries(data: Mapping[str, Any]) -> list[str]:
     """The keys of ``data`` that SB3 would unpickle (cloudpickle) when loading."""
     return sorted(key for key, value in data.items()
                   if isinstance(value, dict) and ":serialized:" in value)
 
 
-def _saved_hyperparameters(cls: Any, algo: str, backend: str,
-                           manifest: Mapping[str, Any] | None) -> Any:
+def _saved_hyperparameters(algo: str, backend: str, manifest: Mapping[str, Any] | None) -> Any:
     """The run's hyperparameters rebuilt from its manifest (what the user gave), else the
     defaults; classes only from the packages the settings files may name."""
     from rehabbot.rl.hyperparams import hyperparameters_from_mapping
 
     block = (manifest or {}).get("hyperparameters") or {}
     given = dict(block.get("given") or {}) if isinstance(block, Mapping) else {}
-    if isinstance(block, Mapping) and isinstance(block.get("policy"), str):
-        given.setdefault("policy", block["policy"])
     try:
         return hyperparameters_from_mapping(given, algo, source="the run's manifest",
                                             backend=backend)
@@ -143,24 +129,12 @@ def _saved_hyperparameters(cls: Any, algo: str, backend: str,
             from err
 
 
-def _policy_class_from_data(cls: Any, path: Path, entry: Any) -> Any:
-    """The policy class a zip without a manifest names in its readable metadata (module and
-    the qualified names of its methods), imported only from the packages settings files may
-    name and only if it is a subclass of the algorithm's policy."""
-    import re
-
-    from rehabbot.rl.hyperparams import parse_policy
-
-    module = entry.get("__module__") if isinstance(entry, dict) else None
-    names = {match for value in (entry or {}).values() if isinstance(value, str)
-             for match in re.findall(r"<function ([A-Za-z_][\w]*)\.\w+ at ", value)}
-    for name in sorted(names):
-        try:
-            policy = parse_policy(f"{module}.{name}", cls, f"model {path}")
-        except (RehabbotError, ValueError):
-            continue
-        return cls.policy_aliases[policy] if isinstance(policy, str) else policy
-    return cls.policy_aliases["MlpPolicy"]
+def _policy_class_from_data(cls: Any, data: Mapping[str, Any]) -> Any:
+    """The policy class a zip names in its readable metadata: one of the algorithm's own
+    (``policy_aliases``) by its name, else its MlpPolicy."""
+    name = saved_policy_class(data)[1].rpartition(".")[2]
+    own = {policy.__name__: policy for policy in cls.policy_aliases.values()}
+    return own.get(name, cls.policy_aliases["MlpPolicy"])
 
 
 def _default(cls: Any, key: str) -> Any:
@@ -186,8 +160,6 @@ def _readable_bound(text: Any, dtype: Any) -> Any:
 def _check_space(path: Path, key: str, saved: Any, space: Any, env_name: str) -> None:
     """Refuse a model whose saved space (SB3's readable copy of it) is not the env's."""
     import numpy as np
-
-    from rehabbot.rl.algorithms import PolicyError
 
     saved = saved if isinstance(saved, dict) else {}
     shape, dtype = saved.get("_shape"), saved.get("dtype")
@@ -217,7 +189,7 @@ def safe_custom_objects(cls: Any, path: Path, data: Mapping[str, Any], env: Any,
     """
     from stable_baselines3.common.utils import FloatSchedule
 
-    hp = _saved_hyperparameters(cls, algo, backend, manifest)
+    hp = _saved_hyperparameters(algo, backend, manifest)
     spec = getattr(env, "spec", None)
     env_name = spec.id if spec is not None else type(env).__name__
     replacements: dict[str, Any] = {}
@@ -226,11 +198,8 @@ def safe_custom_objects(cls: Any, path: Path, data: Mapping[str, Any], env: Any,
             space = getattr(env, key)
             _check_space(path, key, data[key], space, env_name)
             replacements[key] = space
-        elif key == "policy_class" and not (manifest or {}).get("hyperparameters"):
-            replacements[key] = _policy_class_from_data(cls, path, data[key])
         elif key == "policy_class":
-            replacements[key] = hp.policy if isinstance(hp.policy, type) \
-                else cls.policy_aliases[hp.policy]
+            replacements[key] = _policy_class_from_data(cls, data)
         elif key in SCHEDULE_KEYS or key == "lr_schedule" or key == "clip_range_schedule":
             source = {"lr_schedule": "learning_rate",
                       "clip_range_schedule": "clip_range"}.get(key, key)
@@ -299,7 +268,7 @@ def load_safely(cls: Any, path: Path, env: Any, algo: str, backend: str,
             state, a damaged file; PolicyError: spaces that do not fit ``env``.
     """
     path = Path(path)
-    data = read_zip_data(path)
+    data = read_model_data(path)  # PolicyError: unreadable, or a removed policy class
     custom = safe_custom_objects(cls, path, data, env, algo, backend, manifest)
     model = cls.load(path, env=env, custom_objects=custom, **load_kwargs)
     if is_sbx(cls):
@@ -310,8 +279,6 @@ def load_safely(cls: Any, path: Path, env: Any, algo: str, backend: str,
 def load_run_model(cls: Any, path: Path, venv: Any, manifest: Mapping[str, Any] | None,
                    **load_kwargs: Any) -> Any:
     """A checkpoint of a run for training on (``venv``), loaded by :func:`load_safely`."""
-    from rehabbot.rl.algorithms import ALGORITHMS
-
     algo = str((manifest or {}).get("algo", ""))
     if algo not in ALGORITHMS:
         raise DataError(f"cannot load {path}: its run's manifest names algorithm {algo!r}")

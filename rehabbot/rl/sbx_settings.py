@@ -7,13 +7,8 @@ rules, and the run's manifest lists each change (``hyperparameters.backend_chang
 what was given, what is used instead or ``null`` when dropped, and why):
 
 =================================== =======================================================
-``policy``: ``TrackingErrorSACPolicy``, its JAX counterpart in :mod:`rehabbot.rl.features_jax`
-``TrackingErrorTD3Policy`` or       (the same features, computed inside SBX's actor and
-``TrackingErrorActorCriticPolicy``  critics or value network); ``features_extractor_kwargs``
-(``rehabbot.rl.features``)          become its own kwargs
-``policy``: any other PyTorch       SBX's ``MlpPolicy`` (the SBX network reads the
-policy class (``rehabbot.rl.``,     observation as it is)
-SB3's)
+``policy``: a PyTorch policy class  SBX's ``MlpPolicy`` (the SBX network reads the
+(SB3's or sb3-contrib's)            observation as it is)
 ``policy_kwargs``:
   ``features_extractor_class/_kwargs`` dropped (SBX's MLP policies have no extractor)
   ``activation_fn`` (``nn.ReLU``, …) the Flax function of the same name (``flax.linen.relu``)
@@ -38,15 +33,23 @@ Keys only SBX has (``qf_learning_rate``, ``policy_delay`` for SAC, ``param_reset
 
 from __future__ import annotations
 
+import importlib
 import inspect
 from typing import Any
 
-TORCH_POLICY_PACKAGES = ("rehabbot", "stable_baselines3", "sb3_contrib")
+from rehabbot.rl.hyperparam_checks import jsonable
+
+TORCH_POLICY_PACKAGES = ("stable_baselines3", "sb3_contrib")
 SBX_POLICY = "MlpPolicy"
 EXTRACTOR_KEYS = ("features_extractor_class", "features_extractor_kwargs")
-ACTIVATIONS = {"ReLU": "relu", "Tanh": "tanh", "ELU": "elu", "LeakyReLU": "leaky_relu",
-               "SiLU": "silu", "GELU": "gelu"}
-OPTIMIZERS = {"Adam": "adam", "AdamW": "adamw", "RMSprop": "rmsprop", "SGD": "sgd"}
+# policy_kwargs key -> (JAX module, its names of the torch classes, what they are, SBX's default)
+JAX_EQUIVALENTS = {
+    "activation_fn": ("flax.linen", {"ReLU": "relu", "Tanh": "tanh", "ELU": "elu",
+                                     "LeakyReLU": "leaky_relu", "SiLU": "silu", "GELU": "gelu"},
+                      "Flax function", "SBX's default activation"),
+    "optimizer_class": ("optax", {"Adam": "adam", "AdamW": "adamw", "RMSprop": "rmsprop",
+                                  "SGD": "sgd"}, "Optax optimizer", "SBX's default (optax.adam)"),
+}
 OPTIMIZER_RENAMES = {"alpha": "decay"}  # torch.optim.RMSprop(alpha) is optax.rmsprop(decay)
 KEY_REASONS = {
     "target_update_interval": "SBX updates the target networks after every gradient step",
@@ -57,22 +60,12 @@ KEY_REASONS = {
 
 def change(key: str, given: Any, used: Any, why: str) -> dict[str, Any]:
     """One entry of the manifest's ``backend_changes`` (``used`` None: dropped)."""
-    return {"key": key, "given": _name(given), "used": _name(used), "why": why}
-
-
-def _name(value: Any) -> Any:
-    if callable(value) and isinstance(getattr(value, "__qualname__", None), str):
-        return f"{value.__module__}.{value.__qualname__}"
-    if isinstance(value, dict):
-        return {str(k): _name(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_name(v) for v in value]
-    return value
+    return {"key": key, "given": jsonable(given), "used": jsonable(used), "why": why}
 
 
 def is_torch_policy(raw: Any) -> bool:
     """Whether a ``policy`` value names a PyTorch policy class (a dotted name under
-    rehabbot, stable_baselines3 or sb3_contrib, or such a class itself)."""
+    stable_baselines3 or sb3_contrib, or such a class itself)."""
     if isinstance(raw, type):
         return raw.__module__.split(".")[0] in TORCH_POLICY_PACKAGES
     return isinstance(raw, str) and "." in raw.strip(". ") and \
@@ -84,29 +77,6 @@ def policy_change(raw: Any) -> dict[str, Any]:
     return change("policy", raw, SBX_POLICY,
                   "a PyTorch policy class cannot run on JAX; SBX's MlpPolicy takes its place "
                   "(without a features extractor: the network reads the observation as it is)")
-
-
-def _dotted(raw: Any) -> str:
-    if isinstance(raw, type):
-        return f"{raw.__module__}.{raw.__qualname__}"
-    return str(raw).strip()
-
-
-def jax_counterpart(raw: Any, algo: str) -> type | None:
-    """SBX's policy with the same network as the PyTorch ``policy`` ``raw`` (the tracking-error
-    policies of :mod:`rehabbot.rl.features` for SAC, TD3 and PPO), or None."""
-    from rehabbot.rl.features_jax import SBX_TRACKING_ERROR_POLICIES
-
-    found = SBX_TRACKING_ERROR_POLICIES.get(_dotted(raw))
-    return found if found is not None and algo == found.ALGO else None
-
-
-def counterpart_change(raw: Any, used: type) -> dict[str, Any]:
-    """The change record for a PyTorch ``policy`` replaced by its JAX counterpart."""
-    return change("policy", raw, _dotted(used),
-                  "the same network on JAX: SBX's MlpPolicy with TrackingErrorFeatures computed "
-                  "inside the actor and the critics or value network "
-                  "(rehabbot.rl.features_jax)")
 
 
 def dropped_key_reason(key: str, algo: str) -> str | None:
@@ -124,22 +94,11 @@ def dropped_key_reason(key: str, algo: str) -> str | None:
                                 f"SBX's {ALGO_NAMES[algo]} does not have")
 
 
-def _flax_activation(value: Any) -> Any | None:
-    name = ACTIVATIONS.get(getattr(value, "__name__", ""))
-    if name is None:
-        return None
-    import flax.linen
-
-    return getattr(flax.linen, name)
-
-
-def _optax_optimizer(value: Any) -> Any | None:
-    name = OPTIMIZERS.get(getattr(value, "__name__", ""))
-    if name is None:
-        return None
-    import optax
-
-    return getattr(optax, name)
+def _jax_equivalent(key: str, value: Any) -> Any | None:
+    """The Flax activation or Optax optimizer of a torch class (None: none of that name)."""
+    module, names, _, _ = JAX_EQUIVALENTS[key]
+    name = names.get(getattr(value, "__name__", ""))
+    return None if name is None else getattr(importlib.import_module(module), name)
 
 
 def _is_torch(value: Any) -> bool:
@@ -170,75 +129,31 @@ def _optimizer_kwargs(given: dict[str, Any], optimizer: Any,
     return out
 
 
-def _init_params(cls: type) -> dict[str, inspect.Parameter]:
-    """The keyword arguments ``cls`` takes, through the classes whose ``__init__`` passes
-    ``**kwargs`` on to its base."""
-    params: dict[str, inspect.Parameter] = {}
-    for klass in cls.__mro__:
-        if "__init__" not in vars(klass):
-            continue
-        own = inspect.signature(klass.__init__).parameters
-        params.update({k: v for k, v in own.items() if v.kind not in (v.VAR_POSITIONAL,
-                                                                          v.VAR_KEYWORD)})
-        if not any(v.kind is v.VAR_KEYWORD for v in own.values()):
-            break
-    return params
-
-
-def _feature_kwargs(key: str, value: Any, policy_class: type,
-                    changes: list[dict[str, Any]]) -> dict[str, Any]:
-    """``features_extractor_class/_kwargs`` for a policy that computes TrackingErrorFeatures
-    itself: the class must be TrackingErrorFeatures, the kwargs become the policy's own."""
-    where = f"policy_kwargs.{key}"
-    if key == "features_extractor_class":
-        if _dotted(value).rsplit(".", 1)[-1] != "TrackingErrorFeatures":
-            changes.append(change(where, value, None, f"{policy_class.__name__} computes "
-                                  "TrackingErrorFeatures itself; no other extractor runs on JAX"))
-        return {}
-    kept = {}
-    for name, item in (value or {}).items():
-        if name in policy_class.FEATURE_KWARGS:
-            kept[name] = item
-        else:
-            changes.append(change(f"{where}.{name}", item, None, "not an argument of "
-                                  "TrackingErrorFeatures in JAX"))
-    return kept
-
-
 def translate_policy_kwargs(kwargs: dict[str, Any], policy_class: type,
                             changes: list[dict[str, Any]]) -> dict[str, Any]:
     """``policy_kwargs`` parsed for SB3 (torch classes resolved) as SBX's ``policy_class``
     takes them; appends a record to ``changes`` for each key translated or dropped."""
-    params = _init_params(policy_class)
+    params = inspect.signature(policy_class.__init__).parameters
     out: dict[str, Any] = {}
     optimizer = None
     for key, value in kwargs.items():
         where = f"policy_kwargs.{key}"
-        if key in EXTRACTOR_KEYS and hasattr(policy_class, "FEATURE_KWARGS"):
-            out.update(_feature_kwargs(key, value, policy_class, changes))
-        elif key in EXTRACTOR_KEYS:
+        if key in EXTRACTOR_KEYS:
             changes.append(change(where, value, None, "SBX's MLP policies have no features "
                                   "extractor: the network reads the observation as it is"))
-        elif key == "activation_fn" and _is_torch(value):
-            flax_fn = _flax_activation(value)
-            if flax_fn is None:
-                changes.append(change(where, value, None, "no Flax function of that name; "
-                                      "SBX's default activation is used"))
+        elif key in JAX_EQUIVALENTS and _is_torch(value):
+            module, _, what, default = JAX_EQUIVALENTS[key]
+            used = _jax_equivalent(key, value)
+            if used is None:
+                changes.append(change(where, value, None, f"no {what} of that name; {default} "
+                                      "is used"))
             else:
-                out[key] = flax_fn
-                changes.append(change(where, value, f"flax.linen.{flax_fn.__name__}",
-                                      "the Flax function of the PyTorch module"
+                out[key] = used
+                changes.append(change(where, value, f"{module}.{used.__name__}",
+                                      f"the {what} of the PyTorch class"
                                       + (" (tanh approximation)" if value.__name__ == "GELU"
                                          else "")))
-        elif key == "optimizer_class" and _is_torch(value):
-            optimizer = _optax_optimizer(value)
-            if optimizer is None:
-                changes.append(change(where, value, None, "no Optax optimizer of that name; "
-                                      "SBX's default (optax.adam) is used"))
-            else:
-                out[key] = optimizer
-                changes.append(change(where, value, f"optax.{optimizer.__name__}",
-                                      "the Optax optimizer of the PyTorch one"))
+            optimizer = used if key == "optimizer_class" else optimizer
         elif key == "batch_norm_momentum" and key in params and isinstance(value, (int, float)):
             out[key] = 1.0 - float(value)
             changes.append(change(where, value, out[key], "PyTorch's batch-norm momentum weighs "

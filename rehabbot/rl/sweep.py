@@ -24,15 +24,13 @@ and its status, and is rewritten as trials finish. Ray is imported only inside f
 
 from __future__ import annotations
 
-import inspect
-import json
 import logging
 import os
 import shutil
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,14 +38,14 @@ from rehabbot.common.errors import DataError, RehabbotError, UsageError
 from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
 from rehabbot.rl import runs
-from rehabbot.rl.planning import find_resume_point
+from rehabbot.rl.backends import DEFAULT_BACKEND
+from rehabbot.rl.planning import check_demonstrations, find_resume_point, run_is_complete
 from rehabbot.rl.sweep_config import (
-    OPTIONAL_TRAIN_KEYS,
     RAY_DIR,
     SWEEP_FILE,
     SweepConfig,
-    SweepConfigError,
     Trial,
+    naming,
 )
 
 SWEEP_FORMAT = 1
@@ -74,18 +72,11 @@ class SweepResult:
     out: Path
     records: list[dict[str, Any]]
     interrupted: bool = False
-    experiment: Path | None = None
-    counts: dict[str, int] = field(default_factory=dict)
 
     @property
     def failed(self) -> list[dict[str, Any]]:
         """The records of trials that failed."""
         return [r for r in self.records if r["status"] == "failed"]
-
-    @property
-    def ok(self) -> bool:
-        """Every trial finished."""
-        return all(r["status"] == "finished" for r in self.records)
 
 
 # --------------------------------------------------------------------------- run folders
@@ -102,9 +93,7 @@ def trial_state(trial: Trial) -> str:
         manifest = runs.read_manifest(run_dir)
     except DataError:
         return "resume"  # train_run names the damaged manifest
-    if (manifest is not None and manifest.get("status") == "finished"
-            and int(manifest.get("timesteps_done", 0)) >= trial.total_timesteps
-            and (run_dir / runs.MODEL_NAME).is_file()):
+    if run_is_complete(run_dir, manifest, trial.total_timesteps):
         return "complete"
     if find_resume_point(run_dir, manifest) is not None:
         return "resume"
@@ -130,13 +119,6 @@ def run_status(trial: Trial) -> dict[str, Any]:
             "error": manifest.get("error") if status == "failed" else None}
 
 
-def train_run_accepts(name: str) -> bool:
-    """Whether :func:`train_run` takes the keyword ``name`` (e.g. ``demos``)."""
-    from rehabbot.rl.training import train_run
-
-    return name in inspect.signature(train_run).parameters
-
-
 def run_trial(spec: Mapping[str, Any], command: Sequence[str] = ()) -> dict[str, Any]:
     """Run one trial in this process (what a Ray worker does): start, continue or skip its
     run folder with :func:`train_run`; returns its record (status, steps, wall-clock, error).
@@ -153,21 +135,18 @@ def run_trial(spec: Mapping[str, Any], command: Sequence[str] = ()) -> dict[str,
     started = time.monotonic()
     error = None
     if state != "complete":
-        kwargs: dict[str, Any] = dict(
-            n_envs=trial.n_envs, hyperparams=trial.build_hyperparameters(),
-            env_kwargs=trial.env_kwargs, resume=state == "resume",
-            overwrite=state == "restart", eval_freq=trial.eval_freq,
-            eval_episodes=trial.eval_episodes, checkpoint_freq=trial.checkpoint_freq,
-            progress_bar=False)
-        for name in OPTIONAL_TRAIN_KEYS:  # only set if train_run takes them (check_sweep)
-            kwargs[name] = getattr(trial, name)
-        kwargs = {k: v for k, v in kwargs.items() if v is not None}
         saved_argv = sys.argv
         if command:
             sys.argv = list(command)
         try:
             train_run(trial.env_id, trial.algo, trial.seed, trial.total_timesteps,
-                      trial.out_dir, **kwargs)
+                      trial.out_dir, n_envs=trial.n_envs,
+                      hyperparams=trial.build_hyperparameters(), env_kwargs=trial.env_kwargs,
+                      resume=state == "resume", overwrite=state == "restart",
+                      eval_freq=trial.eval_freq, eval_episodes=trial.eval_episodes,
+                      checkpoint_freq=trial.checkpoint_freq, progress_bar=False,
+                      backend=trial.backend or DEFAULT_BACKEND, demos=trial.demos,
+                      bc=bool(trial.bc))
         except Exception as err:  # a trial's failure is reported, not raised
             error = " ".join(f"{type(err).__name__}: {err}".split())
         finally:
@@ -280,7 +259,7 @@ def _progress_callback(state: _SweepState) -> Any:
 
 def check_sweep(config: SweepConfig) -> list[Trial]:
     """Every trial of ``config``, checked before anything runs: hyperparameter files and grid
-    values, ``demos`` support, the env kwargs (each env is built once), the output folder.
+    values, ``demos`` and ``bc``, the env kwargs (each env is built once), the output folder.
 
     Raises:
         SweepConfigError: a bad setting (names it).
@@ -288,26 +267,13 @@ def check_sweep(config: SweepConfig) -> list[Trial]:
     """
     from rehabbot.rl.training import check_env_kwargs
 
-    for name in OPTIONAL_TRAIN_KEYS:
-        if config.uses(name) and not train_run_accepts(name):
-            raise SweepConfigError(f"{config.source}: {name}: this version of rehabbot's "
-                                   f"train_run does not take {name!r}; remove the key")
     trials = config.trials()
-    if config.uses("demos") or config.uses("bc"):
-        from rehabbot.rl import planning
-
-        check = getattr(planning, "check_demonstrations", None)
-        for algo in config.algos if check is not None else ():
-            try:
-                check(algo, config.demos[algo], bool(config.bc[algo]))
-            except UsageError as err:
-                raise SweepConfigError(f"{config.source}: {algo}: {err}") from err
-    if config.env_kwargs is not None:
-        for env_id in config.envs:
-            try:
-                check_env_kwargs(env_id, config.env_kwargs)
-            except UsageError as err:
-                raise SweepConfigError(f"{config.source}: env_kwargs: {err}") from err
+    for algo in config.algos:
+        with naming(f"{config.source}: {algo}"):
+            check_demonstrations(algo, config.demos[algo], bool(config.bc[algo]))
+    for env_id in config.envs if config.env_kwargs is not None else ():
+        with naming(f"{config.source}: env_kwargs"):
+            check_env_kwargs(env_id, config.env_kwargs)
     check_writable_dir(config.out)
     return trials
 
@@ -351,14 +317,6 @@ def _keep_worker_logs(session_dir: Path | None, destination: Path) -> None:
             continue
 
 
-def _trial_dirname(trial: Any) -> str:
-    return f"trial_{trial.trial_id}"
-
-
-def _trial_name(trial: Any) -> str:
-    return str(trial.config.get("trial", {}).get("key", trial.trial_id))
-
-
 def _run_on_ray(state: _SweepState, pending: list[Trial], address: str | None,
                 cpus: int | None) -> bool:
     """Run ``pending`` as one Ray Tune experiment; returns whether it was interrupted."""
@@ -381,8 +339,9 @@ def _run_on_ray(state: _SweepState, pending: list[Trial], address: str | None,
             tune.with_resources(_ray_trial, dict(resources)),
             param_space={"command": state.command,
                          "trial": tune.grid_search([t.to_json() for t in pending])},
-            tune_config=tune.TuneConfig(trial_name_creator=_trial_name,
-                                        trial_dirname_creator=_trial_dirname),
+            tune_config=tune.TuneConfig(  # trials named by their run folder below OUT
+                trial_name_creator=lambda trial: str(trial.config["trial"]["key"]),
+                trial_dirname_creator=lambda trial: f"trial_{trial.trial_id}"),
             run_config=tune.RunConfig(
                 name=state.experiment, storage_path=str(state.config.out / RAY_DIR),
                 verbose=0, callbacks=[_progress_callback(state)],
@@ -461,9 +420,8 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
         interrupted = _run_on_ray(state, pending, address, local_cpus)
     if not dry_run:
         state.write()
-    experiment = config.out / RAY_DIR / state.experiment if state.experiment else None
     return SweepResult(out=config.out, records=list(state.records.values()),
-                       interrupted=interrupted, experiment=experiment, counts=counts)
+                       interrupted=interrupted)
 
 
 def format_table(records: Sequence[Mapping[str, Any]]) -> str:
@@ -480,19 +438,3 @@ def format_table(records: Sequence[Mapping[str, Any]]) -> str:
              .rstrip() for row in rows]
     lines.insert(1, "  ".join("-" * width for width in widths))
     return "\n".join(lines)
-
-
-def read_sweep_file(out: str | Path) -> dict[str, Any]:
-    """``OUT/sweep.json`` as a mapping.
-
-    Raises:
-        DataError: missing or not a sweep file.
-    """
-    path = Path(out) / SWEEP_FILE
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise DataError(f"{path} is not a readable sweep file: {err}") from err
-    if not isinstance(data, dict) or not isinstance(data.get("trials"), list):
-        raise DataError(f"{path} is not a sweep file: it lacks the list of trials")
-    return data

@@ -15,11 +15,13 @@ This module imports neither Ray nor Stable-Baselines3.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import hashlib
 import itertools
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,14 +29,16 @@ from typing import Any
 from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import env_short_name, resolve_env_id
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import ALGORITHMS
+from rehabbot.rl.algorithms import ALGORITHMS, check_algo
 from rehabbot.rl.backends import DEFAULT_BACKEND, check_backend_choice, resolve_backend
+from rehabbot.rl.hyperparam_checks import as_count
 from rehabbot.rl.hyperparams import (
     Hyperparameters,
     as_hyperparameters,
     coerce_number,
     hyperparameters_from_mapping,
     jsonable,
+    read_yaml,
 )
 from rehabbot.rl.planning import DEFAULT_TIMESTEPS
 
@@ -42,8 +46,6 @@ SWEEP_KEYS = ("out", "envs", "algos", "seeds", "timesteps", "hyperparams", "grid
               "env_kwargs", "eval_freq", "eval_episodes", "checkpoint_freq", "n_envs",
               "backend", "demos", "bc", "resources_per_trial")
 REQUIRED_KEYS = ("envs", "algos", "seeds")
-# Keys passed to train_run only if it takes them (checked with inspect when the sweep starts).
-OPTIONAL_TRAIN_KEYS = ("backend", "demos", "bc")
 DEFAULT_OUT = "runs/sweep"
 DEFAULT_RESOURCES: dict[str, float] = {"cpu": 1}
 RAY_DIR = "_ray"
@@ -54,6 +56,16 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._+=,-]")
 
 class SweepConfigError(UsageError):
     """A sweep file that cannot be read or holds a bad key or value (CLI exit code 2)."""
+
+
+@contextlib.contextmanager
+def naming(where: str) -> Iterator[None]:
+    """A :class:`UsageError` raised inside, as a :class:`SweepConfigError` that names
+    ``where`` (the file and the setting)."""
+    try:
+        yield
+    except UsageError as err:
+        raise SweepConfigError(f"{where}: {err}") from err
 
 
 @dataclass(frozen=True)
@@ -99,25 +111,14 @@ class Trial:
 
     def to_json(self) -> dict[str, Any]:
         """The trial as JSON-able data (the Ray trial's config, an entry of sweep.json)."""
-        return {
-            "key": self.key, "env_id": self.env_id, "algo": self.algo, "seed": self.seed,
-            "total_timesteps": self.total_timesteps, "out_dir": str(self.out_dir),
-            "run_dir": str(self.run_dir), "variant": self.variant,
-            "overrides": jsonable(self.overrides), "hyperparams": jsonable(self.hyperparams),
-            "env_kwargs": jsonable(self.env_kwargs), "n_envs": self.n_envs,
-            "eval_freq": self.eval_freq, "eval_episodes": self.eval_episodes,
-            "checkpoint_freq": self.checkpoint_freq, "backend": self.backend,
-            "demos": self.demos, "bc": self.bc,
-        }
+        return {"key": self.key, **jsonable(dataclasses.asdict(self)),
+                "out_dir": str(self.out_dir), "run_dir": str(self.run_dir)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> Trial:
         """The inverse of :meth:`to_json`."""
-        fields = {name: data[name] for name in (
-            "env_id", "algo", "seed", "total_timesteps", "variant", "overrides", "hyperparams",
-            "env_kwargs", "n_envs", "eval_freq", "eval_episodes", "checkpoint_freq", "backend",
-            "demos", "bc")}
-        return cls(out_dir=Path(data["out_dir"]), **fields)
+        values = {item.name: data[item.name] for item in dataclasses.fields(cls)}
+        return cls(**{**values, "out_dir": Path(data["out_dir"])})
 
 
 @dataclass(frozen=True)
@@ -143,16 +144,10 @@ class SweepConfig:
     resources_per_trial: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_RESOURCES))
     raw: dict[str, Any] = field(default_factory=dict)
 
-    def uses(self, key: str) -> bool:
-        """Whether the file sets ``key`` (``backend``, ``demos``, ``bc``) for an algorithm."""
-        return any(value is not None for value in getattr(self, key).values())
-
     def with_out(self, out: str | Path) -> SweepConfig:
         """The same sweep written below ``out`` (the CLI's ``--out``)."""
-        values = {name: getattr(self, name) for name in self.__dataclass_fields__}
-        values["out"] = Path(out).expanduser().absolute()
-        values["raw"] = {**self.raw, "out": str(out)}
-        return SweepConfig(**values)
+        return dataclasses.replace(self, out=Path(out).expanduser().absolute(),
+                                   raw={**self.raw, "out": str(out)})
 
     def trials(self) -> list[Trial]:
         """Every trial, in the order env, algorithm, variant, seed.
@@ -164,9 +159,10 @@ class SweepConfig:
         trials: list[Trial] = []
         for env_id in self.envs:
             for algo in self.algos:
-                backend = _backend(self.backend[algo], algo, self.source)
-                base = _base_hyperparameters(self.hyperparams[algo], env_id, algo, backend,
-                                             self.source)
+                with naming(f"{self.source}: backend of {algo}"):
+                    backend = resolve_backend(self.backend[algo] or DEFAULT_BACKEND, algo)
+                with naming(f"{self.source}: hyperparams of {algo} on {env_short_name(env_id)}"):
+                    base = as_hyperparameters(self.hyperparams[algo], env_id, algo, backend)
                 for variant, overrides in variants(self.grid.get(algo, {})):
                     trials += self._trials_of(env_id, algo, base, backend, variant,
                                               overrides)
@@ -176,12 +172,9 @@ class SweepConfig:
                    variant: str | None, overrides: dict[str, Any]) -> list[Trial]:
         source = base.source if variant is None else f"{base.source} [{variant}]"
         given = {**base.given, **jsonable(overrides)}
-        try:
+        with naming(f"{self.source}: grid of {algo} on {env_short_name(env_id)}"):
             hp = hyperparameters_from_mapping(given, algo, source=source, entry=base.entry,
                                               backend=backend)
-        except UsageError as err:
-            raise SweepConfigError(f"{self.source}: grid of {algo} on "
-                                   f"{env_short_name(env_id)}: {err}") from err
         total = self.timesteps[algo] or hp.n_timesteps or DEFAULT_TIMESTEPS
         out_dir = self.out / variant if variant else self.out
         return [Trial(env_id=env_id, algo=algo, seed=seed, total_timesteps=total,
@@ -194,23 +187,6 @@ class SweepConfig:
                 for seed in self.seeds]
 
 
-def _backend(choice: str | None, algo: str, where: str) -> str:
-    """The backend (``sb3`` or ``sbx``) that trains ``algo`` here, to check its settings."""
-    try:
-        return resolve_backend(choice or DEFAULT_BACKEND, algo)
-    except UsageError as err:
-        raise SweepConfigError(f"{where}: backend of {algo}: {err}") from err
-
-
-def _base_hyperparameters(name: str | None, env_id: str, algo: str, backend: str,
-                          where: str) -> Hyperparameters:
-    try:
-        return as_hyperparameters(name, env_id, algo, backend)
-    except UsageError as err:
-        raise SweepConfigError(f"{where}: hyperparams of {algo} on {env_short_name(env_id)}: "
-                               f"{err}") from err
-
-
 def variant_name(overrides: Mapping[str, Any]) -> str:
     """``learning_rate=0.001,batch_size=128``: a folder name for a grid point (characters
     other than letters, digits and ``._+=,-`` become ``_``; long names end in a hash)."""
@@ -221,9 +197,12 @@ def variant_name(overrides: Mapping[str, Any]) -> str:
         parts.append(f"{key}={text}")
     name = _UNSAFE.sub("_", ",".join(parts))
     if len(name) > MAX_VARIANT_CHARS:
-        digest = hashlib.sha1(name.encode("utf-8")).hexdigest()[:8]
-        name = f"{name[:MAX_VARIANT_CHARS - 9]}-{digest}"
+        name = f"{name[:MAX_VARIANT_CHARS - 9]}-{_digest(name)}"
     return name
+
+
+def _digest(text: str) -> str:
+    return hashlib.sha1(text.encode("utf-8")).hexdigest()[:8]
 
 
 def variants(grid: Mapping[str, list[Any]]) -> list[tuple[str | None, dict[str, Any]]]:
@@ -231,17 +210,12 @@ def variants(grid: Mapping[str, list[Any]]) -> list[tuple[str | None, dict[str, 
     ``(None, {})`` without a grid."""
     if not grid:
         return [(None, {})]
-    keys = list(grid)
     found: list[tuple[str | None, dict[str, Any]]] = []
-    names: set[str] = set()
-    for values in itertools.product(*(grid[key] for key in keys)):
-        overrides = dict(zip(keys, values, strict=True))
+    for values in itertools.product(*grid.values()):
+        overrides = dict(zip(grid, values, strict=True))
         name = variant_name(overrides)
-        if name in names:  # two values that read the same in a folder name
-            digest = hashlib.sha1(json.dumps(jsonable(overrides), sort_keys=True)
-                                  .encode("utf-8")).hexdigest()[:8]
-            name = f"{name}-{digest}"
-        names.add(name)
+        if name in (other for other, _ in found):  # two values that read the same as a folder
+            name = f"{name}-{_digest(json.dumps(jsonable(overrides), sort_keys=True))}"
         found.append((name, overrides))
     return found
 
@@ -250,12 +224,7 @@ def variants(grid: Mapping[str, list[Any]]) -> list[tuple[str | None, dict[str, 
 
 
 def _count(value: Any, where: str, minimum: int) -> int:
-    number = coerce_number(value)
-    if isinstance(number, float) and number.is_integer():
-        number = int(number)
-    if isinstance(number, bool) or not isinstance(number, int) or number < minimum:
-        raise SweepConfigError(f"{where} must be an integer >= {minimum}, got {value!r}")
-    return number
+    return as_count(value, where, minimum, SweepConfigError)
 
 
 def _optional_count(data: Mapping[str, Any], key: str, where: str, minimum: int) -> int | None:
@@ -273,10 +242,8 @@ def _names(data: Mapping[str, Any], key: str, where: str) -> list[Any]:
 
 
 def _check_algo_name(name: Any, where: str) -> str:
-    if not isinstance(name, str) or name.lower() not in ALGORITHMS:
-        raise SweepConfigError(f"{where}: unknown algorithm {name!r} (valid: "
-                               f"{', '.join(ALGORITHMS)})")
-    return name.lower()
+    with naming(where):
+        return check_algo(name)
 
 
 def _per_algo(data: Mapping[str, Any], key: str, algos: tuple[str, ...], where: str,
@@ -304,10 +271,8 @@ def _settings_name(value: Any, where: str) -> str:
 
 
 def _backend_choice(value: Any, where: str) -> str:
-    try:
+    with naming(where):
         return check_backend_choice(value)
-    except UsageError as err:
-        raise SweepConfigError(f"{where}: {err}") from err
 
 
 def _flag(value: Any, where: str) -> bool:
@@ -397,12 +362,8 @@ def parse_sweep_config(data: Any, source: str = "sweep config") -> SweepConfig:
     if missing:
         raise SweepConfigError(f"{source}: missing key {missing[0]!r} (required: "
                                f"{', '.join(REQUIRED_KEYS)})")
-    envs = []
-    for name in _names(data, "envs", source):
-        try:
-            envs.append(resolve_env_id(str(name)))
-        except UsageError as err:
-            raise SweepConfigError(f"{source}: envs: {err}") from err
+    with naming(f"{source}: envs"):
+        envs = [resolve_env_id(str(name)) for name in _names(data, "envs", source)]
     algos = tuple(dict.fromkeys(_check_algo_name(name, f"{source}: algos")
                                 for name in _names(data, "algos", source)))
     seeds = tuple(_count(seed, f"{source}: seeds", 0) for seed in _names(data, "seeds", source))
@@ -440,19 +401,5 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
     Raises:
         SweepConfigError: the file is missing, unreadable, not YAML, or holds a bad setting.
     """
-    try:
-        import yaml
-    except ImportError as err:
-        raise SweepConfigError("reading sweep files needs PyYAML: pip install pyyaml") from err
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise SweepConfigError(f"cannot read sweep file {str(path)!r}: "
-                               f"{getattr(err, 'strerror', None) or err}") from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise SweepConfigError(f"sweep file {str(path)!r} is not valid YAML: "
-                               f"{' '.join(str(err).split())}") from err
-    return parse_sweep_config({} if data is None else data, source=str(path))
+    return parse_sweep_config(read_yaml(Path(path), "sweep file", SweepConfigError),
+                              source=str(path))

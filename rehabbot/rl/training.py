@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import functools
+import importlib.util
 import json
 import os
 import signal
@@ -44,9 +45,6 @@ from rehabbot.rl.backends import backend_version, backend_versions, resolve_back
 from rehabbot.rl.callbacks import callback_classes
 from rehabbot.rl.hyperparams import Hyperparameters, as_hyperparameters, jsonable
 from rehabbot.rl.planning import (
-    DEFAULT_CHECKPOINT_FREQ,
-    DEFAULT_EVAL_EPISODES,
-    DEFAULT_EVAL_FREQ,
     NothingToResumeError,
     RunPlan,
     TrainingError,
@@ -90,11 +88,9 @@ def check_env_kwargs(env_id: str, env_kwargs: Mapping[str, Any]) -> None:
     import gymnasium as gym
 
     mode = env_kwargs.get("render_mode")
-    if mode is not None and not isinstance(mode, str):  # gym.make calls mode.endswith first
-        raise TrainingUsageError(f"cannot make {env_id} with env kwargs "
-                                 f"{json.dumps(env_kwargs)}: render_mode must be a "
-                                 f"string or null, got {mode!r}")
     try:
+        if mode is not None and not isinstance(mode, str):  # gym.make calls mode.endswith
+            raise ValueError(f"render_mode must be a string or null, got {mode!r}")
         env = gym.make(env_id, **env_kwargs)
     except (TypeError, ValueError) as err:
         raise TrainingUsageError(f"cannot make {env_id} with env kwargs "
@@ -175,12 +171,8 @@ def _stop_on_signals(stopper: Any):
 
 
 def _progress_bar_available() -> bool:
-    try:
-        import rich  # noqa: F401
-        import tqdm  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether SB3's progress bar can run (it needs rich and tqdm)."""
+    return all(importlib.util.find_spec(name) is not None for name in ("rich", "tqdm"))
 
 
 class _Run:
@@ -477,24 +469,28 @@ def _execute_locked(plan: RunPlan, created_root: Path | None) -> Path:
     return run_dir
 
 
-def train_run(env_id: str, algo: str, seed: int, total_timesteps: int, out_dir: str | Path,
-              *, n_envs: int = 1, hyperparams: str | Path | Mapping[str, Any] | Hyperparameters
-              | None = None, env_kwargs: Mapping[str, Any] | None = None, resume: bool = False,
-              checkpoint_freq: int = DEFAULT_CHECKPOINT_FREQ,
-              eval_freq: int = DEFAULT_EVAL_FREQ, eval_episodes: int = DEFAULT_EVAL_EPISODES,
-              progress_bar: bool = True, overwrite: bool = False, vec: str = "dummy",
-              backend: str = "auto", demos: int | None = None, bc: bool = False) -> Path:
-    """Train one agent and return its run directory ``out_dir/<env-short>/<algo>/seed<k>``.
+def train_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
+              out_dir: str | Path, *, n_envs: int | None = None,
+              hyperparams: str | Path | Mapping[str, Any] | Hyperparameters | None = None,
+              env_kwargs: Mapping[str, Any] | None = None, resume: bool = False,
+              checkpoint_freq: int | None = None, eval_freq: int | None = None,
+              eval_episodes: int | None = None, progress_bar: bool = True,
+              overwrite: bool = False, vec: str = "dummy", backend: str = "auto",
+              demos: int | None = None, bc: bool = False) -> Path:
+    """Train one agent and return its run directory ``out_dir/<env-short>/<algo>/seed<k>``
+    (:func:`plan_seeds` for ``[seed]``, then :func:`execute`); a run that is already there
+    (``resume`` of a finished run) is left alone. ``None`` takes the settings file's value
+    (``total_timesteps``, ``n_envs``), a resumed run's own, or the default.
 
     ``hyperparams`` is a YAML file path, the name of a settings file shipped with the package
     (``"sac"``), a flat mapping or a :class:`Hyperparameters`;
     ``checkpoint_freq``/``eval_freq`` count env steps (0 turns them off). With ``resume``, the
     run continues from its newest checkpoint until ``total_timesteps`` (n_envs and env_kwargs
-    must match the manifest; the saved model's hyperparameters apply); a run that is already
-    there is left alone. ``backend``: ``auto`` (SBX if installed, else Stable-Baselines3),
-    ``sb3`` or ``sbx``; a resumed run keeps its own. ``demos``: expert episodes added to an
-    off-policy algorithm's replay buffer before learning, or, with ``bc`` (PPO only), cloned
-    into PPO's actor (default :data:`~rehabbot.rl.planning.DEFAULT_BC_EPISODES`).
+    must match the manifest; the saved model's hyperparameters apply). ``backend``: ``auto``
+    (SBX if installed, else Stable-Baselines3), ``sb3`` or ``sbx``; a resumed run keeps its
+    own. ``demos``: expert episodes added to an off-policy algorithm's replay buffer before
+    learning, or, with ``bc`` (PPO only), cloned into PPO's actor (default
+    :data:`~rehabbot.rl.planning.DEFAULT_BC_EPISODES`).
 
     Raises:
         UsageError: a bad id, algorithm, hyperparameter or value (``HyperparameterError``,
@@ -504,20 +500,12 @@ def train_run(env_id: str, algo: str, seed: int, total_timesteps: int, out_dir: 
         OutputError: ``out_dir`` cannot be written.
         TrainingInterrupted: SIGINT/SIGTERM stopped training; a checkpoint was saved.
     """
-    env_id = resolve_env_id(env_id)
-    algo = check_algo(algo)
-    hp = as_hyperparameters(hyperparams, env_id, algo, resolve_backend(backend, algo))
-    kwargs = None if env_kwargs is None else dict(env_kwargs)
-    check_writable_dir(Path(out_dir))
-    plan = plan_run(env_id, algo, seed, total_timesteps, out_dir, n_envs=n_envs, hp=hp,
-                    env_kwargs=kwargs, resume=resume, overwrite=overwrite,
-                    checkpoint_freq=checkpoint_freq, eval_freq=eval_freq,
-                    eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec,
-                    backend=backend, demos=demos, bc=bc)
-    if plan.skip is not None:
-        return plan.run_dir
-    _check_run_inputs(plan)
-    return execute(plan)
+    plan = plan_seeds(env_id, algo, [seed], total_timesteps, out_dir, hyperparams=hyperparams,
+                      env_kwargs=env_kwargs, resume=resume, overwrite=overwrite, n_envs=n_envs,
+                      checkpoint_freq=checkpoint_freq, eval_freq=eval_freq,
+                      eval_episodes=eval_episodes, progress_bar=progress_bar, vec=vec,
+                      backend=backend, demos=demos, bc=bc)[0]
+    return plan.run_dir if plan.skip is not None else execute(plan)
 
 
 def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: int | None,
@@ -529,11 +517,11 @@ def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: in
                vec: str = "dummy", backend: str = "auto", demos: int | None = None,
                bc: bool = False) -> list[RunPlan]:
     """Plan one run per seed and check everything (ids, settings, resume points, the output
-    folder, the env kwargs) before any of them starts; writes nothing.
+    folder, the env kwargs) before any of them starts; writes nothing. The arguments are
+    those of :func:`train_run`.
 
     With ``resume``, seeds that have no run yet are started afresh (``--resume`` with more
     seeds than were started); it is an error only if no seed has anything to resume.
-    ``backend``, ``demos`` and ``bc`` are those of :func:`train_run`.
     """
     env_id = resolve_env_id(env_id)
     algo = check_algo(algo)

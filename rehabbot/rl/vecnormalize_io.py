@@ -55,39 +55,20 @@ class VecNormalizeStats:
         return np.clip(scaled, -self.clip_obs, self.clip_obs).astype(np.float32)
 
 
-def stats_of(venv: Any) -> VecNormalizeStats:
-    """The statistics of a ``VecNormalize`` wrapper (Box observations only)."""
-    return VecNormalizeStats(
-        norm_obs=bool(venv.norm_obs), norm_reward=bool(venv.norm_reward),
-        clip_obs=float(venv.clip_obs), clip_reward=float(venv.clip_reward),
-        gamma=float(venv.gamma), epsilon=float(venv.epsilon),
-        obs_mean=np.asarray(venv.obs_rms.mean, dtype=np.float64),
-        obs_var=np.asarray(venv.obs_rms.var, dtype=np.float64),
-        obs_count=float(venv.obs_rms.count), ret_mean=float(np.asarray(venv.ret_rms.mean)),
-        ret_var=float(np.asarray(venv.ret_rms.var)), ret_count=float(venv.ret_rms.count))
-
-
 def save_vecnormalize(venv: Any, path: str | Path) -> None:
-    """Write the statistics of ``venv`` (a ``VecNormalize``) to ``path`` as JSON
-    (atomically)."""
-    stats = stats_of(venv)
+    """Write the statistics of ``venv`` (a ``VecNormalize`` of Box observations) to ``path``
+    as JSON (atomically)."""
+    def rms(stats: Any) -> dict[str, Any]:  # a float vector (observations) or float (returns)
+        return {"mean": np.asarray(stats.mean, dtype=np.float64).tolist(),
+                "var": np.asarray(stats.var, dtype=np.float64).tolist(),
+                "count": float(stats.count)}
+
     atomic_write_json(Path(path), {
         "format": FORMAT, "format_version": FORMAT_VERSION,
-        "norm_obs": stats.norm_obs, "norm_reward": stats.norm_reward,
-        "clip_obs": stats.clip_obs, "clip_reward": stats.clip_reward,
-        "gamma": stats.gamma, "epsilon": stats.epsilon,
-        "obs_rms": {"mean": stats.obs_mean.tolist(), "var": stats.obs_var.tolist(),
-                    "count": stats.obs_count},
-        "ret_rms": {"mean": stats.ret_mean, "var": stats.ret_var, "count": stats.ret_count},
-    })
-
-
-def legacy_pickle_error(path: Path) -> DataError:
-    """The refusal for a ``vecnormalize*.pkl`` of an earlier version (a pickle is code)."""
-    return DataError(
-        f"{path} is a pickled VecNormalize file of an earlier RehabBot; loading a pickle runs "
-        "code, so it is not read. If you trust the file, convert it once with: python -c "
-        f"\"from rehabbot.rl.vecnormalize_io import convert_legacy_pickle as c; c('{path}')\"")
+        "norm_obs": bool(venv.norm_obs), "norm_reward": bool(venv.norm_reward),
+        **{key: float(getattr(venv, key)) for key in ("clip_obs", "clip_reward", "gamma",
+                                                      "epsilon")},
+        "obs_rms": rms(venv.obs_rms), "ret_rms": rms(venv.ret_rms)})
 
 
 def _number(data: dict[str, Any], key: str, path: Path) -> float:
@@ -118,7 +99,11 @@ def read_vecnormalize(path: str | Path) -> VecNormalizeStats:
     """
     path = Path(path)
     if path.suffix == LEGACY_SUFFIX:
-        raise legacy_pickle_error(path)
+        raise DataError(  # a pickle is code
+            f"{path} is a pickled VecNormalize file of an earlier RehabBot; loading a pickle "
+            "runs code, so it is not read. If you trust the file, convert it once with: python "
+            f"-c \"from rehabbot.rl.vecnormalize_io import convert_legacy_pickle as c; "
+            f"c('{path}')\"")
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:

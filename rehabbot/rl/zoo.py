@@ -10,11 +10,11 @@ PyTorch, JAX or Stable-Baselines3, no download).
 ``load_full_model(env_id, algo)``    the whole trained SB3/SBX model behind an agent, where the
                                     zoo keeps it (``<algo>.zip`` beside the ``.npz``): for
                                     ``learn`` (fine-tuning), critics included
-``export_policy(model, env_id,      write a zoo file from a trained SB3 model (SAC, TD3, PPO;
-algo, out_path, metadata)``         TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
-                                    PPO, TQC, CrossQ), a model zip or a run folder
-``python -m rehabbot.rl.zoo``       ``export RUN_DIR --env ID --algo ALGO`` (default output:
-                                    the zoo folder of the package), ``list``
+``rehabbot.rl.zoo_export.           write a zoo file from a trained SB3 model (SAC, TD3, PPO;
+export_policy(model, env_id, algo,  TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
+out_path, metadata)``               PPO, TQC, CrossQ), a model zip or a run folder
+                                    (``rehabbot zoo export RUN_DIR``; default output: the zoo
+                                    folder of the package)
 =================================== ======================================================
 
 **Where the files are.** ``rehabbot/zoo/<env-short-name>/<algo>.npz`` (package data; e.g.
@@ -30,8 +30,8 @@ parameters:
 
 ================= ==========================================================================
 ``normalize``     VecNormalize's ``clip((x - mean) / sqrt(var + epsilon), -clip, clip)``
-``tracking_error`` :func:`rehabbot.rl.features_numpy.tracking_error_features` (``center``,
-                  ``half_range``, ``fine_scale_rad``; NaN for none)
+``tracking_error`` the input of the ``-v1`` agents' networks (:func:`tracking_error_features`;
+                  ``center``, ``half_range``, ``fine_scale_rad``: NaN for none)
 ``dense``         ``x @ weight.T + bias`` (``weight`` has PyTorch's (out, in) shape)
 ``batch_norm``    ``(x - mean) / sqrt(var + epsilon) * scale + bias`` (running statistics)
 activations       ``relu``, ``tanh``, ``elu`` (``alpha``), ``leaky_relu`` (``slope``),
@@ -54,12 +54,10 @@ of the trained model is not exported.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import os
 import re
-import sys
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -68,10 +66,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from rehabbot.common.errors import DataError, RehabbotError, UsageError
+from rehabbot.common.errors import DataError, UsageError
 from rehabbot.common.files import atomic_write
 from rehabbot.envs.registration import NAMESPACE, env_short_name
-from rehabbot.rl.features_numpy import tracking_error_features
+from rehabbot.tasks.observation import tracking_slices
 
 ZOO_DIR = Path(__file__).resolve().parents[1] / "zoo"
 ZOO_DIR_ENV = "REHABBOT_ZOO_DIR"
@@ -79,7 +77,6 @@ ZOO_PREFIX = "zoo:"
 SUFFIX = ".npz"
 FORMAT_VERSION = 1
 METADATA_KEY = "metadata"
-SPACE_KEYS = ("observation_low", "observation_high", "action_low", "action_high")
 DEFAULT_EPISODES = 20
 DEFAULT_SEED = 1000
 # op name -> the parameters it needs
@@ -94,7 +91,7 @@ OP_PARAMS: dict[str, tuple[str, ...]] = {
     "unscale": ("low", "high"),
 }
 
-__all__ = ["ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy", "available", "export_policy",
+__all__ = ["ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy", "available",
            "full_model_path", "is_zoo_spec", "load", "load_file", "load_full_model", "load_spec",
            "parse_spec", "ship_full_model", "weights_sha256", "write_zoo_file", "zoo_dir",
            "zoo_path"]
@@ -107,20 +104,38 @@ class ZooError(DataError):
 # --------------------------------------------------------------------------- the program
 
 
+def tracking_error_features(obs: np.ndarray, center: np.ndarray, half_range: np.ndarray,
+                            fine_scale_rad: float | None) -> np.ndarray:
+    """``[(obs - center) / half_range, (theta* - theta) / 0.5 rad, (p* - p) / 0.1 m]``, plus
+    ``tanh((theta* - theta) / fine_scale_rad)`` when given, for a float32 batch of the paper's
+    observation layout (:func:`rehabbot.tasks.observation.tracking_slices`): the features that
+    the networks of the ``-v1`` agents read (rehabbot 0.3's ``TrackingErrorFeatures``, removed
+    with issue 26), in float32 and in their order of operations, so that the shipped agents
+    act as they were trained."""
+    theta_star, p_star, theta, p = tracking_slices(obs.shape[1])
+    joint_error = (obs[:, theta_star] - obs[:, theta]) / 0.5
+    parts = [(obs - center) / half_range, joint_error, (obs[:, p_star] - obs[:, p]) / 0.1]
+    if fine_scale_rad is not None:
+        parts.append(np.tanh(joint_error * (0.5 / fine_scale_rad)))
+    return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
+
+
+# The steps without parameters, in float32.
+ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "relu": lambda x: np.maximum(x, np.float32(0)), "tanh": np.tanh,
+    "sigmoid": lambda x: np.float32(1) / (np.float32(1) + np.exp(-x)),
+    "silu": lambda x: x / (np.float32(1) + np.exp(-x)),
+}
+
+
 def _op(name: str, p: Mapping[str, np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
     """The function of one step of the actor's program."""
     f32 = np.float32
     if name == "dense":
         weight, bias = p["weight"], p["bias"]
         return lambda x: x @ weight.T + bias
-    if name == "relu":
-        return lambda x: np.maximum(x, f32(0))
-    if name == "tanh":
-        return np.tanh
-    if name == "sigmoid":
-        return lambda x: f32(1) / (f32(1) + np.exp(-x))
-    if name == "silu":
-        return lambda x: x / (f32(1) + np.exp(-x))
+    if name in ACTIVATIONS:
+        return ACTIVATIONS[name]
     if name == "elu":
         alpha = f32(p["alpha"])
         return lambda x: np.where(x > 0, x, alpha * np.expm1(np.minimum(x, f32(0))))
@@ -223,6 +238,9 @@ class ZooPolicy:
             self.action_space = gym.spaces.Box(arrays["action_low"], arrays["action_high"],
                                                dtype=np.float32)
             names = [str(name) for name in np.atleast_1d(arrays["ops"])]
+            unknown = [name for name in names if name not in OP_PARAMS]
+            if unknown:
+                raise ValueError(f"unknown ops {unknown}")
             self._ops = []
             for k, name in enumerate(names):
                 params = {key: np.asarray(arrays[f"op{k}.{key}"])
@@ -246,9 +264,8 @@ class ZooPolicy:
         except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as err:
             raise ZooError(f"{path} is not a readable zoo file ({type(err).__name__}: "
                            f"{err})") from err
-        missing = [key for key in (METADATA_KEY, "ops", *SPACE_KEYS) if key not in arrays]
-        if missing:
-            raise ZooError(f"{path} is not a valid zoo file: it lacks {', '.join(missing)}")
+        if METADATA_KEY not in arrays:
+            raise ZooError(f"{path} is not a valid zoo file: it lacks {METADATA_KEY}")
         try:
             metadata = json.loads(str(arrays[METADATA_KEY]))
         except json.JSONDecodeError as err:
@@ -259,20 +276,13 @@ class ZooPolicy:
         if metadata.get("format") != FORMAT_VERSION:
             raise ZooError(f"{path} has zoo format {metadata.get('format')!r}; this rehabbot "
                            f"reads format {FORMAT_VERSION}")
-        names = [str(name) for name in np.atleast_1d(arrays["ops"])]
-        unknown = [name for name in names if name not in OP_PARAMS]
-        if unknown:
-            raise ZooError(f"{path} is not a valid zoo file: unknown ops {unknown}")
-        lacking = [f"op{k}.{key}" for k, name in enumerate(names) for key in OP_PARAMS[name]
-                   if f"op{k}.{key}" not in arrays]
-        if lacking:
-            raise ZooError(f"{path} is not a valid zoo file: it lacks {', '.join(lacking)}")
+        policy = cls(arrays, metadata, path)  # ZooError: an array it lacks, an unknown op
         expected = metadata.get("weights_sha256")
         actual = weights_sha256(arrays)
         if expected != actual:
             raise ZooError(f"{path} is damaged or was modified: its arrays' sha256 is "
                            f"{actual}, its metadata says {expected}")
-        return cls(arrays, metadata, path)
+        return policy
 
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, None]:
@@ -350,8 +360,8 @@ def available() -> list[tuple[str, str]]:
 def _listing() -> str:
     shipped = available()
     if not shipped:
-        return (f"the zoo ({zoo_dir()}) holds no agents yet; build one with `python -m "
-                "rehabbot.rl.zoo export RUN_DIR`")
+        return (f"the zoo ({zoo_dir()}) holds no agents yet; build one with `rehabbot zoo "
+                "export RUN_DIR`")
     return "available: " + ", ".join(f"{env_short_name(e)}/{a}" for e, a in shipped)
 
 
@@ -401,64 +411,6 @@ def load_spec(spec: str) -> ZooPolicy:
     return load(*parse_spec(spec))
 
 
-# --------------------------------------------------------------------------- export
-
-
-def measure_success(policy: ZooPolicy, env_id: str, env_kwargs: Mapping[str, Any] | None,
-                    episodes: int, seed: int) -> dict[str, Any]:
-    """Run ``policy`` for ``episodes`` episodes reset with seeds ``seed, seed + 1, ...``;
-    the success rate and what was run."""
-    env = gym.make(env_id, **dict(env_kwargs or {}))
-    successes = []
-    try:
-        for k in range(episodes):
-            obs, info = env.reset(seed=seed + k)
-            while True:
-                obs, _reward, terminated, truncated, info = env.step(policy(obs))
-                if terminated or truncated:
-                    break
-            successes.append(bool(info.get("is_success", False)))
-    finally:
-        env.close()
-    return {"success_rate": float(np.mean(successes)) if successes else None,
-            "evaluation": {"episodes": episodes, "seed": seed, "deterministic": True,
-                           "successes": int(sum(successes))}}
-
-
-def export_policy(model_or_run_dir: Any, env_id: str | None, algo: str | None,
-                  out_path: str | Path, metadata: Mapping[str, Any] | None = None,
-                  episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED) -> dict[str, Any]:
-    """Export the deterministic actor of a trained model to the zoo file ``out_path``.
-
-    ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
-    train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
-    command, and its ``vecnormalize.pkl`` the observation normalisation). ``metadata`` adds
-    or overrides metadata fields. The exported actor then runs ``episodes`` episodes (seeds
-    ``seed, seed + 1, ...``; 0: none) and its success rate is recorded. Returns the metadata
-    written. Imports the model's library (PyTorch or JAX).
-    """
-    from rehabbot.common.version import VERSION
-    from rehabbot.rl import zoo_export
-
-    source = zoo_export.load_source(model_or_run_dir, algo)
-    meta: dict[str, Any] = dict(source.metadata)
-    env_id = env_id or meta.get("env_id")
-    if not env_id:
-        raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
-    meta.update(env_id=f"{NAMESPACE}/{_short(env_id)}", rehabbot_version=VERSION)
-    meta.update(dict(metadata or {}))
-    out_path = Path(out_path)
-    written = write_zoo_file(out_path, source.ops, source.observation_space,
-                             source.action_space, meta)
-    if episodes > 0:
-        policy = ZooPolicy.from_file(out_path)
-        measured = measure_success(policy, meta["env_id"], meta.get("env_kwargs"), episodes,
-                                   seed)
-        written = write_zoo_file(out_path, source.ops, source.observation_space,
-                                 source.action_space, {**meta, **measured})
-    return written
-
-
 # --------------------------------------------------------------------------- full models
 
 FULL_MODEL_SUFFIX = ".zip"
@@ -467,14 +419,6 @@ FULL_MODEL_SUFFIX = ".zip"
 def full_model_path(env_id: str, algo: str, root: Path | None = None) -> Path:
     """``<zoo>/<env-short-name>/<algo>.zip``: where the zoo keeps an agent's whole model."""
     return zoo_path(env_id, algo, root).with_suffix(FULL_MODEL_SUFFIX)
-
-
-def _file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as stream:
-        for block in iter(lambda: stream.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
@@ -496,7 +440,7 @@ def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
     if not path.is_file():
         raise UsageError(f"the zoo keeps only the actor of {_short(meta['env_id'])}/"
                          f"{meta['algo']} (no {path.name}); load(...) gives the actor")
-    if _file_sha256(path) != meta.get("full_model_sha256"):
+    if hashlib.sha256(path.read_bytes()).hexdigest() != meta.get("full_model_sha256"):
         raise ZooError(f"{path} is not the model this agent was exported from (its SHA-256 "
                        "differs from the agent's full_model_sha256)")
     env = env if env is not None else gym.make(meta["env_id"], **(meta.get("env_kwargs") or {}))
@@ -515,80 +459,4 @@ def ship_full_model(model_path: str | Path, out_npz: Path) -> dict[str, str]:
     data = source.read_bytes()
     target.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(target, lambda stream: stream.write(data))
-    return {"full_model_sha256": _file_sha256(target)}
-
-
-# --------------------------------------------------------------------------- command line
-
-
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python -m rehabbot.rl.zoo",
-        description="Build and list the zoo of trained agents shipped with rehabbot.")
-    commands = parser.add_subparsers(dest="command", required=True)
-    export = commands.add_parser(
-        "export", help="export a trained model's deterministic actor to a zoo file",
-        description="Export a model (a `rehabbot train` run folder or a model zip, SB3 or "
-                    "SBX) to <zoo>/<env>/<algo>.npz, then measure its success rate.")
-    export.add_argument("source", type=Path, metavar="RUN_DIR|MODEL.zip")
-    export.add_argument("--env", metavar="ID", help="env id (default: the run's manifest)")
-    export.add_argument("--algo", help="sac, td3, ppo, tqc or crossq (default: the manifest)")
-    export.add_argument("--out", type=Path, metavar="FILE.npz",
-                        help="output file (default: the package's zoo folder, or "
-                             f"${ZOO_DIR_ENV}, /<env>/<algo>.npz)")
-    export.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
-                        help=f"episodes to measure the success rate on (default "
-                             f"{DEFAULT_EPISODES}; 0: none)")
-    export.add_argument("--seed", type=int, default=DEFAULT_SEED, metavar="S",
-                        help=f"episode k is reset with seed S + k (default {DEFAULT_SEED})")
-    export.add_argument("--full", action="store_true",
-                        help="also keep the whole model (<algo>.zip beside the .npz, for "
-                             "load_full_model and fine-tuning)")
-    export.add_argument("--note", metavar="JSON",
-                        help="metadata to add, as a JSON object (e.g. how the seed was chosen)")
-    commands.add_parser("list", help="the agents in the zoo and their metadata")
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m rehabbot.rl.zoo export|list``; exit code 0, 1 (bad file) or 2 (usage)."""
-    args = _parser().parse_args(argv)
-    try:
-        if args.command == "list":
-            for env_id, algo in available():
-                meta = load(env_id, algo).metadata
-                print(f"{env_short_name(env_id)}/{algo}: backend {meta.get('backend')}, "
-                      f"{meta.get('training_steps')} steps, seed {meta.get('seed')}, success "
-                      f"{meta.get('success_rate')}")
-            if not available():
-                print(_listing())
-            return 0
-        from rehabbot.rl import runs
-
-        manifest = runs.read_manifest(args.source) if args.source.is_dir() else None
-        env_id = args.env or (manifest or {}).get("env_id")
-        algo = args.algo or (manifest or {}).get("algo")
-        if not env_id or not algo:
-            raise UsageError("give --env and --algo (the source has no run manifest)")
-        out = args.out or zoo_path(env_id, algo)
-        extra = json.loads(args.note) if args.note else {}
-        if not isinstance(extra, dict):
-            raise UsageError(f"--note {args.note!r} must be a JSON object")
-        if args.full:
-            extra.update(ship_full_model(args.source, out))
-        meta = export_policy(args.source, env_id, algo, out, metadata=extra,
-                             episodes=args.episodes, seed=args.seed)
-        print(f"wrote {out}: {meta['env_id']} {meta['algo']} ({meta['backend']}), success "
-              f"rate {meta.get('success_rate')} on {args.episodes} episodes, sha256 "
-              f"{meta['weights_sha256'][:12]}")
-        return 0
-    except UsageError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    except (RehabbotError, OSError, ImportError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    return {"full_model_sha256": hashlib.sha256(data).hexdigest()}

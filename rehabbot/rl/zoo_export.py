@@ -1,57 +1,54 @@
-"""Reading the deterministic actor out of a trained model, for :func:`rehabbot.rl.zoo.
-export_policy`: the layers of its network as plain float32 arrays, in the step format of
-:mod:`rehabbot.rl.zoo`.
+"""Exporting a trained model to the zoo (:func:`export_policy`): its deterministic actor read
+out as the layers of its network, plain float32 arrays in the step format of
+:mod:`rehabbot.rl.zoo`, written with the model's provenance and measured success rate.
 
 ============ ======================================== =========================================
 backend      algorithms                                actor read
 ============ ======================================== =========================================
-``sb3``      SAC, TD3, PPO (Stable-Baselines3); TQC,   the features extractor (``Flatten`` or
-             CrossQ (sb3-contrib)                      :class:`~rehabbot.rl.features.
-                                                       TrackingErrorFeatures`), every module of
-                                                       the actor's MLP (Linear, activations,
-                                                       Hardtanh, BatchNorm/BatchRenorm with
-                                                       their running statistics), then tanh for
-                                                       SAC/TQC/CrossQ and squashed PPO
-``sbx``      SAC, TD3, PPO, TQC, CrossQ (SBX, JAX)     the flax parameters of the actor
-                                                       (``Dense_<k>``, ``BatchRenorm_<k>``) and
-                                                       its activation function
+``sb3``      SAC, TD3, PPO (Stable-Baselines3); TQC,   every module of the ``MlpPolicy`` actor
+             CrossQ (sb3-contrib)                      (Linear, activations, Hardtanh,
+                                                       BatchNorm/BatchRenorm with their running
+                                                       statistics), then tanh for SAC/TQC/CrossQ
+                                                       and squashed PPO
+``sbx``      SAC, TD3, PPO, TQC, CrossQ (SBX, JAX)     the flax parameters of the ``MlpPolicy``
+                                                       actor (``Dense_<k>``, ``BatchRenorm_<k>``)
+                                                       and its activation function
 ============ ======================================== =========================================
 
 A squashed actor's output in [-1, 1] is mapped to the action box (``unscale``), an unsquashed
 one clipped to it, as the library's ``predict`` does. VecNormalize statistics of a run folder
 become a ``normalize`` step before the network. PyTorch, JAX and the libraries are imported
-only inside the functions that read their models; this module never imports
-:mod:`rehabbot.rl.zoo` (which imports it when exporting).
+only inside the functions that read their models; :mod:`rehabbot.rl.zoo`, which runs the
+files with NumPy alone, never imports this module.
 """
 
 from __future__ import annotations
 
-import importlib
 import shlex
-from collections.abc import Iterator
-from dataclasses import dataclass, field
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from rehabbot.common.errors import DataError, UsageError
+from rehabbot.common.errors import UsageError
+from rehabbot.common.version import VERSION
+from rehabbot.envs.registration import NAMESPACE, env_short_name
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import policy_module_backend, read_model_data
-from rehabbot.rl.safe_load import load_safely
-from rehabbot.rl.vecnormalize_io import read_vecnormalize
+from rehabbot.rl.algorithms import check_algo
+from rehabbot.rl.policies import env_for, load_model, model_file
+from rehabbot.rl.safe_load import is_sbx
+from rehabbot.rl.zoo import (
+    DEFAULT_EPISODES,
+    DEFAULT_SEED,
+    ZooPolicy,
+    ship_full_model,
+    write_zoo_file,
+    zoo_path,
+)
 
 Op = tuple[str, dict[str, Any]]
-# (backend, algo) -> (module, class)
-MODEL_CLASSES = {
-    ("sb3", "sac"): ("stable_baselines3", "SAC"), ("sb3", "td3"): ("stable_baselines3", "TD3"),
-    ("sb3", "ppo"): ("stable_baselines3", "PPO"), ("sb3", "tqc"): ("sb3_contrib", "TQC"),
-    ("sb3", "crossq"): ("sb3_contrib", "CrossQ"),
-    ("sbx", "sac"): ("sbx", "SAC"), ("sbx", "td3"): ("sbx", "TD3"), ("sbx", "ppo"): ("sbx", "PPO"),
-    ("sbx", "tqc"): ("sbx", "TQC"), ("sbx", "crossq"): ("sbx", "CrossQ"),
-}
-EXPORT_ALGOS = ("sac", "td3", "ppo", "tqc", "crossq")
 # JAX activation function name -> zoo op (with its default parameter)
 JAX_ACTIVATIONS: dict[str, Op] = {
     "relu": ("relu", {}), "tanh": ("tanh", {}), "silu": ("silu", {}), "swish": ("silu", {}),
@@ -64,38 +61,11 @@ class ExportError(UsageError):
     """A model whose actor the zoo format cannot hold (the message says which part)."""
 
 
-@dataclass
-class ExportSource:
-    """What a zoo file is written from: the actor's steps, its spaces and provenance."""
-
-    ops: list[Op]
-    observation_space: gym.spaces.Box
-    action_space: gym.spaces.Box
-    metadata: dict[str, Any] = field(default_factory=dict)
-
-
 def _f32(value: Any) -> np.ndarray:
     """A torch tensor or JAX / NumPy array as a float32 NumPy array."""
     if hasattr(value, "detach"):
         value = value.detach().cpu().numpy()
     return np.asarray(value, dtype=np.float32)
-
-
-# The SBX actor each tracking-error actor of rehabbot.rl.features_jax extends.
-SBX_FEATURE_ACTOR_KINDS = {
-    "TrackingErrorActor": "sbx.common.policies.SquashedGaussianActor",
-    "TrackingErrorTD3Actor": "sbx.td3.policies.Actor",
-    "TrackingErrorPPOActor": "sbx.ppo.policies.Actor",
-    "TrackingErrorNormalizedPPOActor": "sbx.ppo.policies.Actor",
-}
-
-
-def _bound_units_ops(policy: Any, action_space: gym.spaces.Box) -> list[Op]:
-    """``center + half * u`` for a policy whose network acts in units of the action bound
-    (``ACTIONS_IN_BOUND_UNITS``: ``TrackingErrorNormalizedActionPolicy`` and its JAX twin)."""
-    if not getattr(policy, "ACTIONS_IN_BOUND_UNITS", False):
-        return []
-    return [("unscale", {"low": _f32(action_space.low), "high": _f32(action_space.high)})]
 
 
 def _output_ops(action_space: gym.spaces.Box, squashed: bool) -> list[Op]:
@@ -108,37 +78,20 @@ def _output_ops(action_space: gym.spaces.Box, squashed: bool) -> list[Op]:
 # --------------------------------------------------------------------------- SB3 (PyTorch)
 
 
-def _modules(module: Any) -> Iterator[Any]:
-    """The leaf modules of nested ``nn.Sequential`` containers, in order."""
-    from torch import nn
-
-    if isinstance(module, nn.Sequential):
-        for child in module:
-            yield from _modules(child)
-    else:
-        yield module
-
-
 def _torch_module_ops(module: Any) -> list[Op]:
     """The zoo steps of one PyTorch module (a Sequential, a Linear, an activation ...)."""
     from torch import nn
 
     ops: list[Op] = []
-    for m in _modules(module):
+    for m in module.modules():  # the module, then what it holds, in order
         name = type(m).__name__
         if isinstance(m, nn.Linear):
             bias = m.bias if m.bias is not None else np.zeros(m.out_features)
             ops.append(("dense", {"weight": _f32(m.weight), "bias": _f32(bias)}))
-        elif isinstance(m, (nn.Identity, nn.Flatten, nn.Dropout)):
-            continue  # nothing to do at inference on a batch of vectors
-        elif isinstance(m, nn.ReLU):
-            ops.append(("relu", {}))
-        elif isinstance(m, nn.Tanh):
-            ops.append(("tanh", {}))
-        elif isinstance(m, nn.SiLU):
-            ops.append(("silu", {}))
-        elif isinstance(m, nn.Sigmoid):
-            ops.append(("sigmoid", {}))
+        elif isinstance(m, (nn.Sequential, nn.Identity, nn.Flatten, nn.Dropout)):
+            continue  # a container, or nothing to do at inference on a batch of vectors
+        elif name in ("ReLU", "Tanh", "SiLU", "Sigmoid"):
+            ops.append((name.lower(), {}))
         elif isinstance(m, nn.ELU):
             ops.append(("elu", {"alpha": m.alpha}))
         elif isinstance(m, nn.LeakyReLU):
@@ -162,22 +115,6 @@ def _torch_module_ops(module: Any) -> list[Op]:
     return ops
 
 
-def _sb3_features_ops(extractor: Any) -> list[Op]:
-    """The zoo steps of a parameter-free SB3 features extractor."""
-    name = type(extractor).__name__
-    if name == "FlattenExtractor":
-        return []
-    from rehabbot.rl.features import TrackingErrorFeatures
-
-    if isinstance(extractor, TrackingErrorFeatures):
-        fine = extractor.fine_scale_rad
-        return [("tracking_error", {"center": _f32(extractor._center),
-                                    "half_range": _f32(extractor._half_range),
-                                    "fine_scale_rad": np.nan if fine is None else fine})]
-    raise ExportError(f"the zoo cannot export the features extractor {name} (supported: "
-                      "FlattenExtractor, TrackingErrorFeatures)")
-
-
 def sb3_actor_ops(model: Any) -> list[Op]:
     """The deterministic actor of an SB3 / sb3-contrib model (SAC, TD3, PPO, TQC, CrossQ)."""
     policy = model.policy
@@ -194,13 +131,13 @@ def sb3_actor_ops(model: Any) -> list[Op]:
             body, tanh = [actor.mu], False
     else:
         raise ExportError(f"the zoo cannot export a {type(policy).__name__} policy")
-    ops = _sb3_features_ops(extractor)
-    for part in body:
-        ops.extend(_torch_module_ops(part))
+    if type(extractor).__name__ != "FlattenExtractor":  # the MlpPolicy's: no parameters
+        raise ExportError(f"the zoo cannot export the features extractor "
+                          f"{type(extractor).__name__} (supported: FlattenExtractor)")
+    ops = [op for part in body for op in _torch_module_ops(part)]
     if tanh:
         ops.append(("tanh", {}))
-    return ops + _bound_units_ops(policy, model.action_space) + \
-        _output_ops(model.action_space, bool(policy.squash_output))
+    return ops + _output_ops(model.action_space, bool(policy.squash_output))
 
 
 # --------------------------------------------------------------------------- SBX (JAX)
@@ -239,24 +176,15 @@ def sbx_actor_ops(model: Any) -> list[Op]:
     params = state.params.get("params", state.params)
     activation = _jax_activation(policy.activation_fn)
     n_hidden = len(actor.net_arch)
+    mlp = [op for k in range(n_hidden) for op in (_dense(params, k), activation)]
     ops: list[Op] = []
-    if kind.startswith("rehabbot.rl.features_jax."):  # TrackingErrorFeatures, then the MLP
-        fine = actor.fine_scale_rad
-        ops.append(("tracking_error", {"center": _f32(actor.center),
-                                       "half_range": _f32(actor.half_range),
-                                       "fine_scale_rad": np.nan if fine is None else fine}))
-        kind = SBX_FEATURE_ACTOR_KINDS.get(type(actor).__name__, kind)
     if kind in ("sbx.common.policies.SquashedGaussianActor",  # SAC, TQC: tanh(mean)
                 "sbx.td3.policies.Actor"):  # TD3: tanh of the output layer
-        for k in range(n_hidden):
-            ops += [_dense(params, k), activation]
-        ops += [_dense(params, n_hidden), ("tanh", {})]
+        ops = [*mlp, _dense(params, n_hidden), ("tanh", {})]
     elif kind == "sbx.ppo.policies.Actor":
         if actor.features_extractor is not None or actor.num_discrete_choices is not None:
             raise ExportError("the zoo exports SBX PPO with an MLP on a Box action space only")
-        for k in range(n_hidden):
-            ops += [_dense(params, k), activation]
-        ops.append(_dense(params, n_hidden))
+        ops = [*mlp, _dense(params, n_hidden)]
     elif kind == "sbx.crossq.policies.Actor":
         from sbx.common.jax_layers import BatchRenorm
 
@@ -277,75 +205,10 @@ def sbx_actor_ops(model: Any) -> list[Op]:
         ops += [_dense(params, n_hidden), ("tanh", {})]
     else:
         raise ExportError(f"the zoo cannot export the SBX actor {kind}")
-    return ops + _bound_units_ops(policy, model.action_space) + \
-        _output_ops(model.action_space, bool(policy.squash_output))
+    return ops + _output_ops(model.action_space, bool(policy.squash_output))
 
 
 # --------------------------------------------------------------------------- sources
-
-
-def _zip_policy_module(path: Path) -> str:
-    policy_class = read_model_data(path).get("policy_class", {})
-    return str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
-
-
-def _manifest_env(path: Path, manifest: dict[str, Any]) -> gym.Env:
-    """The env of the model's run (its spaces replace the zip's pickled ones)."""
-    env_id = manifest.get("env_id")
-    if not isinstance(env_id, str):
-        raise DataError(f"cannot load {str(path)!r} without its run folder: a model zip is "
-                        "loaded without unpickling, and the env whose spaces it uses is named "
-                        "by the run's manifest.json")
-    try:
-        return gym.make(env_id, **dict(manifest.get("env_kwargs") or {}))
-    except (gym.error.Error, TypeError, ValueError) as err:
-        raise DataError(f"cannot make the env of {str(path)!r} ({env_id}): {err}") from err
-
-
-def load_model(path: Path, algo: str, backend: str | None = None,
-               manifest: dict[str, Any] | None = None) -> Any:
-    """A saved SB3 or SBX model (the backend from the zip's policy class unless given),
-    loaded without unpickling (:mod:`rehabbot.rl.safe_load`) in the env of ``manifest``."""
-    if backend is None:
-        backend = "sbx" if policy_module_backend(_zip_policy_module(path)) == "sbx" else "sb3"
-    key = (backend, algo)
-    if key not in MODEL_CLASSES:
-        raise UsageError(f"the zoo exports {', '.join(EXPORT_ALGOS)} (sb3 or sbx), not "
-                         f"{algo!r} on {backend!r}")
-    module_name, class_name = MODEL_CLASSES[key]
-    try:
-        cls = getattr(importlib.import_module(module_name), class_name)
-    except (ImportError, AttributeError) as err:
-        raise UsageError(f"exporting {class_name} ({backend}) needs {module_name}: {err}"
-                         ) from err
-    kwargs = {"device": "cpu"} if backend == "sb3" else {}
-    env = _manifest_env(path, manifest or {})
-    try:
-        return load_safely(cls, path, env, algo, backend, manifest, **kwargs)
-    except DataError:
-        raise
-    except Exception as err:  # the libraries raise many kinds on a damaged file
-        raise DataError(f"cannot load model {str(path)!r}: {type(err).__name__}: {err}"
-                        ) from err
-
-
-def _normalize_ops(run_dir: Path | None) -> list[Op]:
-    if run_dir is None:
-        return []
-    path = run_dir / runs.VECNORMALIZE_NAME
-    if not path.is_file():
-        path = run_dir / runs.LEGACY_VECNORMALIZE_NAME  # refused by read_vecnormalize
-        if not path.is_file():
-            return []
-    stats = read_vecnormalize(path)  # DataError: damaged, or a pickle (not read)
-    if not stats.norm_obs:
-        return []
-    return [("normalize", {"mean": stats.obs_mean, "var": stats.obs_var,
-                           "epsilon": stats.epsilon, "clip": stats.clip_obs})]
-
-
-def _backend_of(model: Any) -> str:
-    return "sbx" if type(model).__module__.split(".")[0] == "sbx" else "sb3"
 
 
 def _manifest_metadata(manifest: dict[str, Any]) -> dict[str, Any]:
@@ -361,42 +224,98 @@ def _manifest_metadata(manifest: dict[str, Any]) -> dict[str, Any]:
     }.items() if value is not None}
 
 
-def load_source(model_or_run_dir: Any, algo: str | None = None) -> ExportSource:
-    """The actor and provenance of a model object, a model zip or a run folder."""
+def load_source(model_or_run_dir: Any, algo: str | None = None,
+                env_id: str | None = None) -> tuple[list[Op], Any, dict[str, Any]]:
+    """``(ops, model, metadata)``: the actor's zoo steps, the model and its provenance, for a
+    model object, or a model zip or run folder loaded as ``rehabbot evaluate`` loads it, in
+    its run's env (``env_id``: the env of a loose zip)."""
+    algo = check_algo(algo) if algo else None
     manifest: dict[str, Any] = {}
-    run_dir = None
+    stats = None
     if isinstance(model_or_run_dir, (str, Path)):
-        path = Path(model_or_run_dir)
-        if path.is_dir():
-            run_dir, path = path, path / runs.MODEL_NAME
-        elif not path.is_file() and path.with_name(path.name + ".zip").is_file():
-            path = path.with_name(path.name + ".zip")
-        if not path.is_file():
-            raise DataError(f"model file {str(path)!r} not found")
-        run_dir = run_dir or runs.find_run_dir(path)
-        manifest = (runs.read_manifest(run_dir) if run_dir else None) or {}
-        algo = str(algo or manifest.get("algo") or "").lower()
-        if not algo:
-            raise UsageError(f"the algorithm of {str(path)!r} is unknown (no run manifest): "
-                             "give algo / --algo")
-        model = load_model(path, algo, manifest.get("backend"), manifest)
+        path = model_file(model_or_run_dir)  # PolicyError: not found
+        run_dir = runs.find_run_dir(path)
+        run_env, env_kwargs = env_for([str(path)], None if run_dir else env_id)
+        loaded = load_model(path, gym.make(run_env, **env_kwargs))
+        if algo is not None and algo != loaded.algo:
+            raise UsageError(f"{str(path)!r} holds a {loaded.algo} model, not {algo}")
+        model, algo, manifest, stats = (loaded.policy, loaded.algo, loaded.manifest,
+                                        loaded.vecnormalize)
     else:
         model = model_or_run_dir
-        algo = str(algo or type(model).__name__).lower()
-    if algo not in EXPORT_ALGOS:
-        raise UsageError(f"the zoo exports {', '.join(EXPORT_ALGOS)}, not {algo!r}")
+        algo = algo or check_algo(type(model).__name__)
     for name, space in (("observation", model.observation_space),
                         ("action", model.action_space)):
         if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
             raise ExportError(f"the zoo exports models with flat Box spaces; the {name} "
                               f"space is {space}")
-    backend = _backend_of(model)
+    backend = "sbx" if is_sbx(model) else "sb3"
     actor = sbx_actor_ops(model) if backend == "sbx" else sb3_actor_ops(model)
     policy = model.policy
     metadata = {"algo": algo, "backend": backend,
                 "policy_class": f"{type(policy).__module__}.{type(policy).__qualname__}",
                 "training_steps": int(model.num_timesteps), "seed": model.seed,
                 **_manifest_metadata(manifest)}
-    return ExportSource(ops=_normalize_ops(run_dir) + actor,
-                        observation_space=model.observation_space,
-                        action_space=model.action_space, metadata=metadata)
+    normalize = [("normalize", {"mean": stats.obs_mean, "var": stats.obs_var,
+                                "epsilon": stats.epsilon, "clip": stats.clip_obs})
+                 ] if stats is not None and stats.norm_obs else []
+    return normalize + actor, model, metadata
+
+
+# --------------------------------------------------------------------------- export
+
+
+def measure_success(policy: ZooPolicy, env_id: str, env_kwargs: Mapping[str, Any] | None,
+                    episodes: int, seed: int) -> dict[str, Any]:
+    """Run ``policy`` for ``episodes`` episodes reset with seeds ``seed, seed + 1, ...``;
+    the success rate and what was run."""
+    env = gym.make(env_id, **dict(env_kwargs or {}))
+    successes = []
+    try:
+        for k in range(episodes):
+            obs, info = env.reset(seed=seed + k)
+            while True:
+                obs, _reward, terminated, truncated, info = env.step(policy(obs))
+                if terminated or truncated:
+                    break
+            successes.append(bool(info.get("is_success", False)))
+    finally:
+        env.close()
+    return {"success_rate": float(np.mean(successes)) if successes else None,
+            "evaluation": {"episodes": episodes, "seed": seed, "deterministic": True,
+                           "successes": int(sum(successes))}}
+
+
+def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | None = None,
+                  out_path: str | Path | None = None, metadata: Mapping[str, Any] | None = None,
+                  episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED,
+                  full: bool = False) -> dict[str, Any]:
+    """Export the deterministic actor of a trained model to the zoo file ``out_path``
+    (default: the zoo's file for its env and algorithm, :func:`zoo_path`).
+
+    ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
+    train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
+    command, and its ``vecnormalize.json`` the observation normalisation). ``metadata`` adds
+    or overrides metadata fields. ``full`` also keeps the model zip beside the zoo file
+    (:func:`ship_full_model`, for :func:`load_full_model`). The exported actor then runs
+    ``episodes`` episodes (seeds ``seed, seed + 1, ...``; 0: none) and its success rate is
+    recorded. Returns the metadata written. Imports the model's library (PyTorch or JAX).
+    """
+    ops, model, meta = load_source(model_or_run_dir, algo, env_id)
+    env_id = env_id or meta.get("env_id")
+    if not env_id:
+        raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
+    meta.update(env_id=f"{NAMESPACE}/{env_short_name(env_id)}", rehabbot_version=VERSION)
+    meta.update(dict(metadata or {}))
+    out_path = Path(out_path) if out_path is not None else zoo_path(meta["env_id"], meta["algo"])
+    if full:
+        if not isinstance(model_or_run_dir, (str, Path)):
+            raise UsageError("full=True needs the model's zip or run folder, not a model object")
+        meta.update(ship_full_model(model_or_run_dir, out_path))
+    written = write_zoo_file(out_path, ops, model.observation_space, model.action_space, meta)
+    if episodes > 0:
+        measured = measure_success(ZooPolicy.from_file(out_path), meta["env_id"],
+                                   meta.get("env_kwargs"), episodes, seed)
+        written = write_zoo_file(out_path, ops, model.observation_space, model.action_space,
+                                 {**meta, **measured})
+    return written

@@ -17,10 +17,6 @@ TORCH_NAMES = {
     **{f"{prefix}{name}": ("torch.optim", name)
        for prefix in ("optim.", "th.optim.", "torch.optim.")
        for name in ("Adam", "AdamW", "RMSprop", "SGD")},
-    # RehabBot's own features extractor (observation + tracking errors).
-    **{name: ("rehabbot.rl.features", "TrackingErrorFeatures")
-       for name in ("TrackingErrorFeatures", "rehabbot.rl.features.TrackingErrorFeatures",
-                    "rehabbot.features.TrackingErrorFeatures")},
 }
 
 
@@ -38,15 +34,6 @@ def parse_python_expression(text: str) -> Any:
     except SyntaxError as err:
         raise ValueError(f"not a valid expression: {text!r} ({err.msg})") from err
     return _literal(tree.body)
-
-
-def _dotted_name(node: ast.AST) -> str | None:
-    if isinstance(node, ast.Name):
-        return node.id
-    if isinstance(node, ast.Attribute):
-        base = _dotted_name(node.value)
-        return None if base is None else f"{base}.{node.attr}"
-    return None
 
 
 def _literal(node: ast.AST) -> Any:
@@ -71,8 +58,8 @@ def _literal(node: ast.AST) -> Any:
             and node.func.id == "dict" and not node.args
             and all(keyword.arg is not None for keyword in node.keywords)):
         return {keyword.arg: _literal(keyword.value) for keyword in node.keywords}
-    dotted = _dotted_name(node)
-    if dotted is not None and dotted in TORCH_NAMES:
+    dotted = ast.unparse(node) if isinstance(node, (ast.Name, ast.Attribute)) else None
+    if dotted in TORCH_NAMES:
         return _torch_object(dotted)
     allowed = sorted({name for name in TORCH_NAMES if name.startswith(("nn.", "optim."))})
     raise ValueError(

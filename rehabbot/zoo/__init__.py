@@ -14,7 +14,7 @@
 
 This package is the data folder: ``<env-short-name>/<algo>.npz``, one file per agent. The
 loader lives in :mod:`rehabbot.rl.zoo` (the ``rl`` layer), which also builds the files
-(``python -m rehabbot.rl.zoo export RUN_DIR --env ID --algo ALGO``) and documents their
+(``rehabbot zoo export RUN_DIR``) and documents their
 format; this module only re-exports it. Importing it loads neither PyTorch nor JAX.
 """
 
