@@ -243,9 +243,9 @@ def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, fini
     marker = tmp_path / "pwned"
     _as_old_run(run_dir, marker)
     before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
-    why = (f"the policy class {REMOVED_CLASS} was removed in this version of rehabbot with "
-           "issue 26 (the -v2 ids observe what an agent needs, and the libraries' own "
-           "MlpPolicy learns them); the 0.3 release of rehabbot loads it")
+    why = (f"the policy class {REMOVED_CLASS} was removed from rehabbot with issue 26 "
+           "(the -v2 ids observe what an agent needs, and the libraries' own MlpPolicy learns "
+           "them); rehabbot at commit 51d9d71, the last with it, loads it")
     commands = {
         "evaluate": lambda: main(["evaluate", str(run_dir), "--episodes", "1",
                                   "--out", str(tmp_path / "evaluation")]),
@@ -264,7 +264,7 @@ def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, fini
     assert "rehabbot.rl.features" not in sys.modules
     assert not marker.exists() and not (tmp_path / "agent.npz").exists()
     assert {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()} == before
-    with pytest.raises(PolicyError, match="was removed in this version of rehabbot"):
+    with pytest.raises(PolicyError, match="was removed from rehabbot with issue 26"):
         detect_model(run_dir / runs.MODEL_NAME)
 
 

@@ -85,8 +85,8 @@ tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id, and prints which
 hold entries for the -v2 ids, which name only library options (MlpPolicy, n_steps, ...). The
 -v0 ids (the paper's reference: its reward traps agents) and the -v1 ids observe the paper's
 fields, from which a plain network does not learn: without --hyperparams they are refused
-with the -v2 id to train instead (rehabbot 0.3 trained -v1 with its own networks, removed
-with issue 26); --hyperparams sb3-defaults/<algo> trains any id with the library's
+with the -v2 id to train instead (rehabbot trained -v1 with its own networks, removed with
+issue 26 after commit 51d9d71); --hyperparams sb3-defaults/<algo> trains any id with the library's
 defaults. A run too short to update its model
 (PPO: fewer steps than one rollout, n_steps x n_envs; SAC/TD3/TQC/CrossQ: no more steps than
 learning_starts) is refused.
@@ -114,8 +114,8 @@ or one flat mapping. Keys: the SB3 constructor arguments of the algorithm, plus 
 n_envs, policy, normalize (true or VecNormalize arguments), noise_type (normal |
 ornstein-uhlenbeck) and noise_std (SAC/TD3). policy_kwargs may be a mapping or a string such
 as "dict(net_arch=[64, 64], activation_fn=nn.ReLU)"; learning_rate may be "lin_3e-4" (linear
-decay to 0). policy is MlpPolicy or a library's policy class by dotted name (rehabbot 0.3's
-own classes, rehabbot.rl.features.*, were removed with issue 26 and are refused by name).
+decay to 0). policy is MlpPolicy or a library's policy class by dotted name (rehabbot's own
+classes, rehabbot.rl.features.*, were removed with issue 26 and are refused by name).
 --hyperparams takes a path or the name of a file shipped with rehabbot: sac, td3, ppo, tqc
 and crossq hold the settings of the -v2 ids, sb3-defaults/<algo> spells out SB3's defaults
 as a template, ablations/<name> the plain-network diagnoses of the README (`rehabbot train

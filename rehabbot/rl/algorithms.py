@@ -44,16 +44,20 @@ class BackendUnavailableError(UsageError):
     """The library an algorithm needs on the chosen backend is not installed."""
 
 
-# The modules of rehabbot's own policy classes (the tracking-error networks of rehabbot 0.3),
-# removed with issue 26: settings and models that name one are refused by name.
+# The modules of rehabbot's own policy classes (the tracking-error networks), removed with
+# issue 26 after commit 51d9d71: settings and models that name one are refused by name.
 REMOVED_POLICY_MODULES = ("rehabbot.rl.features", "rehabbot.rl.features_jax")
+
+
+# The last commit of rehabbot whose rl/features*.py defined the removed policy classes.
+LAST_CUSTOM_NETWORK_COMMIT = "51d9d71"
 
 
 def removed_policy(name: str) -> str:
     """Why the policy class ``name`` (a dotted name in a removed module) does not load."""
-    return (f"the policy class {name} was removed in this version of rehabbot with issue 26 "
-            "(the -v2 ids observe what an agent needs, and the libraries' own MlpPolicy "
-            "learns them); the 0.3 release of rehabbot loads it")
+    return (f"the policy class {name} was removed from rehabbot with issue 26 (the -v2 ids "
+            "observe what an agent needs, and the libraries' own MlpPolicy learns them); "
+            f"rehabbot at commit {LAST_CUSTOM_NETWORK_COMMIT}, the last with it, loads it")
 
 
 def saved_policy_class(data: dict[str, Any]) -> tuple[str, str]:
