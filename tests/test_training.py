@@ -589,6 +589,28 @@ def test_train_without_hyperparams_uses_the_shipped_file_and_says_so(tmp_path: P
     assert manifest["hyperparameters"]["policy"] == "MlpPolicy"
 
 
+@pytest.mark.slow
+def test_shipped_off_policy_settings_start_with_the_expert_episodes_they_were_validated_with(
+        tmp_path: Path, capsys) -> None:
+    """Without --hyperparams an off-policy run puts the scripted expert's episodes in its
+    replay buffer (as the published -v2 results did) and says so; --demos 0 trains without,
+    and a settings file given by name gets none unless asked."""
+    out = tmp_path / "runs"
+    common = ("--timesteps", "104", "--eval-freq", "0", "--checkpoint-freq", "0",
+              "--no-progress", "--backend", "sb3")
+    assert cmd_train(_parse("rehab-reach-v2", "--algo", "td3", "--out", str(out),
+                            *common)) == 0
+    assert "with 20 scripted-expert episodes in the replay buffer (--demos 0: none)" in \
+        capsys.readouterr().err
+    assert _manifest(out / "rehab-reach-v2" / "td3" / "seed0")["demos"]["episodes"] == 20
+    for extra in (("--demos", "0"), ("--hyperparams", "td3")):
+        assert cmd_train(_parse("rehab-reach-v2", "--algo", "td3", "--out", str(out),
+                                "--overwrite", *extra, *common)) == 0
+        assert "scripted-expert" not in capsys.readouterr().err
+        manifest = _manifest(out / "rehab-reach-v2" / "td3" / "seed0")
+        assert not (manifest.get("demos") or {}).get("episodes")
+
+
 @pytest.mark.parametrize(("env_id", "algo", "words"), [
     ("rehab-reach-v1", "sac",
      "the shipped 'sac' settings have no entry for rehabbot/rehab-reach-v1: it observes the "

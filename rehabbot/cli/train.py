@@ -13,7 +13,7 @@ from typing import Any
 
 from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_kwargs_object
 from rehabbot.envs.registration import ENV_SPECS, env_short_name
-from rehabbot.rl.algorithms import ALGORITHMS
+from rehabbot.rl.algorithms import ALGORITHMS, OFF_POLICY
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
 from rehabbot.rl.hyperparams import (
     coerce_number,
@@ -28,6 +28,7 @@ from rehabbot.rl.planning import (
     DEFAULT_EVAL_EPISODES,
     DEFAULT_EVAL_FREQ,
     DEFAULT_TIMESTEPS,
+    SHIPPED_DEMOS,
 )
 
 DEFAULT_SEEDS = (0,)
@@ -75,21 +76,22 @@ examples:
   rehabbot train rehab-hip-v2 --algo ppo --vec subproc --out runs/ppo-sweep
   rehabbot train rehab-reach-v2 --algo sac --env-kwargs '{"weight_level": 2}'
   rehabbot train rehab-reach-v2 --algo sac --timesteps 400000 --resume   # continue a run
-  rehabbot train rehab-knee-v2 --algo sac --demos 20  # 20 expert episodes in the buffer
+  rehabbot train rehab-knee-v2 --algo sac --demos 0   # no expert episodes in the buffer
   rehabbot train rehab-reach-v2 --algo ppo --bc --demos 50  # a behaviour-cloned start
   rehabbot train rehab-reach-v0 --algo sac --hyperparams sb3-defaults/sac  # the paper's id,
       # the library's defaults
 
 Without --hyperparams a run uses the settings file shipped for the algorithm (sac, td3, ppo,
-tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id, and prints which. The files
-hold entries for the -v2 ids, which name only library options (MlpPolicy, n_steps, ...). The
--v0 ids (the paper's reference: its reward traps agents) and the -v1 ids observe the paper's
-fields, from which a plain network does not learn: without --hyperparams they are refused
-with the -v2 id to train instead (rehabbot trained -v1 with its own networks, removed with
-issue 26 after commit 51d9d71); --hyperparams sb3-defaults/<algo> trains any id with the library's
-defaults. A run too short to update its model
-(PPO: fewer steps than one rollout, n_steps x n_envs; SAC/TD3/TQC/CrossQ: no more steps than
-learning_starts) is refused.
+tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id, and prints which; an
+off-policy run then also starts with 20 scripted-expert episodes in its replay buffer, as the
+published results did (--demos N changes that). The files hold entries for the -v2 ids, which
+name only library options (MlpPolicy, n_steps, ...). The -v0 ids (the paper's reference: its
+reward traps agents) and the -v1 ids observe the paper's fields, from which a plain network
+does not learn: without --hyperparams they are refused with the -v2 id to train instead
+(rehabbot trained -v1 with its own networks, removed with issue 26 after commit 51d9d71);
+--hyperparams sb3-defaults/<algo> trains any id with the library's defaults. A run too short
+to update its model (PPO: fewer steps than one rollout, n_steps x n_envs; SAC/TD3/TQC/CrossQ:
+no more steps than learning_starts) is refused.
 
 Each seed writes OUT/<env>/<algo>/seed<k>/ with manifest.json, monitor/train_<i>.monitor.csv,
 eval/evaluations.npz, tb/ (tensorboard --logdir OUT), checkpoints/ and, at the end, model.zip.
@@ -183,8 +185,9 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--demos", type=_non_negative_count, metavar="N",
                         help="run the scripted expert for N episodes of the training env "
                              "(seeds: run seed + 20000 + i) and add every transition to the "
-                             "replay buffer before learning (sac, td3, tqc, crossq); with "
-                             f"--bc, the episodes to clone (default {DEFAULT_BC_EPISODES})")
+                             "replay buffer before learning (sac, td3, tqc, crossq; default "
+                             f"{SHIPPED_DEMOS} with the shipped settings, else 0); with --bc, "
+                             f"the episodes to clone (default {DEFAULT_BC_EPISODES})")
     parser.add_argument("--bc", action="store_true",
                         help="PPO only: warm-start PPO's actor by behaviour cloning the "
                              "expert's episodes (MSE of the mean action, in units of the "
@@ -206,21 +209,28 @@ def cmd_train(args: argparse.Namespace) -> int:
     from rehabbot.rl import runs
     from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
 
-    hyperparams = args.hyperparams
-    if hyperparams is None and not args.resume:
+    hyperparams, demos = args.hyperparams, args.demos
+    shipped = hyperparams is None and not args.resume
+    if shipped:
         hyperparams = shipped_settings(args.algo)
+        if demos is None and args.algo in OFF_POLICY:
+            demos = SHIPPED_DEMOS  # what the shipped settings were validated with
     plans = plan_seeds(args.env, args.algo, args.seeds or DEFAULT_SEEDS, args.timesteps,
                        args.out, hyperparams=hyperparams,
                        env_kwargs=parse_env_kwargs(args.env_kwargs), resume=args.resume,
                        overwrite=args.overwrite, n_envs=args.n_envs,
                        checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq,
                        eval_episodes=args.eval_episodes, progress_bar=not args.no_progress,
-                       vec=args.vec, backend=args.backend, demos=args.demos, bc=args.bc)
+                       vec=args.vec, backend=args.backend, demos=demos, bc=args.bc)
     new_runs = [plan for plan in plans if plan.skip is None and plan.resume is None]
-    if args.hyperparams is None and new_runs and hyperparams is not None:
+    if shipped and new_runs and hyperparams is not None:
+        buffer = ""
+        if args.demos is None and args.algo in OFF_POLICY:
+            buffer = (f", with {SHIPPED_DEMOS} scripted-expert episodes in the replay buffer "
+                      "(--demos 0: none)")
         print(f"settings: the shipped {hyperparams!r} file, entry {new_runs[0].hp.entry!r} "
-              f"({settings_path(hyperparams)}); {library_defaults(args.algo)} trains with the "
-              "library's defaults instead", file=sys.stderr, flush=True)
+              f"({settings_path(hyperparams)}){buffer}; {library_defaults(args.algo)} trains "
+              "with the library's defaults instead", file=sys.stderr, flush=True)
     for change in new_runs[0].hp.backend_changes if new_runs else ():
         used = "dropped" if change["used"] is None else f"-> {change['used']}"
         print(f"note: {new_runs[0].backend} backend: {change['key']} {change['given']!r} "
