@@ -305,6 +305,15 @@ def test_available_and_unknown_ids_or_algorithms(env, zoo_root) -> None:
     linear_tracker(env, zoo_root / "rehab-knee-v0" / "sac.npz")
     with pytest.raises(ZooError, match="holds an agent for 'rehabbot/rehab-reach-v0'"):
         load("rehab-knee-v0", "sac")
+    # An agent trained with another robot is named after both, and runs with its kwargs.
+    assert zoo.agent_name("SAC", {"robot": "fr3"}) == "sac-fr3"
+    assert zoo.agent_name("sac", {"robot": "ur5e", "weight_level": 2}) == "sac"
+    linear_tracker(env, zoo_root / ENV / "sac-fr3.npz", algo="sac", env_kwargs={"robot": "fr3"})
+    assert load(ENV, "sac-fr3").metadata["env_kwargs"] == {"robot": "fr3"}
+    assert (FULL_ID, "sac-fr3") in available()
+    linear_tracker(env, zoo_root / ENV / "td3.npz", algo="td3", env_kwargs={"robot": "fr3"})
+    with pytest.raises(ZooError, match="holds the agent 'td3-fr3'"):
+        load(ENV, "td3")
 
 
 def test_loading_and_acting_import_no_torch_or_jax(env, tmp_path) -> None:

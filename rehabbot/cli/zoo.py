@@ -18,7 +18,9 @@ examples:
   rehabbot zoo export runs/rehab-knee-v2/sac/seed0 --full   # env, algo: the run's manifest
 
 Each agent is a light NumPy actor (rehabbot/zoo/<env>/<algo>.npz: its layers, verified by a
-SHA-256 of its weights); rehabbot.zoo.load(ENV, ALGO) returns it, with SB3's predict."""
+SHA-256 of its weights); rehabbot.zoo.load(ENV, ALGO) returns it, with SB3's predict. An agent
+trained with another robot than the UR5e is named after both (rehab-hip-v2/sac-fr3, trained
+with --env-kwargs '{"robot": "fr3"}'); it runs with the kwargs it was trained with."""
 
 
 def _row(env_id: str, algo: str) -> str:
@@ -72,8 +74,9 @@ def cmd_zoo_export(args: argparse.Namespace) -> int:
     from rehabbot.rl.zoo_export import export_policy
 
     meta = export_policy(args.source, args.env, args.algo, args.out, metadata=args.note,
-                             episodes=args.episodes, seed=args.seed, full=args.full)
-    out = args.out or zoo.zoo_path(meta["env_id"], meta["algo"])
+                         episodes=args.episodes, seed=args.seed, full=args.full)
+    out = args.out or zoo.zoo_path(meta["env_id"],
+                                   zoo.agent_name(meta["algo"], meta.get("env_kwargs")))
     print(f"wrote {out}: {meta['env_id']} {meta['algo']} ({meta['backend']}), success rate "
           f"{meta.get('success_rate')} on {args.episodes} episodes, sha256 "
           f"{meta['weights_sha256'][:12]}")

@@ -347,6 +347,15 @@ def zoo_path(env_id: str, algo: str, root: Path | None = None) -> Path:
     return base / env / f"{name}{SUFFIX}"
 
 
+def agent_name(algo: str, env_kwargs: Mapping[str, Any] | None = None) -> str:
+    """The zoo's name of an agent: its algorithm (``sac``), followed by the robot for one
+    trained with another robot than the ids' UR5e (``sac-fr3``: ``zoo:rehab-hip-v2/sac-fr3``,
+    trained and run with ``robot="fr3"``)."""
+    robot = (env_kwargs or {}).get("robot")
+    name = str(algo).strip().lower()
+    return name if robot in (None, "ur5e") else f"{name}-{robot}"
+
+
 def available() -> list[tuple[str, str]]:
     """The ``(env_id, algo)`` of every agent in the zoo, sorted (full ids, e.g.
     ``("rehabbot/rehab-reach-v1", "sac")``)."""
@@ -379,9 +388,10 @@ def load(env_id: str, algo: str) -> ZooPolicy:
     policy = ZooPolicy.from_file(path)
     if _short(policy.env_id) != _short(env_id):
         raise ZooError(f"{path} holds an agent for {policy.env_id!r}, not {env_id!r}")
-    if policy.algo.strip().lower() != path.stem:
-        raise ZooError(f"{path} holds an agent of algorithm {policy.algo!r}, not "
-                       f"{path.stem!r}")
+    name = agent_name(policy.algo, policy.metadata.get("env_kwargs"))
+    if name != path.stem:
+        raise ZooError(f"{path} holds the agent {name!r} (algorithm {policy.algo!r}, env kwargs "
+                       f"{policy.metadata.get('env_kwargs')}), not {path.stem!r}")
     return policy
 
 
@@ -436,10 +446,10 @@ def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
     from rehabbot.rl.safe_load import load_safely
 
     meta = load(env_id, algo).metadata
-    path = full_model_path(meta["env_id"], meta["algo"])
+    path = full_model_path(meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs")))
     if not path.is_file():
         raise UsageError(f"the zoo keeps only the actor of {_short(meta['env_id'])}/"
-                         f"{meta['algo']} (no {path.name}); load(...) gives the actor")
+                         f"{path.stem} (no {path.name}); load(...) gives the actor")
     if hashlib.sha256(path.read_bytes()).hexdigest() != meta.get("full_model_sha256"):
         raise ZooError(f"{path} is not the model this agent was exported from (its SHA-256 "
                        "differs from the agent's full_model_sha256)")

@@ -43,6 +43,7 @@ from rehabbot.rl.zoo import (
     DEFAULT_EPISODES,
     DEFAULT_SEED,
     ZooPolicy,
+    agent_name,
     ship_full_model,
     write_zoo_file,
     zoo_path,
@@ -291,7 +292,8 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
                   episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED,
                   full: bool = False) -> dict[str, Any]:
     """Export the deterministic actor of a trained model to the zoo file ``out_path``
-    (default: the zoo's file for its env and algorithm, :func:`zoo_path`).
+    (default: the zoo's file for its env and agent name, :func:`zoo_path` and
+    :func:`agent_name`: ``sac``, or ``sac-fr3`` for a run with ``robot="fr3"``).
 
     ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
     train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
@@ -307,7 +309,8 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
         raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
     meta.update(env_id=f"{NAMESPACE}/{env_short_name(env_id)}", rehabbot_version=VERSION)
     meta.update(dict(metadata or {}))
-    out_path = Path(out_path) if out_path is not None else zoo_path(meta["env_id"], meta["algo"])
+    out_path = Path(out_path) if out_path is not None else zoo_path(
+        meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs")))
     if full:
         if not isinstance(model_or_run_dir, (str, Path)):
             raise UsageError("full=True needs the model's zip or run folder, not a model object")
