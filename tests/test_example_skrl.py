@@ -1,7 +1,9 @@
-"""examples/skrl_sac.py: a tiny run of skrl's SAC, its stratified evaluation and its outputs."""
+"""examples/skrl_sac.py: a tiny run of skrl's SAC, its stratified evaluation and its outputs
+(skrl_common.py)."""
 
 import importlib.util
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,36 +13,52 @@ pytest.importorskip("skrl")
 torch = pytest.importorskip("torch")
 gym = pytest.importorskip("gymnasium")
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "skrl_sac.py"
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 ENV_ID = "rehabbot/rehab-knee-v2"
+
+
+def load(name: str):
+    """An example module by file (``skrl_common`` found beside it, as when run as a script)."""
+    sys.path.insert(0, str(EXAMPLES))
+    try:
+        spec = importlib.util.spec_from_file_location(f"{name}_example", EXAMPLES / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(EXAMPLES))
+    return module
 
 
 @pytest.fixture(scope="module")
 def example():
-    spec = importlib.util.spec_from_file_location("skrl_sac_example", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load("skrl_sac")
 
 
-def test_train_evaluate_save(example, tmp_path, monkeypatch, capsys):
-    trained, real_train = {}, example.train
+@pytest.fixture(scope="module")
+def common(example):
+    return sys.modules["skrl_common"]
 
-    def keep(*args, **kwargs):  # the real train, keeping the agent for the checks below
+
+def keep_trained(module, monkeypatch) -> dict:
+    """Patch ``module.train`` to keep the agent it returns (in the dict returned)."""
+    trained, real_train = {}, module.train
+
+    def keep(*args, **kwargs):
         trained["agent"] = real_train(*args, **kwargs)
         return trained["agent"]
 
-    monkeypatch.setattr(example, "train", keep)
-    out = tmp_path / "run"
-    argv = ["--env", ENV_ID, "--timesteps", "300", "--learning-starts", "100", "--seed", "3",
-            "--episodes-per-cell", "1", "--max-episode-steps", "60", "--out", str(out)]
-    assert example.main(argv) == 0
-    printed = capsys.readouterr()
-    assert printed.out.startswith("success rate: ") and printed.err == ""
+    monkeypatch.setattr(module, "train", keep)
+    return trained
 
+
+def check_result(common, out: Path, script: str, seed: int, timesteps: int) -> dict:
+    """``result.json`` of a run with one episode per cell and 60-step episodes: its command,
+    seed, timing and one episode of every profile x exercise x weight level."""
     result = json.loads((out / "result.json").read_text())
-    assert result["seed"] == 3 and result["timesteps"] == 300
-    assert result["command"].startswith("python examples/skrl_sac.py")
+    assert result["seed"] == seed and result["timesteps"] == timesteps
+    assert result["command"].startswith(f"python examples/{script}")
+    assert result["env_kwargs"] == {"max_episode_steps": 60}
+    assert result["skrl_version"] == sys.modules["skrl"].__version__
     assert result["wall_clock_seconds"] >= result["train_seconds"] > 0
     episodes = result["evaluation"]["episodes"]
     assert len(episodes) == 1 * 2 * 5 * 3
@@ -52,28 +70,50 @@ def test_train_evaluate_save(example, tmp_path, monkeypatch, capsys):
     cells = {(json.dumps(e["profile"], sort_keys=True), e["exercise"], e["weight_level"])
              for e in episodes}
     assert len(cells) == 30
-    assert [e["profile"] for e in episodes[::10]] == [None, *example.PROFILES[1:]]
+    assert [e["profile"] for e in episodes[::10]] == [None, *common.PROFILES[1:]]
     rate = np.mean([e["success"] for e in episodes])
     assert result["evaluation"]["success_rate"] == pytest.approx(rate)
     assert not (out / "policy.pt.tmp").exists()
+    return result
+
+
+def check_saved_policy(common, policy_class, trained_policy, weights: Path) -> None:
+    """The saved weights load into a fresh policy that acts as the trained one, in the box."""
+    env = gym.make(ENV_ID)
+    obs, _ = env.reset(seed=0)
+    fresh = policy_class(env.observation_space, env.action_space, device="cpu")
+    fresh.load_state_dict(torch.load(weights, map_location="cpu", weights_only=True))
+    fresh.enable_training_mode(False)
+    action = common.deterministic_action(fresh, obs)
+    np.testing.assert_allclose(action, common.deterministic_action(trained_policy, obs),
+                               atol=1e-5)
+    assert action.shape == (6,) and np.all(np.abs(action) <= 1.0)
+    env.close()
+
+
+def test_train_evaluate_save(example, common, tmp_path, monkeypatch, capsys):
+    trained = keep_trained(example, monkeypatch)
+    out = tmp_path / "run"
+    argv = ["--env", ENV_ID, "--timesteps", "300", "--learning-starts", "100", "--seed", "3",
+            "--episodes-per-cell", "1", "--max-episode-steps", "60", "--out", str(out)]
+    assert example.main(argv) == 0
+    printed = capsys.readouterr()
+    assert printed.out.startswith("success rate: ") and printed.err == ""
+    result = check_result(common, out, "skrl_sac.py", seed=3, timesteps=300)
+    assert result["algo"] == "sac" and "SAC" in result["training"]
 
     # SAC updated (the learned entropy coefficient left its initial 0.2), and the saved weights
     # load into a fresh policy that acts as the trained one.
     assert trained["agent"].log_entropy_coefficient.exp().item() != pytest.approx(0.2)
     policy = trained["agent"].policy
+    check_saved_policy(common, example.Policy, policy, out / "policy.pt")
+    # Sampled (stochastic) and random exploration actions stay in the box too.
     env = gym.make(ENV_ID)
     obs, _ = env.reset(seed=0)
-    fresh = example.Policy(env.observation_space, env.action_space, device="cpu")
-    fresh.load_state_dict(torch.load(out / "policy.pt", map_location="cpu", weights_only=True))
-    fresh.enable_training_mode(False)
-    action = example.deterministic_action(fresh, obs)
-    np.testing.assert_allclose(action, example.deterministic_action(policy, obs), atol=1e-5)
-    assert action.shape == (6,) and np.all(np.abs(action) <= 1.0)
-    # Sampled (stochastic) and random exploration actions stay in the box too.
     batch = torch.as_tensor(np.stack([obs] * 64), dtype=torch.float32)
     with torch.no_grad():
-        sampled, _ = fresh.act({"observations": batch}, role="policy")
-        random, _ = fresh.random_act({"observations": batch}, role="policy")
+        sampled, _ = policy.act({"observations": batch}, role="policy")
+        random, _ = policy.random_act({"observations": batch}, role="policy")
     assert sampled.abs().max() <= 1.0 and random.abs().max() <= 1.0
     assert not torch.equal(random[0], random[1])  # skrl issue #453: one repeated action
     env.close()
