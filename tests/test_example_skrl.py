@@ -1,5 +1,5 @@
 """examples/skrl_sac.py: a tiny run of skrl's SAC, its stratified evaluation and its outputs
-(skrl_common.py)."""
+(skrl_common.py), and the rows of skrl results in benchmarks/stratified_results.py."""
 
 import importlib.util
 import json
@@ -117,3 +117,48 @@ def test_train_evaluate_save(example, common, tmp_path, monkeypatch, capsys):
     assert sampled.abs().max() <= 1.0 and random.abs().max() <= 1.0
     assert not torch.equal(random[0], random[1])  # skrl issue #453: one repeated action
     env.close()
+
+
+def test_stratified_results_renders_both_examples(tmp_path, monkeypatch, capsys):
+    """``--skrl`` takes result.json files of both examples: each is a row named by the
+    result's algorithm (an older SAC result without one is SAC's), with its training
+    described from the result, its seed and its success."""
+    from benchmarks import stratified_results
+
+    def result(algo: str | None, seed: int, successes: list[bool], **extra) -> Path:
+        cells = [(p, x, lv) for p in (None, {"height_m": 1.60, "mass_kg": 60.0, "sex": "female"},
+                                      {"height_m": 1.85, "mass_kg": 90.0, "sex": "male"})
+                 for x in range(2) for lv in range(5)]
+        episodes = [{"seed": 60000 + i, "profile": p, "exercise": x, "weight_level": lv,
+                     "success": ok, "safety_violation": None if ok else "cuff_force"}
+                    for i, ((p, x, lv), ok) in enumerate(zip(cells, successes, strict=True))]
+        data = {"env": ENV_ID, "env_kwargs": {}, "seed": seed, "timesteps": 1000,
+                "skrl_version": "2.1.1", **({"algo": algo} if algo else {}), **extra,
+                "evaluation": {"episodes": episodes}}
+        path = tmp_path / f"{algo}-{seed}.json"
+        path.write_text(json.dumps(data))
+        return path
+
+    ppo_runs = [result("ppo", 0, [True] * 30, training="skrl 2.1.1 PPO, 64 x 64 tanh MLPs"),
+                result("ppo", 1, [True] * 24 + [False] * 6,
+                       training="skrl 2.1.1 PPO, 64 x 64 tanh MLPs")]
+    old_sac = result(None, 0, [False] * 30)
+    expert_calls = []
+
+    def expert(spec, env_id, env_kwargs, per_cell, seed):
+        expert_calls.append((spec, env_id))
+        return [{"seed": seed, "profile": "m175", "exercise": 0, "weight_level": 0,
+                 "success": True, "safety_violation": None}]
+
+    monkeypatch.setattr(stratified_results, "evaluate_cells", expert)
+    assert stratified_results.main(["--skrl", *map(str, ppo_runs), str(old_sac)]) == 0
+    text = capsys.readouterr().out
+    assert ("| rehab-knee-v2 | ppo (skrl) | skrl 2.1.1 PPO, 64 x 64 tanh MLPs | 0, 1 | "
+            "100, 80 % |") in text
+    assert ("| rehab-knee-v2 | sac (skrl) | skrl 2.1.1 SAC, 256 x 256 MLPs, 1-step returns, "
+            "1000 steps | 0 | 0 % | 0 % | 100 % |") in text
+    # The per-cell table of the PPO row pools both seeds (seed 1 failed the last 6 cells).
+    ppo_cells = text.split("rehab-knee-v2 / ppo (skrl): success per cell")[1]
+    assert "| 1 | f160 | 2/2 | 2/2 | 2/2 | 2/2 | 2/2 |" in ppo_cells
+    assert "| 1 | m185 |" + " 1/2 (1 cuff_force) |" * 5 in ppo_cells
+    assert expert_calls == [("expert", ENV_ID)]
