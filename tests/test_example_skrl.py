@@ -1,5 +1,5 @@
-"""examples/skrl_sac.py: a tiny run of skrl's SAC, its stratified evaluation and its outputs
-(skrl_common.py), and the rows of skrl results in benchmarks/stratified_results.py."""
+"""examples/skrl_sac.py and skrl_ppo.py: tiny runs of skrl's SAC and PPO, their stratified
+evaluation and outputs (skrl_common.py), and their rows in benchmarks/stratified_results.py."""
 
 import importlib.util
 import json
@@ -32,6 +32,11 @@ def load(name: str):
 @pytest.fixture(scope="module")
 def example():
     return load("skrl_sac")
+
+
+@pytest.fixture(scope="module")
+def ppo():
+    return load("skrl_ppo")
 
 
 @pytest.fixture(scope="module")
@@ -116,6 +121,114 @@ def test_train_evaluate_save(example, common, tmp_path, monkeypatch, capsys):
         random, _ = policy.random_act({"observations": batch}, role="policy")
     assert sampled.abs().max() <= 1.0 and random.abs().max() <= 1.0
     assert not torch.equal(random[0], random[1])  # skrl issue #453: one repeated action
+    env.close()
+
+
+def test_ppo_train_evaluate_save(ppo, common, tmp_path, monkeypatch, capsys):
+    """Two PPO updates (8 envs x 256 steps each), the evaluation and the outputs."""
+    trained = keep_trained(ppo, monkeypatch)
+    out = tmp_path / "run"
+    argv = ["--env", ENV_ID, "--timesteps", "4096", "--seed", "3", "--episodes-per-cell", "1",
+            "--max-episode-steps", "60", "--out", str(out)]
+    assert ppo.main(argv) == 0
+    printed = capsys.readouterr()
+    assert printed.err == ""  # quiet: no warnings or INFO logs from skrl, Gymnasium, torch
+    progress, summary = printed.out.split("success rate: ", 1)
+    assert progress.startswith("    4096 steps: ") and progress.count("\n") == 1
+    assert summary.rstrip().endswith(f"wrote {out / 'policy.pt'} and {out / 'result.json'}")
+    result = check_result(common, out, "skrl_ppo.py", seed=3, timesteps=4096)
+    assert result["algo"] == "ppo" and result["settings"] == ppo.SETTINGS
+    assert result["training"].startswith("skrl 2.1.1 PPO, 64 x 64 tanh MLPs, 8 envs x 256")
+    assert result["steps_per_second"] > 0
+
+    # One row of the learning curve after the last update: 4096 steps, 60-step episodes (the
+    # episode statistics are the env's), and the learning rate fell linearly to 0 over the 2 x
+    # 10 epochs (skrl steps the scheduler once an epoch).
+    agent = trained["agent"]
+    (row,) = result["learning_curve"]
+    assert row["steps"] == 4096 and row["episodes"] >= 8 * (512 // 60) and row["length"] <= 60
+    assert 0.0 <= row["success"] <= 1.0 and row["value_loss"] > 0
+    rates = agent.tracking_data["Learning / Learning rate"]
+    assert rates == pytest.approx([1.5e-4, 0.0]) and row["learning_rate"] == 0.0
+    assert agent.optimizer.param_groups[0]["eps"] == 1e-5
+    # The policy learned: its log std left -1, and the saved weights act as the trained policy.
+    log_std = agent.policy.log_std_parameter.detach()
+    assert not torch.allclose(log_std, torch.full_like(log_std, -1.0))
+    assert row["std"] == pytest.approx(log_std.exp().mean().item(), rel=1e-5)
+    check_saved_policy(common, ppo.Policy, agent.policy, out / "policy.pt")
+
+
+def test_ppo_env_is_seeded_float32_and_clips(ppo):
+    """skrl gets float32 observations, the first reset honours the seed (set_seed), and the
+    env resets an ended episode within the step, clipping actions to the box."""
+    from skrl.utils import set_seed
+
+    set_seed(7)
+    env = ppo.make_env(ENV_ID, {"max_episode_steps": 3})
+    obs, _ = env.reset()
+    assert obs.dtype == torch.float32 and obs.shape == (8, 50)
+    plain = gym.vector.SyncVectorEnv([lambda: gym.make(ENV_ID, max_episode_steps=3)] * 8)
+    expected, _ = plain.reset(seed=7)
+    np.testing.assert_array_equal(obs.numpy(), expected)
+    assert not np.array_equal(expected[0], expected[1])  # env i gets seed 7 + i
+    for _ in range(3):  # the env counts the values it had to clip: none reach it
+        obs, reward, terminated, truncated, info = env.step(torch.full((8, 6), 5.0))
+        assert not info["action_clipped"].any()
+    assert obs.dtype == torch.float32 and reward.dtype == torch.float32
+    assert truncated.all() and not terminated.any()
+    assert info["_final_obs"].all() and not info["final_info"]["action_clipped"].any()
+    assert not np.array_equal(np.stack(info["final_obs"]), obs.numpy())  # obs: new episodes
+    plain.close()
+    env.close()
+
+
+def test_ppo_bootstraps_truncated_episodes_from_their_last_observation(ppo):
+    """An episode cut by the time limit is bootstrapped with the value of its last observation
+    (``info["final_obs"]``), not of the next episode's first; one that terminates is not, even
+    on the time limit's step; both end GAE."""
+    from skrl.agents.torch.ppo.ppo import compute_gae
+    from skrl.utils import set_seed
+
+    set_seed(0)
+    env = ppo.make_env(ENV_ID, {"max_episode_steps": 2})
+    agent = ppo.make_agent(env, 4096)
+    agent.init()
+    agent.enable_training_mode(True)
+    value = agent.value
+    obs, _ = env.reset()
+    for step in range(2):
+        with torch.no_grad():
+            actions, _ = agent.act(obs, None, timestep=step, timesteps=512)
+        next_obs, reward, terminated, truncated, info = env.step(actions)
+        assert not terminated.any()
+        if step == 1:  # the time limit: env 0 also terminates on it
+            assert truncated.all()
+            terminated[0] = True
+        agent.record_transition(observations=obs, states=None, actions=actions,
+                                rewards=reward.clone(), next_observations=next_obs,
+                                next_states=None, terminated=terminated, truncated=truncated,
+                                infos=info, timestep=step, timesteps=512)
+        obs = next_obs
+    stored = agent.memory.get_tensor_by_name("rewards").view(-1, 8)[1]
+    final = torch.as_tensor(np.stack(info["final_obs"]), dtype=torch.float32)
+    with torch.no_grad():
+        v_final = value.act({"observations": final}, role="value")[0].view(-1)
+        v_next = value.act({"observations": next_obs}, role="value")[0].view(-1)
+    assert not torch.allclose(v_final, v_next, atol=1e-3)
+    expected = reward.view(-1) + 0.99 * v_final
+    expected[0] = reward[0, 0]
+    torch.testing.assert_close(stored, expected)
+    assert len(agent.episodes) == 8 and all(length == 2 for _, length, _ in agent.episodes)
+    # GAE as skrl's update computes it (time_limit_bootstrap=True): nothing flows back from the
+    # next episode's first value across the episode ends.
+    values = agent.memory.get_tensor_by_name("values")[:2]
+    rewards = agent.memory.get_tensor_by_name("rewards")[:2]
+    returns, _ = compute_gae(
+        rewards=rewards, terminated=agent.memory.get_tensor_by_name("terminated")[:2],
+        truncated=agent.memory.get_tensor_by_name("truncated")[:2], values=values,
+        last_values=torch.full_like(values[0], 1e6), discount_factor=0.99,
+        lambda_coefficient=0.95, time_limit_bootstrap=agent.cfg.time_limit_bootstrap)
+    torch.testing.assert_close(returns[1], rewards[1])
     env.close()
 
 
