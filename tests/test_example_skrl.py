@@ -3,6 +3,8 @@ evaluation and outputs (skrl_common.py), and their rows in benchmarks/stratified
 
 import importlib.util
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -40,20 +42,8 @@ def ppo():
 
 
 @pytest.fixture(scope="module")
-def common(example):
+def common(example):  # the helper module the examples import
     return sys.modules["skrl_common"]
-
-
-def keep_trained(module, monkeypatch) -> dict:
-    """Patch ``module.train`` to keep the agent it returns (in the dict returned)."""
-    trained, real_train = {}, module.train
-
-    def keep(*args, **kwargs):
-        trained["agent"] = real_train(*args, **kwargs)
-        return trained["agent"]
-
-    monkeypatch.setattr(module, "train", keep)
-    return trained
 
 
 def check_result(common, out: Path, script: str, seed: int, timesteps: int) -> dict:
@@ -82,22 +72,14 @@ def check_result(common, out: Path, script: str, seed: int, timesteps: int) -> d
     return result
 
 
-def check_saved_policy(common, policy_class, trained_policy, weights: Path) -> None:
-    """The saved weights load into a fresh policy that acts as the trained one, in the box."""
-    env = gym.make(ENV_ID)
-    obs, _ = env.reset(seed=0)
-    fresh = policy_class(env.observation_space, env.action_space, device="cpu")
-    fresh.load_state_dict(torch.load(weights, map_location="cpu", weights_only=True))
-    fresh.enable_training_mode(False)
-    action = common.deterministic_action(fresh, obs)
-    np.testing.assert_allclose(action, common.deterministic_action(trained_policy, obs),
-                               atol=1e-5)
-    assert action.shape == (6,) and np.all(np.abs(action) <= 1.0)
-    env.close()
-
-
 def test_train_evaluate_save(example, common, tmp_path, monkeypatch, capsys):
-    trained = keep_trained(example, monkeypatch)
+    trained, real_train = {}, example.train
+
+    def keep(*args, **kwargs):  # the real train, keeping the agent for the checks below
+        trained["agent"] = real_train(*args, **kwargs)
+        return trained["agent"]
+
+    monkeypatch.setattr(example, "train", keep)
     out = tmp_path / "run"
     argv = ["--env", ENV_ID, "--timesteps", "300", "--learning-starts", "100", "--seed", "3",
             "--episodes-per-cell", "1", "--max-episode-steps", "60", "--out", str(out)]
@@ -111,29 +93,37 @@ def test_train_evaluate_save(example, common, tmp_path, monkeypatch, capsys):
     # load into a fresh policy that acts as the trained one.
     assert trained["agent"].log_entropy_coefficient.exp().item() != pytest.approx(0.2)
     policy = trained["agent"].policy
-    check_saved_policy(common, example.Policy, policy, out / "policy.pt")
-    # Sampled (stochastic) and random exploration actions stay in the box too.
     env = gym.make(ENV_ID)
     obs, _ = env.reset(seed=0)
+    fresh = example.Policy(env.observation_space, env.action_space, device="cpu")
+    fresh.load_state_dict(torch.load(out / "policy.pt", map_location="cpu", weights_only=True))
+    fresh.enable_training_mode(False)
+    action = common.deterministic_action(fresh, obs)
+    np.testing.assert_allclose(action, common.deterministic_action(policy, obs), atol=1e-5)
+    assert action.shape == (6,) and np.all(np.abs(action) <= 1.0)
+    # Sampled (stochastic) and random exploration actions stay in the box too.
     batch = torch.as_tensor(np.stack([obs] * 64), dtype=torch.float32)
     with torch.no_grad():
-        sampled, _ = policy.act({"observations": batch}, role="policy")
-        random, _ = policy.random_act({"observations": batch}, role="policy")
+        sampled, _ = fresh.act({"observations": batch}, role="policy")
+        random, _ = fresh.random_act({"observations": batch}, role="policy")
     assert sampled.abs().max() <= 1.0 and random.abs().max() <= 1.0
     assert not torch.equal(random[0], random[1])  # skrl issue #453: one repeated action
     env.close()
 
 
-def test_ppo_train_evaluate_save(ppo, common, tmp_path, monkeypatch, capsys):
-    """Two PPO updates (8 envs x 256 steps each), the evaluation and the outputs."""
-    trained = keep_trained(ppo, monkeypatch)
+def test_ppo_example_end_to_end(ppo, common, tmp_path):
+    """The script, run as a user runs it, for two PPO updates (8 envs x 256 steps each): quiet
+    (only its own lines), the evaluation, the outputs and the learning curve."""
     out = tmp_path / "run"
     argv = ["--env", ENV_ID, "--timesteps", "4096", "--seed", "3", "--episodes-per-cell", "1",
             "--max-episode-steps", "60", "--out", str(out)]
-    assert ppo.main(argv) == 0
-    printed = capsys.readouterr()
-    assert printed.err == ""  # quiet: no warnings or INFO logs from skrl, Gymnasium, torch
-    progress, summary = printed.out.split("success rate: ", 1)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(EXAMPLES.parent),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, str(EXAMPLES / "skrl_ppo.py"), *argv], env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stderr == ""  # no warnings or INFO logs from skrl, Gymnasium, torch
+    progress, summary = done.stdout.split("success rate: ", 1)
     assert progress.startswith("    4096 steps: ") and progress.count("\n") == 1
     assert summary.rstrip().endswith(f"wrote {out / 'policy.pt'} and {out / 'result.json'}")
     result = check_result(common, out, "skrl_ppo.py", seed=3, timesteps=4096)
@@ -141,21 +131,22 @@ def test_ppo_train_evaluate_save(ppo, common, tmp_path, monkeypatch, capsys):
     assert result["training"].startswith("skrl 2.1.1 PPO, 64 x 64 tanh MLPs, 8 envs x 256")
     assert result["steps_per_second"] > 0
 
-    # One row of the learning curve after the last update: 4096 steps, 60-step episodes (the
-    # episode statistics are the env's), and the learning rate fell linearly to 0 over the 2 x
-    # 10 epochs (skrl steps the scheduler once an epoch).
-    agent = trained["agent"]
+    # One row of the learning curve, after the last update: 4096 steps of 60-step episodes
+    # (the env's episode statistics), and the learning rate has fallen to 0.
     (row,) = result["learning_curve"]
     assert row["steps"] == 4096 and row["episodes"] >= 8 * (512 // 60) and row["length"] <= 60
     assert 0.0 <= row["success"] <= 1.0 and row["value_loss"] > 0
-    rates = agent.tracking_data["Learning / Learning rate"]
-    assert rates == pytest.approx([1.5e-4, 0.0]) and row["learning_rate"] == 0.0
-    assert agent.optimizer.param_groups[0]["eps"] == 1e-5
-    # The policy learned: its log std left -1, and the saved weights act as the trained policy.
-    log_std = agent.policy.log_std_parameter.detach()
+    assert row["learning_rate"] == 0.0
+    # The policy learned (its log std left -1); the saved weights load and act in the box.
+    env = gym.make(ENV_ID)
+    policy = ppo.Policy(env.observation_space, env.action_space, device="cpu")
+    policy.load_state_dict(torch.load(out / "policy.pt", map_location="cpu", weights_only=True))
+    log_std = policy.log_std_parameter.detach()
     assert not torch.allclose(log_std, torch.full_like(log_std, -1.0))
     assert row["std"] == pytest.approx(log_std.exp().mean().item(), rel=1e-5)
-    check_saved_policy(common, ppo.Policy, agent.policy, out / "policy.pt")
+    action = common.deterministic_action(policy, env.reset(seed=0)[0])
+    assert action.shape == (6,) and np.all(np.abs(action) <= 1.0)
+    env.close()
 
 
 def test_ppo_env_is_seeded_float32_and_clips(ppo):
@@ -193,6 +184,9 @@ def test_ppo_bootstraps_truncated_episodes_from_their_last_observation(ppo):
     env = ppo.make_env(ENV_ID, {"max_episode_steps": 2})
     agent = ppo.make_agent(env, 4096)
     agent.init()
+    # skrl steps the scheduler after each epoch: 4096 steps are 2 updates of 10 epochs.
+    assert agent.scheduler.total_iters == 20 and agent.scheduler.end_factor == 0.0
+    assert agent.optimizer.param_groups[0]["eps"] == 1e-5
     agent.enable_training_mode(True)
     value = agent.value
     obs, _ = env.reset()
