@@ -101,9 +101,14 @@ def training_text(manifest: dict) -> str:
     """How a run trained, from its manifest: library, policy, steps, demonstrations."""
     hp = manifest.get("hyperparameters") or {}
     demos = (manifest.get("demos") or {}).get("episodes", 0)
-    kwargs = hp.get("kwargs") or {}
-    returns = f"{kwargs.get('n_steps')}-step returns, " if kwargs.get("n_steps") else ""
-    return (f"{manifest.get('backend')} {hp.get('policy')}, {returns}"
+    n_steps = (hp.get("kwargs") or {}).get("n_steps")
+    if not n_steps:
+        steps = ""
+    elif manifest.get("algo") == "ppo":  # PPO's n_steps is its rollout, not a return's length
+        steps = f"{manifest.get('n_envs', 1)} envs x {n_steps} steps per update, "
+    else:
+        steps = f"{n_steps}-step returns, "
+    return (f"{manifest.get('backend')} {hp.get('policy')}, {steps}"
             f"{manifest.get('timesteps_done')} steps"
             + (f", {demos} expert episodes in the buffer" if demos else ""))
 
