@@ -101,22 +101,30 @@ def training_text(manifest: dict) -> str:
     """How a run trained, from its manifest: library, policy, steps, demonstrations."""
     hp = manifest.get("hyperparameters") or {}
     demos = (manifest.get("demos") or {}).get("episodes", 0)
-    kwargs = hp.get("kwargs") or {}
-    returns = f"{kwargs.get('n_steps')}-step returns, " if kwargs.get("n_steps") else ""
-    return (f"{manifest.get('backend')} {hp.get('policy')}, {returns}"
+    n_steps = (hp.get("kwargs") or {}).get("n_steps")
+    if not n_steps:
+        steps = ""
+    elif manifest.get("algo") == "ppo":  # PPO's n_steps is its rollout, not a return's length
+        steps = f"{manifest.get('n_envs', 1)} envs x {n_steps} steps per update, "
+    else:
+        steps = f"{n_steps}-step returns, "
+    return (f"{manifest.get('backend')} {hp.get('policy')}, {steps}"
             f"{manifest.get('timesteps_done')} steps"
             + (f", {demos} expert episodes in the buffer" if demos else ""))
 
 
-def skrl_run(data: dict, path: str) -> dict:
-    """A run of ``examples/skrl_sac.py`` (its ``result.json``) in this script's format."""
+def skrl_run(data: dict, path: str) -> tuple[str, dict]:
+    """A run of ``examples/skrl_sac.py`` or ``examples/skrl_ppo.py`` (its ``result.json``) in
+    this script's format, and its row: the algorithm the result names, "(skrl)"."""
     names = {json.dumps(v, sort_keys=True): k for k, v in PROFILES.items()}
     episodes = [{**e, "profile": names[json.dumps(e["profile"], sort_keys=True)]}
                 for e in data["evaluation"]["episodes"]]
-    return {"run_dir": path, "train_seed": data["seed"], "env_kwargs": data["env_kwargs"],
-            "timesteps": data["timesteps"], "episodes": episodes,
-            "training": f"skrl {data['skrl_version']} SAC, 256 x 256 MLPs, 1-step returns, "
-                        f"{data['timesteps']} steps"}
+    # Results written before skrl_ppo.py existed are skrl_sac.py's, without "algo"/"training".
+    training = data.get("training") or (f"skrl {data['skrl_version']} SAC, 256 x 256 MLPs, "
+                                        f"1-step returns, {data['timesteps']} steps")
+    return f"{data.get('algo', 'sac')} (skrl)", {
+        "run_dir": path, "train_seed": data["seed"], "env_kwargs": data["env_kwargs"],
+        "timesteps": data["timesteps"], "episodes": episodes, "training": training}
 
 
 def row_label(algo: str, run: dict) -> str:
@@ -182,8 +190,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help=f"first episode seed (default {DEFAULT_SEED})")
     parser.add_argument("--json", type=Path, help="write every episode to this file")
     parser.add_argument("--skrl", type=Path, nargs="+", default=[], metavar="RESULT.json",
-                        help="result.json files of examples/skrl_sac.py, shown as their own "
-                             "rows (their episodes are that script's, seeds from 60000)")
+                        help="result.json files of examples/skrl_sac.py or skrl_ppo.py, shown "
+                             "as rows of their own named by the result's algorithm (their "
+                             "episodes are that script's, seeds from 60000)")
     parser.add_argument("--from-json", type=Path, nargs="+", default=[], metavar="FILE",
                         help="render the tables from files written by --json (no evaluation; "
                              "the runs of every file are merged)")
@@ -229,11 +238,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     for path in args.skrl:
         data = json.loads(path.read_text())
         env_id = data["env"]
-        results[(env_id, "sac (skrl)")].append(skrl_run(data, str(path)))
+        label, run = skrl_run(data, str(path))
+        results[(env_id, label)].append(run)
         if (env_id, "expert") not in results:
             results[(env_id, "expert")].append({
-                "run_dir": None, "train_seed": None, "env_kwargs": {},
-                "episodes": evaluate_cells("expert", env_id, {}, args.per_cell, args.seed)})
+                "run_dir": None, "train_seed": None, "env_kwargs": run["env_kwargs"],
+                "episodes": evaluate_cells("expert", env_id, run["env_kwargs"], args.per_cell,
+                                           args.seed)})
     command = " ".join(["python", "benchmarks/stratified_results.py",
                         *map(str, argv if argv is not None else sys.argv[1:])])
     text = (f"episodes from seed {args.seed} ({args.per_cell} per exercise x weight level x "

@@ -161,3 +161,18 @@ def test_stratified_results_cover_every_cell_and_report_per_cell(tmp_path) -> No
         ("rehabbot/rehab-knee-v2", "expert"): [{"train_seed": None, "episodes": episodes}]})
     assert "| rehab-knee-v2 | sac | - | 0, 1 | 80, 80 % | 80 % | 0 % |" in text
     assert "| 0 | f160 | 2/2 | 2/2 | 2/2 | 2/2 | 0/2 (2 cuff_force) |" in text
+
+
+def test_stratified_results_describe_each_algorithms_training() -> None:
+    """n_steps is an off-policy learner's return length but PPO's rollout per env."""
+    from benchmarks.stratified_results import training_text
+
+    def manifest(algo: str, **kwargs) -> dict:
+        return {"algo": algo, "backend": "sbx", "n_envs": 8, "timesteps_done": 1000,
+                "hyperparameters": {"policy": "MlpPolicy", "kwargs": kwargs}}
+
+    assert (training_text(manifest("ppo", n_steps=256))
+            == "sbx MlpPolicy, 8 envs x 256 steps per update, 1000 steps")
+    assert (training_text(manifest("sac", n_steps=10))
+            == "sbx MlpPolicy, 10-step returns, 1000 steps")
+    assert training_text(manifest("td3")) == "sbx MlpPolicy, 1000 steps"
