@@ -134,6 +134,13 @@ def row_label(algo: str, run: dict) -> str:
     return f"{algo} + demos" if demos else algo
 
 
+def env_label(env_id: str, env_kwargs: dict) -> str:
+    """The env of a row: the id, and the robot where it is not the ids' UR5e (the FR3 hip is
+    ``rehabbot/rehab-hip-v2 (fr3)``, a row of its own with the expert on the same robot)."""
+    robot = (env_kwargs or {}).get("robot")
+    return env_id if robot in (None, "ur5e") else f"{env_id} ({robot})"
+
+
 def cell_key(episode: dict) -> tuple[int, int, str]:
     return episode["exercise"], episode["weight_level"], episode["profile"]
 
@@ -226,12 +233,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         run = {"run_dir": str(run_dir), "train_seed": manifest.get("seed"),
                "env_kwargs": env_kwargs, "timesteps": manifest.get("timesteps_done"),
                "training": training_text(manifest), "episodes": episodes}
-        results[(env_id, row_label(algo, run))].append(run)
+        row_env = env_label(env_id, env_kwargs)
+        results[(row_env, row_label(algo, run))].append(run)
         rate = np.mean([e["success"] for e in episodes])
         print(f"{run_dir}: {100 * rate:.0f} % of {len(episodes)} episodes", file=sys.stderr,
               flush=True)
-        if (env_id, "expert") not in results:
-            results[(env_id, "expert")].append({
+        if (row_env, "expert") not in results:
+            results[(row_env, "expert")].append({
                 "run_dir": None, "train_seed": None, "env_kwargs": env_kwargs,
                 "episodes": evaluate_cells("expert", env_id, env_kwargs, args.per_cell,
                                            args.seed)})
@@ -239,9 +247,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         data = json.loads(path.read_text())
         env_id = data["env"]
         label, run = skrl_run(data, str(path))
-        results[(env_id, label)].append(run)
-        if (env_id, "expert") not in results:
-            results[(env_id, "expert")].append({
+        row_env = env_label(env_id, run["env_kwargs"])
+        results[(row_env, label)].append(run)
+        if (row_env, "expert") not in results:
+            results[(row_env, "expert")].append({
                 "run_dir": None, "train_seed": None, "env_kwargs": run["env_kwargs"],
                 "episodes": evaluate_cells("expert", env_id, run["env_kwargs"], args.per_cell,
                                            args.seed)})

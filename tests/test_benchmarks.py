@@ -176,3 +176,39 @@ def test_stratified_results_describe_each_algorithms_training() -> None:
     assert (training_text(manifest("sac", n_steps=10))
             == "sbx MlpPolicy, 10-step returns, 1000 steps")
     assert training_text(manifest("td3")) == "sbx MlpPolicy, 1000 steps"
+
+
+def test_zoo_select_picks_each_rows_best_seed_on_validation_episodes(tmp_path) -> None:
+    """Per env, robot and algorithm the seed with the most successful validation episodes
+    (ties: the lower seed); the FR3 runs are a row (and a zoo agent) of their own; test
+    episodes are refused."""
+    import json
+
+    from benchmarks import zoo_select
+    from benchmarks.stratified_results import env_label
+
+    def run(seed: int, successes: int, robot: str | None = None) -> dict:
+        kwargs = {"robot": robot} if robot else {}
+        folder = tmp_path / (robot or "ur5e") / f"seed{seed}"
+        folder.mkdir(parents=True)
+        (folder / "manifest.json").write_text(json.dumps({
+            "env_id": "rehabbot/rehab-hip-v2", "algo": "sac", "seed": seed,
+            "env_kwargs": kwargs}))
+        return {"run_dir": str(folder), "train_seed": seed, "env_kwargs": kwargs,
+                "episodes": [{"success": k < successes} for k in range(10)]}
+
+    assert env_label("rehabbot/rehab-hip-v2", {"robot": "fr3"}) == "rehabbot/rehab-hip-v2 (fr3)"
+    assert env_label("rehabbot/rehab-hip-v2", {"robot": "ur5e"}) == "rehabbot/rehab-hip-v2"
+    validation = {"seed": 40000, "per_cell": 1, "command": "python ...", "results": [
+        {"env_id": "rehabbot/rehab-hip-v2", "algo": "sac + demos",
+         "runs": [run(0, 7), run(1, 9), run(2, 9)]},
+        {"env_id": "rehabbot/rehab-hip-v2 (fr3)", "algo": "sac + demos",
+         "runs": [run(0, 4, "fr3"), run(1, 3, "fr3")]},
+        {"env_id": "rehabbot/rehab-hip-v2", "algo": "expert", "runs": [{"episodes": []}]}]}
+    picked = zoo_select.choices(validation)
+    assert [(c["agent"], c["seed"]) for c in picked] == [("sac", 1), ("sac-fr3", 0)]
+    assert picked[0]["success_by_seed"] == {0: 0.7, 1: 0.9, 2: 0.9}
+    note = zoo_select.selection_note(picked[0], validation)["selection"]
+    assert note["chosen_seed"] == 1 and note["validation_episodes"]["first_seed"] == 40000
+    with pytest.raises(ValueError, match="the test episodes"):
+        zoo_select.choices({**validation, "seed": 50000})
