@@ -81,12 +81,17 @@ class RehabEnvCore(RehabEnvBase):
                                       controller.clip_high.tolist(), strict=True))
         self._qpos_adr = as_index(np.concatenate([h.qpos_adr for h in self.handles]))
         self._dof_adr = as_index(np.concatenate([h.dof_adr for h in self.handles]))
-        self._arm_dofs = tuple(as_index(h.dof_adr) for h in self.handles)
+        # Per arm: its controller, its dofs and its joints in theta.
+        self._arm_parts = tuple(
+            (arm_controller, as_index(handle.dof_adr), slice(k * n, (k + 1) * n))
+            for k, (arm_controller, handle) in enumerate(zip(controller.controllers,
+                                                             self.handles, strict=True)))
         mujoco.mj_kinematics(self.model, data)
         base_pos = [data.xpos[h.base_body_id].copy() for h in self.handles]
         base_rot = [data.xmat[h.base_body_id].reshape(3, 3).copy() for h in self.handles]
-        self._base_pos_lists = [pos.tolist() for pos in base_pos]
-        self._base_rot_cols = [rot.T.tolist() for rot in base_rot]  # p = R^T (x - base)
+        # Per arm, the base frame as nine numbers and the origin: p = R^T (x - base).
+        self._frames = [(*pos.tolist(), *rot.T.ravel().tolist())
+                        for pos, rot in zip(base_pos, base_rot, strict=True)]
         self._tool_sites = [h.tool_site_id for h in self.handles]
         phi_adr = [int(a) for a in scene.exercised_qpos_adr]
         self._phi_block = slice(min(phi_adr), max(phi_adr) + 1)  # read as one slice
@@ -195,12 +200,12 @@ class RehabEnvCore(RehabEnvBase):
             obs[self._dynamic] = self._healthy_values
             force_n = 0.0 if not math.isfinite(force_n) else force_n
 
-        # Each arm's distance to the target that was active during the step.
-        squares, largest = [0.0] * self._arms, 0.0
-        for arm, angle, goal in zip(self._arm_of_joint, self._theta, self._target,
-                                    strict=True):
+        # The distance to the target that was active during the step (a few numbers: plain
+        # Python), and each arm's.
+        squared = largest = 0.0
+        for angle, goal in zip(self._theta, self._target, strict=True):
             error = angle - goal
-            squares[arm] += error * error
+            squared += error * error
             if abs(error) > largest:
                 largest = abs(error)
         index = self._target_index
@@ -209,8 +214,9 @@ class RehabEnvCore(RehabEnvBase):
                                                  or violation == "instability")
         reached = largest < self._tolerance and not safety_stop
         outcome = self._outcome
-        outcome.distance_rad = math.sqrt(sum(squares))
-        outcome.arm_distances_rad = [math.sqrt(s) for s in squares]
+        distance = outcome.distance_rad = math.sqrt(squared)
+        outcome.arm_distances_rad = [distance] if self._arms == 1 else \
+            self._arm_distances(self._target)
         if reached and not last:  # holding still now costs the distance to the next target
             outcome.next_distance_rad, outcome.next_arm_distances_rad = self._distances(
                 self._sequence.robot_rad[index + 1].tolist())
@@ -273,22 +279,29 @@ class RehabEnvCore(RehabEnvBase):
     # Helpers
     # ------------------------------------------------------------------------------------------
     def _distances(self, target: list[float]) -> tuple[float, list[float]]:
-        """``||theta - target||`` over every joint and per arm (plain Python: a few numbers)."""
+        """``||theta - target||`` over every joint, and per arm."""
+        squared = 0.0
+        for angle, goal in zip(self._theta, target, strict=True):
+            squared += (angle - goal) * (angle - goal)
+        distance = math.sqrt(squared)
+        return distance, [distance] if self._arms == 1 else self._arm_distances(target)
+
+    def _arm_distances(self, target: list[float]) -> list[float]:
+        """Each arm's ``||theta_k - target_k||``."""
         squares = [0.0] * self._arms
         for arm, angle, goal in zip(self._arm_of_joint, self._theta, target, strict=True):
             squares[arm] += (angle - goal) * (angle - goal)
-        return math.sqrt(sum(squares)), [math.sqrt(s) for s in squares]
+        return [math.sqrt(s) for s in squares]
 
     def _leads(self) -> list[float]:
         """Per arm, how far [rad] its joints may still travel if the agent holds still
         (:meth:`rehabbot.envs.control.Controller.hold_travel_rad`)."""
-        leads, n, qvel = [], self._n_joints, self._qvel
-        for k, controller in enumerate(self.controller.controllers):
+        leads, qvel, theta = [], self._qvel, self._theta
+        for controller, dofs, joints in self._arm_parts:
             speed = 0.0
-            for velocity in qvel[self._arm_dofs[k]].tolist():
+            for velocity in qvel[dofs].tolist():
                 speed += velocity * velocity
-            leads.append(controller.hold_travel_rad(self._theta[k * n:(k + 1) * n],
-                                                    math.sqrt(speed)))
+            leads.append(controller.hold_travel_rad(theta[joints], math.sqrt(speed)))
         return leads
 
     def _write_target(self) -> None:
@@ -324,12 +337,12 @@ class RehabEnvCore(RehabEnvBase):
         qpos = self._qpos
         theta = qpos[self._qpos_adr].tolist()
         values = self._healthy_values = theta.copy()
-        for (bx, by, bz), (c0, c1, c2), tool in zip(self._base_pos_lists, self._base_rot_cols,
-                                                    self._tool_xpos, strict=True):
+        for (bx, by, bz, r00, r01, r02, r10, r11, r12, r20, r21, r22), tool in zip(
+                self._frames, self._tool_xpos, strict=True):
             x, y, z = tool.tolist()
             dx, dy, dz = x - bx, y - by, z - bz
-            values += (dx * c0[0] + dy * c0[1] + dz * c0[2], dx * c1[0] + dy * c1[1]
-                       + dz * c1[2], dx * c2[0] + dy * c2[1] + dz * c2[2])
+            values += (dx * r00 + dy * r01 + dz * r02, dx * r10 + dy * r11 + dz * r12,
+                       dx * r20 + dy * r21 + dz * r22)
         block = qpos[self._phi_block].tolist()
         values += [block[k] for k in self._phi_pick]
         self._obs[self._dynamic] = values
