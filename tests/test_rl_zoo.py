@@ -81,9 +81,9 @@ def _load(algo: str, path: Path) -> Any:
 # The shipped entry of ID for each algorithm: (n_timesteps, n_envs, kwargs, policy_kwargs,
 # noise_type, noise_std); every policy is the library's MlpPolicy.
 SHIPPED = {
-    "sac": (200_000, None, {"n_steps": 10, "train_freq": 4, "gradient_steps": 4}, {},
+    "sac": (100_000, None, {"n_steps": 10, "train_freq": 4, "gradient_steps": 4}, {},
             None, None),
-    "td3": (200_000, None, {"n_steps": 10, "train_freq": 4, "gradient_steps": 4}, {},
+    "td3": (100_000, None, {"n_steps": 10, "train_freq": 4, "gradient_steps": 4}, {},
             "normal", 0.1),
     "ppo": (1_000_000, 8, {"n_steps": 256}, {"log_std_init": -1.0}, None, None),
 }

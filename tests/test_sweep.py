@@ -110,7 +110,7 @@ def test_the_shipped_sweep_files_load() -> None:
     trials = results.trials()
     assert len(trials) == 4 * 3 * 3 and {t.env_id for t in trials} == base
     steps = {t.algo: t.total_timesteps for t in trials}
-    assert steps == {"sac": 200_000, "td3": 200_000, "ppo": 1_000_000}
+    assert steps == {"sac": 100_000, "td3": 100_000, "ppo": 1_000_000}
     assert {t.hyperparams["source"] for t in trials} == {"sac", "td3", "ppo"}
     assert {t.algo: t.demos for t in trials} == {"sac": 20, "td3": 20, "ppo": None}
     # Every grid trains -v2 ids with the libraries' MlpPolicy (the shipped settings).
