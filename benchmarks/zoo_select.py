@@ -1,14 +1,17 @@
 """Choose the zoo's agents on validation episodes, and export them.
 
     python benchmarks/stratified_results.py RUNS... --per-cell 1 --seed 40000 --json val.json
-    python benchmarks/zoo_select.py val.json [--export] [--zoo DIR]
+    python benchmarks/zoo_select.py val.json [more.json ...] [--export] [--zoo DIR]
+        [--min-success 0.5] [--skip ENV/AGENT ...]
 
 For every env x algorithm row of ``benchmarks/stratified_results.py`` (the runs of one id,
 robot and algorithm), the run whose final model finished the most validation episodes is
 chosen (ties: the lower training seed). The validation episodes are ``stratified_results``'
 cells (every exercise x weight level x profile) on seeds of their own (40 000 onwards), never
 the held-out test episodes (50 000 onwards) that ``docs/results-v2.md`` reports, so the
-published figures are not the ones the choice was made on. ``--export`` writes each choice to
+published figures are not the ones the choice was made on. A row whose best seed finishes
+fewer than ``--min-success`` of its validation episodes (default half) is not shipped: the
+table says so. ``--export`` writes each choice to
 the zoo with its whole model (``rehabbot zoo export RUN --full``), recording the choice in the
 agent's metadata (``selection``: the validation file's command, every seed's success and the
 chosen seed). Without ``--export`` it only prints the table.
@@ -31,6 +34,7 @@ from rehabbot.rl import runs, zoo
 from rehabbot.rl.zoo_export import export_policy
 
 VALIDATION_SEED = 40_000
+MIN_SUCCESS = 0.5
 
 
 def choices(validation: dict[str, Any]) -> list[dict[str, Any]]:
@@ -59,6 +63,22 @@ def choices(validation: dict[str, Any]) -> list[dict[str, Any]]:
     return picked
 
 
+def merge(files: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """One validation record of several ``stratified_results --json`` files of the same
+    episodes (first seed and episodes per cell); their commands are kept, joined by ``; ``."""
+    if not files:
+        raise ValueError("no validation file")
+    first = files[0]
+    for other in files[1:]:
+        if (other["seed"], other["per_cell"]) != (first["seed"], first["per_cell"]):
+            raise ValueError(f"validation files of different episodes: seed {other['seed']}, "
+                             f"{other['per_cell']} per cell against seed {first['seed']}, "
+                             f"{first['per_cell']} per cell")
+    return {"seed": first["seed"], "per_cell": first["per_cell"],
+            "command": "; ".join(str(f.get("command")) for f in files),
+            "results": [entry for f in files for entry in f["results"]]}
+
+
 def selection_note(choice: dict[str, Any], validation: dict[str, Any]) -> dict[str, Any]:
     """The ``selection`` metadata of an exported agent."""
     return {"selection": {
@@ -75,23 +95,39 @@ def selection_note(choice: dict[str, Any], validation: dict[str, Any]) -> dict[s
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("validation", type=Path,
-                        help="a stratified_results.py --json file of validation episodes")
+    parser.add_argument("validation", type=Path, nargs="+",
+                        help="stratified_results.py --json files of validation episodes "
+                             "(their rows are merged)")
+    parser.add_argument("--min-success", type=float, default=MIN_SUCCESS, metavar="F",
+                        help="ship a row only if its best seed finishes at least this fraction "
+                             f"of its validation episodes (default {MIN_SUCCESS})")
+    parser.add_argument("--skip", nargs="+", default=[], metavar="ENV/AGENT",
+                        help="rows to leave as they are in the zoo (e.g. rehab-hip-v2/sac)")
     parser.add_argument("--export", action="store_true",
                         help="export every choice to the zoo with its whole model")
     parser.add_argument("--zoo", type=Path, help="the zoo folder (default: the package's)")
     args = parser.parse_args(argv)
-    validation = json.loads(args.validation.read_text())
+    if not 0.0 <= args.min_success <= 1.0:
+        parser.error(f"--min-success {args.min_success} must be in [0, 1]")
+    validation = merge([json.loads(path.read_text()) for path in args.validation])
     picked = choices(validation)
-    print("| agent | chosen seed | validation success by seed | run |")
-    print("|---|---|---|---|")
+    print("| agent | chosen seed | validation success by seed | run | shipped |")
+    print("|---|---|---|---|---|")
+    shipped = []
     for choice in picked:
         rates = ", ".join(f"{seed}: {100 * rate:.0f} %"
                           for seed, rate in sorted(choice["success_by_seed"].items()))
-        print(f"| {env_short_name(choice['env_id'])}/{choice['agent']} | {choice['seed']} | "
-              f"{rates} | {choice['run_dir']} |", flush=True)
+        name = f"{env_short_name(choice['env_id'])}/{choice['agent']}"
+        best = choice["success_by_seed"][choice["seed"]]
+        verdict = ("no (--skip)" if name in args.skip else
+                   f"no (below {100 * args.min_success:.0f} %)" if best < args.min_success
+                   else "yes")
+        if verdict == "yes":
+            shipped.append(choice)
+        print(f"| {name} | {choice['seed']} | {rates} | {choice['run_dir']} | {verdict} |",
+              flush=True)
     if args.export:
-        for choice in picked:
+        for choice in shipped:
             out = zoo.zoo_path(choice["env_id"], choice["agent"], args.zoo)
             meta = export_policy(choice["run_dir"], out_path=out, full=True,
                                  metadata=selection_note(choice, validation))

@@ -212,3 +212,40 @@ def test_zoo_select_picks_each_rows_best_seed_on_validation_episodes(tmp_path) -
     assert note["chosen_seed"] == 1 and note["validation_episodes"]["first_seed"] == 40000
     with pytest.raises(ValueError, match="the test episodes"):
         zoo_select.choices({**validation, "seed": 50000})
+
+
+def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, capsys) -> None:
+    """Several validation files are one record (refused when their episodes differ); a row
+    whose best seed finishes fewer than --min-success of its episodes is not shipped."""
+    import json
+
+    from benchmarks import zoo_select
+
+    def entry(algo: str, successes: int) -> dict:
+        folder = tmp_path / algo
+        folder.mkdir()
+        (folder / "manifest.json").write_text(json.dumps({
+            "env_id": "rehabbot/rehab-knee-v2", "algo": algo, "seed": 0, "env_kwargs": {}}))
+        return {"env_id": "rehabbot/rehab-knee-v2", "algo": algo, "runs": [
+            {"run_dir": str(folder), "train_seed": 0, "env_kwargs": {},
+             "episodes": [{"success": k < successes} for k in range(10)]}]}
+
+    files = []
+    for name, algo, successes in (("a", "td3", 4), ("b", "ppo", 5)):
+        files.append(tmp_path / f"{name}.json")
+        files[-1].write_text(json.dumps({"seed": 40000, "per_cell": 1, "command": name,
+                                         "results": [entry(algo, successes)]}))
+    assert zoo_select.main([*map(str, files)]) == 0
+    rows = capsys.readouterr().out
+    assert "| rehab-knee-v2/td3 | 0 | 0: 40 % |" in rows and "no (below 50 %)" in rows
+    assert "| rehab-knee-v2/ppo | 0 | 0: 50 % |" in rows and rows.count("| yes |") == 1
+    assert zoo_select.main([*map(str, files), "--min-success", "0.6"]) == 0
+    assert capsys.readouterr().out.count("| yes |") == 0
+    assert zoo_select.main([*map(str, files), "--skip", "rehab-knee-v2/ppo"]) == 0
+    assert "no (--skip)" in capsys.readouterr().out
+    other = tmp_path / "c.json"
+    other.write_text(json.dumps({"seed": 40000, "per_cell": 2, "results": []}))
+    with pytest.raises(ValueError, match="2 per cell"):
+        zoo_select.main([str(files[0]), str(other)])
+    with pytest.raises(SystemExit):
+        zoo_select.main([str(files[0]), "--min-success", "1.5"])
