@@ -108,9 +108,11 @@ def training_text(manifest: dict) -> str:
         steps = f"{manifest.get('n_envs', 1)} envs x {n_steps} steps per update, "
     else:
         steps = f"{n_steps}-step returns, "
+    cloned = (manifest.get("bc") or {}).get("episodes", 0)
     return (f"{manifest.get('backend')} {hp.get('policy')}, {steps}"
             f"{manifest.get('timesteps_done')} steps"
-            + (f", {demos} expert episodes in the buffer" if demos else ""))
+            + (f", {demos} expert episodes in the buffer" if demos else "")
+            + (f", actor cloned from {cloned} expert episodes first" if cloned else ""))
 
 
 def skrl_run(data: dict, path: str) -> tuple[str, dict]:
@@ -129,9 +131,14 @@ def skrl_run(data: dict, path: str) -> tuple[str, dict]:
 
 def row_label(algo: str, run: dict) -> str:
     """Runs of one algorithm are one row, apart from those that trained with expert
-    episodes in their buffer (a row of their own)."""
-    demos = "expert episodes" in run.get("training", "") and not algo.endswith(" + demos")
-    return f"{algo} + demos" if demos else algo
+    episodes in their buffer (``+ demos``) or from an actor cloned from them (``+ bc``): rows
+    of their own."""
+    training = run.get("training", "")
+    if "in the buffer" in training and not algo.endswith(" + demos"):
+        return f"{algo} + demos"
+    if "actor cloned from" in training and not algo.endswith(" + bc"):
+        return f"{algo} + bc"
+    return algo
 
 
 def env_label(env_id: str, env_kwargs: dict) -> str:

@@ -176,6 +176,17 @@ def test_stratified_results_describe_each_algorithms_training() -> None:
     assert (training_text(manifest("sac", n_steps=10))
             == "sbx MlpPolicy, 10-step returns, 1000 steps")
     assert training_text(manifest("td3")) == "sbx MlpPolicy, 1000 steps"
+    # Demonstrations in the buffer and a cloned start are rows of their own.
+    from benchmarks.stratified_results import row_label
+
+    demos = training_text({**manifest("sac"), "demos": {"episodes": 20}})
+    cloned = training_text({**manifest("ppo", n_steps=256), "bc": {"episodes": 20}})
+    assert demos.endswith("20 expert episodes in the buffer")
+    assert cloned.endswith("actor cloned from 20 expert episodes first")
+    assert row_label("sac", {"training": demos}) == "sac + demos"
+    assert row_label("ppo", {"training": cloned}) == "ppo + bc"
+    assert row_label("ppo + bc", {"training": cloned}) == "ppo + bc"
+    assert row_label("ppo", {"training": "sbx MlpPolicy, 1000 steps"}) == "ppo"
 
 
 def test_zoo_select_picks_each_rows_best_seed_on_validation_episodes(tmp_path) -> None:
