@@ -66,20 +66,50 @@ def find_runs(roots: Sequence[Path]) -> list[Path]:
     return found
 
 
+def cell_envs(env_id: str, kwargs: dict) -> tuple[dict[int, gym.Env], dict[int, str]]:
+    """The env of each weight level (one env for all where the id accepts every level) and
+    the levels the env refuses for this patient, with its reason (a scene that cannot hold a
+    heavy profile's limb, e.g. the FR3 with the 1.85 m man at levels 3 and 4)."""
+    try:
+        env = gym.make(env_id, **kwargs)
+        return dict.fromkeys(WEIGHT_LEVELS, env), {}
+    except ValueError:
+        pass
+    envs, refused = {}, {}
+    for level in WEIGHT_LEVELS:
+        try:
+            envs[level] = gym.make(env_id, **kwargs, weight_level=level)
+        except ValueError as err:
+            refused[level] = str(err)
+    return envs, refused
+
+
 def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
-                   seed: int) -> list[dict]:
-    """Every episode of ``spec`` (a model path or ``expert``) over the cells of ``env_id``."""
+                   seed: int, refused: list[dict] | None = None) -> list[dict]:
+    """Every episode of ``spec`` (a model path or ``expert``) over the cells of ``env_id``.
+    A cell the env refuses (see :func:`cell_envs`) has no episodes; it is appended to
+    ``refused`` with the env's reason, and its seeds are skipped, so every other cell keeps
+    the seeds it has on every robot."""
     episodes = []
     next_seed = seed
     for profile_name, profile in PROFILES.items():
         kwargs = dict(env_kwargs)
         if profile is not None:
             kwargs["profile"] = profile
-        env = gym.make(env_id, **kwargs)
+        envs, refusals = cell_envs(env_id, kwargs)
+        if refused is not None:
+            refused += [{"profile": profile_name, "weight_level": level, "reason": reason}
+                        for level, reason in refusals.items()]
+        unique = list({id(env): env for env in envs.values()}.values())
         try:
-            policy = load_policy(spec, env, seed=0)
-            for exercise in range(len(env.unwrapped.targets)):
+            policies = {id(env): load_policy(spec, env, seed=0) for env in unique}
+            exercises = range(len(unique[0].unwrapped.targets)) if unique else range(0)
+            for exercise in exercises:
                 for level in WEIGHT_LEVELS:
+                    if level not in envs:
+                        next_seed += per_cell
+                        continue
+                    env, policy = envs[level], policies[id(envs[level])]
                     for _ in range(per_cell):
                         obs, info = env.reset(seed=next_seed, options={
                             "exercise": exercise, "weight_level": level})
@@ -93,7 +123,8 @@ def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
                             "safety_violation": info["safety_violation"], "steps": steps})
                         next_seed += 1
         finally:
-            env.close()
+            for env in unique:
+                env.close()
     return episodes
 
 
@@ -186,12 +217,19 @@ def summarize(results: dict[tuple[str, str], list[dict]]) -> str:
                 row = []
                 for level in WEIGHT_LEVELS:
                     cell = by_cell[(exercise, level, profile)]
-                    text = f"{sum(cell)}/{len(cell)}"
+                    text = f"{sum(cell)}/{len(cell)}" if cell else "n/a"
                     if stops[(exercise, level, profile)]:
                         kinds = sorted(set(stops[(exercise, level, profile)]))
                         text += f" ({len(stops[(exercise, level, profile)])} {'/'.join(kinds)})"
                     row.append(text)
                 cells_text.append(f"| {exercise} | {profile} | " + " | ".join(row) + " |")
+        refusals = {(c["profile"], c["weight_level"]): c["reason"]
+                    for r in entries for c in r.get("refused_cells", [])}
+        if refusals:
+            cells = ", ".join(f"{p} l{lv}" for p, lv in sorted(refusals))
+            reason = next(iter(refusals.values())).split(";")[0]
+            cells_text.append(f"\nn/a: the env refuses {cells} (no episodes, not counted): "
+                              f"{reason}.")
     return "\n".join(lines + cells_text)
 
 
@@ -235,11 +273,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         manifest = runs.read_manifest(run_dir) or {}
         env_id, algo = manifest["env_id"], manifest["algo"]
         env_kwargs = manifest.get("env_kwargs") or {}
+        refused: list[dict] = []
         episodes = evaluate_cells(str(run_dir / runs.MODEL_NAME), env_id, env_kwargs,
-                                  args.per_cell, args.seed)
+                                  args.per_cell, args.seed, refused)
         run = {"run_dir": str(run_dir), "train_seed": manifest.get("seed"),
                "env_kwargs": env_kwargs, "timesteps": manifest.get("timesteps_done"),
-               "training": training_text(manifest), "episodes": episodes}
+               "training": training_text(manifest), "episodes": episodes,
+               "refused_cells": refused}
         row_env = env_label(env_id, env_kwargs)
         results[(row_env, row_label(algo, run))].append(run)
         rate = np.mean([e["success"] for e in episodes])

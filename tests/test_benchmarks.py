@@ -163,6 +163,30 @@ def test_stratified_results_cover_every_cell_and_report_per_cell(tmp_path) -> No
     assert "| 0 | f160 | 2/2 | 2/2 | 2/2 | 2/2 | 0/2 (2 cuff_force) |" in text
 
 
+def test_stratified_results_leave_out_the_cells_an_env_refuses() -> None:
+    """The FR3 cannot hold the 1.85 m man's leg at weight levels 3 and 4: those cells have no
+    episodes (their seeds skipped, so every other cell keeps its seed), are recorded with the
+    env's reason and shown as n/a."""
+    from benchmarks import stratified_results
+
+    refused: list[dict] = []
+    kwargs = {"robot": "fr3", "max_episode_steps": 2}
+    episodes = stratified_results.evaluate_cells("expert", "rehabbot/rehab-hip-v2", kwargs, 1,
+                                                 900, refused)
+    assert sorted((c["profile"], c["weight_level"]) for c in refused) == [("m185", 3),
+                                                                          ("m185", 4)]
+    assert all("fr3_joint" in c["reason"] for c in refused)
+    assert len(episodes) == 2 * 5 * 3 - 2 * 2
+    kept = {stratified_results.cell_key(e): e["seed"] for e in episodes}
+    assert kept[(1, 2, "m185")] == 900 + 2 * 5 * 2 + 5 + 2  # profile, exercise, level order
+    assert (0, 3, "m185") not in kept and (1, 4, "m185") not in kept
+    text = stratified_results.summarize({
+        ("rehabbot/rehab-hip-v2 (fr3)", "sac"): [{"train_seed": 0, "episodes": episodes,
+                                                  "refused_cells": refused}]})
+    assert "| 0 | m185 | 0/1 | 0/1 | 0/1 | n/a | n/a |" in text
+    assert "n/a: the env refuses m185 l3, m185 l4 (no episodes, not counted)" in text
+
+
 def test_stratified_results_describe_each_algorithms_training() -> None:
     """n_steps is an off-policy learner's return length but PPO's rollout per env."""
     from benchmarks.stratified_results import training_text
