@@ -40,6 +40,16 @@ PROFILES = {
     "f160": {"height_m": 1.60, "mass_kg": 60.0, "sex": "female"},
     "m185": {"height_m": 1.85, "mass_kg": 90.0, "sex": "male"},
 }
+# The patients zoo agents are chosen on (benchmarks/zoo_select.py): none of them is a test
+# patient. A healthy -v2 episode is the same for a deterministic policy whatever its seed (the
+# home state has no noise, as in the paper), so validation and test must differ in who is in
+# the chair, not only in their seeds.
+VALIDATION_PROFILES = {
+    "f165": {"height_m": 1.65, "mass_kg": 62.0, "sex": "female"},
+    "m170": {"height_m": 1.70, "mass_kg": 68.0, "sex": "male"},
+    "m180": {"height_m": 1.80, "mass_kg": 82.0, "sex": "male"},
+}
+PROFILE_SETS = {"test": PROFILES, "validation": VALIDATION_PROFILES}
 DEFAULT_SEED = 50_000
 PREAMBLE = """# Results on the -v2 ids: plain networks, held-out episodes
 
@@ -48,9 +58,13 @@ file's source): every trained run's final model acts deterministically on held-o
 that cover every exercise x weight level (0-4) x patient profile (`m175`: the 1.75 m, 75 kg
 man the runs trained on; held out: `f160`, a 1.60 m, 60 kg woman, and `m185`, a 1.85 m,
 90 kg man). The episode seeds are far from every seed training used, and the same for every
-run and for the scripted expert. "success IQM" is the interquartile mean of the seeds'
+run and for the scripted expert. On a healthy id the home state has no noise (as in the
+paper), so a deterministic policy plays the same episode in a cell whatever its seed: the
+2 episodes of a cell are one episode counted twice, and what is held out is the two
+profiles. "success IQM" is the interquartile mean of the seeds'
 success rates with a 95 % percentile-bootstrap interval over seeds (rliable). Zoo agents are
-chosen on other episodes (validation seeds 40 000 onwards) than these. The per-cell tables
+chosen on other patients (`--profiles validation`: a 1.65 m woman and 1.70 m and 1.80 m men,
+seeds from 40 000) than these. The per-cell tables
 pool every seed of a row; a cell's stops name the safety rule that ended those episodes.
 Every episode is in `docs/results-v2.json`; `python benchmarks/stratified_results.py
 --from-json docs/results-v2.json` renders this page again from it.
@@ -85,14 +99,15 @@ def cell_envs(env_id: str, kwargs: dict) -> tuple[dict[int, gym.Env], dict[int, 
 
 
 def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
-                   seed: int, refused: list[dict] | None = None) -> list[dict]:
+                   seed: int, refused: list[dict] | None = None,
+                   profiles: dict[str, dict | None] = PROFILES) -> list[dict]:
     """Every episode of ``spec`` (a model path or ``expert``) over the cells of ``env_id``.
     A cell the env refuses (see :func:`cell_envs`) has no episodes; it is appended to
     ``refused`` with the env's reason, and its seeds are skipped, so every other cell keeps
     the seeds it has on every robot."""
     episodes = []
     next_seed = seed
-    for profile_name, profile in PROFILES.items():
+    for profile_name, profile in profiles.items():
         kwargs = dict(env_kwargs)
         if profile is not None:
             kwargs["profile"] = profile
@@ -183,7 +198,8 @@ def cell_key(episode: dict) -> tuple[int, int, str]:
     return episode["exercise"], episode["weight_level"], episode["profile"]
 
 
-def summarize(results: dict[tuple[str, str], list[dict]]) -> str:
+def summarize(results: dict[tuple[str, str], list[dict]],
+              profiles: Sequence[str] = tuple(PROFILES)) -> str:
     """Markdown: one row per env and algorithm (IQM over seeds), then the per-cell tables."""
     lines = ["| env | algo | training (from the runs' manifests) | seeds | success per seed | "
              "success IQM [95 % CI] | expert |", "|---|---|---|---|---|---|---|"]
@@ -213,7 +229,7 @@ def summarize(results: dict[tuple[str, str], list[dict]]) -> str:
                        "stops in brackets)\n", header,
                        "|---|---|" + "---|" * len(WEIGHT_LEVELS)]
         for exercise in exercises:
-            for profile in PROFILES:
+            for profile in profiles:
                 row = []
                 for level in WEIGHT_LEVELS:
                     cell = by_cell[(exercise, level, profile)]
@@ -240,6 +256,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="episodes per exercise x weight level x profile (default 2)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED,
                         help=f"first episode seed (default {DEFAULT_SEED})")
+    parser.add_argument("--profiles", choices=tuple(PROFILE_SETS), default="test",
+                        help="the patients: test (the training profile and two held out; "
+                             "the published tables) or validation (three others, on which "
+                             "zoo agents are chosen)")
     parser.add_argument("--json", type=Path, help="write every episode to this file")
     parser.add_argument("--skrl", type=Path, nargs="+", default=[], metavar="RESULT.json",
                         help="result.json files of examples/skrl_sac.py or skrl_ppo.py, shown "
@@ -253,15 +273,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.per_cell < 1:
         parser.error(f"--per-cell {args.per_cell} must be at least 1")
+    if args.skrl and args.profiles != "test":
+        parser.error("--skrl results hold the test patients' episodes; use --profiles test")
+    profiles = PROFILE_SETS[args.profiles]
     found = find_runs(args.roots)
     if not found and not args.skrl and not args.from_json:
         parser.error(f"no run folder with a {runs.MODEL_NAME} under {args.roots}")
     results: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for path in args.from_json:
         saved = json.loads(path.read_text())
-        if (saved["per_cell"], saved["seed"]) != (args.per_cell, args.seed):
-            parser.error(f"{path} holds --per-cell {saved['per_cell']} --seed {saved['seed']}, "
-                         f"not {args.per_cell} and {args.seed}")
+        held = (saved["per_cell"], saved["seed"], saved.get("profile_set", "test"))
+        if held != (args.per_cell, args.seed, args.profiles):
+            parser.error(f"{path} holds --per-cell {held[0]} --seed {held[1]} --profiles "
+                         f"{held[2]}, not {args.per_cell}, {args.seed} and {args.profiles}")
         for entry in saved["results"]:
             if entry["algo"] == "expert":
                 if (entry["env_id"], "expert") not in results:
@@ -275,7 +299,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         env_kwargs = manifest.get("env_kwargs") or {}
         refused: list[dict] = []
         episodes = evaluate_cells(str(run_dir / runs.MODEL_NAME), env_id, env_kwargs,
-                                  args.per_cell, args.seed, refused)
+                                  args.per_cell, args.seed, refused, profiles)
         run = {"run_dir": str(run_dir), "train_seed": manifest.get("seed"),
                "env_kwargs": env_kwargs, "timesteps": manifest.get("timesteps_done"),
                "training": training_text(manifest), "episodes": episodes,
@@ -289,7 +313,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             results[(row_env, "expert")].append({
                 "run_dir": None, "train_seed": None, "env_kwargs": env_kwargs,
                 "episodes": evaluate_cells("expert", env_id, env_kwargs, args.per_cell,
-                                           args.seed)})
+                                           args.seed, profiles=profiles)})
     for path in args.skrl:
         data = json.loads(path.read_text())
         env_id = data["env"]
@@ -304,15 +328,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = " ".join(["python", "benchmarks/stratified_results.py",
                         *map(str, argv if argv is not None else sys.argv[1:])])
     text = (f"episodes from seed {args.seed} ({args.per_cell} per exercise x weight level x "
-            "profile, deterministic actions), every run's final model\n\n"
-            + summarize(results))
+            f"profile, {args.profiles} patients, deterministic actions), every run's final "
+            "model\n\n" + summarize(results, tuple(profiles)))
     print(text)
     if args.markdown:
         args.markdown.write_text(f"<!-- generated by: {command} -->\n\n{PREAMBLE}\n{text}\n")
     if args.json:
         args.json.write_text(json.dumps({
             "command": command,
-            "per_cell": args.per_cell, "seed": args.seed, "profiles": PROFILES,
+            "per_cell": args.per_cell, "seed": args.seed, "profile_set": args.profiles,
+            "profiles": profiles,
             "results": [{"env_id": k[0], "algo": k[1], "runs": v} for k, v in results.items()],
         }, indent=1))
     return 0

@@ -1,17 +1,19 @@
 """Choose the zoo's agents on validation episodes, and export them.
 
-    python benchmarks/stratified_results.py RUNS... --per-cell 1 --seed 40000 --json val.json
+    python benchmarks/stratified_results.py RUNS... --profiles validation --per-cell 1 \
+        --seed 40000 --json val.json
     python benchmarks/zoo_select.py val.json [more.json ...] [--export] [--zoo DIR]
         [--min-success 0.5] [--skip ENV/AGENT ...]
 
 For every env x algorithm row of ``benchmarks/stratified_results.py`` (the runs of one id,
 robot and algorithm), the run whose final model finished the most validation episodes is
 chosen (ties: the lower training seed). The validation episodes are ``stratified_results``'
-cells (every exercise x weight level x profile) on seeds of their own (40 000 onwards), never
-the held-out test episodes (50 000 onwards) that ``docs/results-v2.md`` reports, so the
-published figures are not the ones the choice was made on. A row whose best seed finishes
-fewer than ``--min-success`` of its validation episodes (default half) is not shipped: the
-table says so. ``--export`` writes each choice to
+cells (every exercise x weight level x profile) with patients of their own (``--profiles
+validation``) and seeds of their own (40 000 onwards), never the test patients and episodes
+(50 000 onwards) that ``docs/results-v2.md`` reports, so the published figures are not the
+ones the choice was made on (a healthy id's episode depends on the patient, not the seed).
+A row whose best seed finishes fewer than ``--min-success`` of its validation episodes
+(default half) is not shipped: the table says so. ``--export`` writes each choice to
 the zoo with its whole model (``rehabbot zoo export RUN --full``), recording the choice in the
 agent's metadata (``selection``: the validation file's command, every seed's success and the
 chosen seed). Without ``--export`` it only prints the table.
@@ -40,9 +42,10 @@ MIN_SUCCESS = 0.5
 def choices(validation: dict[str, Any]) -> list[dict[str, Any]]:
     """One choice per row of a ``stratified_results --json`` file: the run with the most
     successful validation episodes (ties: the lower training seed)."""
-    if validation["seed"] >= 50_000:
-        raise ValueError(f"the file holds episodes from seed {validation['seed']}: the test "
-                         "episodes; choose on validation episodes (--seed 40000)")
+    if validation["seed"] >= 50_000 or validation.get("profile_set") != "validation":
+        raise ValueError(f"the file holds episodes from seed {validation['seed']} of the "
+                         f"{validation.get('profile_set', 'test')} patients: choose on "
+                         "validation episodes (--profiles validation --seed 40000)")
     rows: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for entry in validation["results"]:
         if entry["algo"] == "expert":
@@ -70,11 +73,13 @@ def merge(files: Sequence[dict[str, Any]]) -> dict[str, Any]:
         raise ValueError("no validation file")
     first = files[0]
     for other in files[1:]:
-        if (other["seed"], other["per_cell"]) != (first["seed"], first["per_cell"]):
+        if ((other["seed"], other["per_cell"], other.get("profile_set"))
+                != (first["seed"], first["per_cell"], first.get("profile_set"))):
             raise ValueError(f"validation files of different episodes: seed {other['seed']}, "
                              f"{other['per_cell']} per cell against seed {first['seed']}, "
                              f"{first['per_cell']} per cell")
     return {"seed": first["seed"], "per_cell": first["per_cell"],
+            "profile_set": first.get("profile_set", "test"),
             "command": "; ".join(str(f.get("command")) for f in files),
             "results": [entry for f in files for entry in f["results"]]}
 
@@ -86,6 +91,7 @@ def selection_note(choice: dict[str, Any], validation: dict[str, Any]) -> dict[s
                 "episodes (ties: the lower seed)",
         "validation_command": validation.get("command"),
         "validation_episodes": {"first_seed": validation["seed"],
+                                "patients": validation.get("profile_set"),
                                 "per_cell": validation["per_cell"],
                                 "per_run": choice["episodes_per_run"]},
         "success_by_seed": {str(k): v for k, v in sorted(choice["success_by_seed"].items())},

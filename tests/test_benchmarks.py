@@ -3,6 +3,7 @@ and quoted in the README; here only that the tables are produced and consistent)
 
 from __future__ import annotations
 
+import json
 import re
 
 import pytest
@@ -160,6 +161,11 @@ def test_stratified_results_cover_every_cell_and_report_per_cell(tmp_path) -> No
                                             {"train_seed": 1, "episodes": fake}],
         ("rehabbot/rehab-knee-v2", "expert"): [{"train_seed": None, "episodes": episodes}]})
     assert "| rehab-knee-v2 | sac | - | 0, 1 | 80, 80 % | 80 % | 0 % |" in text
+    # The validation patients are none of the test patients.
+    test_bodies = {json.dumps(p, sort_keys=True) for p in stratified_results.PROFILES.values()}
+    assert not test_bodies & {json.dumps(p, sort_keys=True)
+                              for p in stratified_results.VALIDATION_PROFILES.values()}
+    assert None not in stratified_results.VALIDATION_PROFILES.values()  # not the default body
     assert "| 0 | f160 | 2/2 | 2/2 | 2/2 | 2/2 | 0/2 (2 cuff_force) |" in text
 
 
@@ -234,7 +240,8 @@ def test_zoo_select_picks_each_rows_best_seed_on_validation_episodes(tmp_path) -
 
     assert env_label("rehabbot/rehab-hip-v2", {"robot": "fr3"}) == "rehabbot/rehab-hip-v2 (fr3)"
     assert env_label("rehabbot/rehab-hip-v2", {"robot": "ur5e"}) == "rehabbot/rehab-hip-v2"
-    validation = {"seed": 40000, "per_cell": 1, "command": "python ...", "results": [
+    validation = {"seed": 40000, "per_cell": 1, "profile_set": "validation",
+                  "command": "python ...", "results": [
         {"env_id": "rehabbot/rehab-hip-v2", "algo": "sac + demos",
          "runs": [run(0, 7), run(1, 9), run(2, 9)]},
         {"env_id": "rehabbot/rehab-hip-v2 (fr3)", "algo": "sac + demos",
@@ -245,8 +252,13 @@ def test_zoo_select_picks_each_rows_best_seed_on_validation_episodes(tmp_path) -
     assert picked[0]["success_by_seed"] == {0: 0.7, 1: 0.9, 2: 0.9}
     note = zoo_select.selection_note(picked[0], validation)["selection"]
     assert note["chosen_seed"] == 1 and note["validation_episodes"]["first_seed"] == 40000
-    with pytest.raises(ValueError, match="the test episodes"):
+    assert note["validation_episodes"]["patients"] == "validation"
+    # Choosing on the test episodes or the test patients is refused: a healthy id's episode
+    # depends on the patient, not on the seed.
+    with pytest.raises(ValueError, match="choose on validation episodes"):
         zoo_select.choices({**validation, "seed": 50000})
+    with pytest.raises(ValueError, match="of the test patients"):
+        zoo_select.choices({**validation, "profile_set": "test"})
 
 
 def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, capsys) -> None:
@@ -269,6 +281,7 @@ def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, caps
     for name, algo, successes in (("a", "td3", 4), ("b", "ppo", 5)):
         files.append(tmp_path / f"{name}.json")
         files[-1].write_text(json.dumps({"seed": 40000, "per_cell": 1, "command": name,
+                                         "profile_set": "validation",
                                          "results": [entry(algo, successes)]}))
     assert zoo_select.main([*map(str, files)]) == 0
     rows = capsys.readouterr().out
@@ -279,7 +292,8 @@ def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, caps
     assert zoo_select.main([*map(str, files), "--skip", "rehab-knee-v2/ppo"]) == 0
     assert "no (--skip)" in capsys.readouterr().out
     other = tmp_path / "c.json"
-    other.write_text(json.dumps({"seed": 40000, "per_cell": 2, "results": []}))
+    other.write_text(json.dumps({"seed": 40000, "per_cell": 2, "profile_set": "validation",
+                                 "results": []}))
     with pytest.raises(ValueError, match="2 per cell"):
         zoo_select.main([str(files[0]), str(other)])
     with pytest.raises(SystemExit):

@@ -252,7 +252,7 @@ def test_stratified_results_renders_both_examples(tmp_path, monkeypatch, capsys)
     old_sac = result(None, 0, [False] * 30)
     expert_calls = []
 
-    def expert(spec, env_id, env_kwargs, per_cell, seed):
+    def expert(spec, env_id, env_kwargs, per_cell, seed, *_, **__):
         expert_calls.append((spec, env_id))
         return [{"seed": seed, "profile": "m175", "exercise": 0, "weight_level": 0,
                  "success": True, "safety_violation": None}]
