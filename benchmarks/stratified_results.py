@@ -83,18 +83,21 @@ def find_runs(roots: Sequence[Path]) -> list[Path]:
 def cell_envs(env_id: str, kwargs: dict) -> tuple[dict[int, gym.Env], dict[int, str]]:
     """The env of each weight level (one env for all where the id accepts every level) and
     the levels the env refuses for this patient, with its reason (a scene that cannot hold a
-    heavy profile's limb, e.g. the FR3 with the 1.85 m man at levels 3 and 4)."""
+    heavy profile's limb, e.g. the FR3 with the 1.85 m man at levels 3 and 4). An env that
+    refuses every level raises its error: that is bad arguments, not a patient too heavy."""
     try:
         env = gym.make(env_id, **kwargs)
         return dict.fromkeys(WEIGHT_LEVELS, env), {}
-    except ValueError:
-        pass
+    except ValueError as err:
+        first_error = err
     envs, refused = {}, {}
     for level in WEIGHT_LEVELS:
         try:
             envs[level] = gym.make(env_id, **kwargs, weight_level=level)
         except ValueError as err:
             refused[level] = str(err)
+    if not envs:
+        raise first_error
     return envs, refused
 
 

@@ -76,8 +76,9 @@ def merge(files: Sequence[dict[str, Any]]) -> dict[str, Any]:
         if ((other["seed"], other["per_cell"], other.get("profile_set"))
                 != (first["seed"], first["per_cell"], first.get("profile_set"))):
             raise ValueError(f"validation files of different episodes: seed {other['seed']}, "
-                             f"{other['per_cell']} per cell against seed {first['seed']}, "
-                             f"{first['per_cell']} per cell")
+                             f"{other['per_cell']} per cell, {other.get('profile_set')} "
+                             f"patients against seed {first['seed']}, {first['per_cell']} "
+                             f"per cell, {first.get('profile_set')} patients")
     return {"seed": first["seed"], "per_cell": first["per_cell"],
             "profile_set": first.get("profile_set", "test"),
             "command": "; ".join(str(f.get("command")) for f in files),

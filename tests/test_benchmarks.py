@@ -193,6 +193,10 @@ def test_stratified_results_leave_out_the_cells_an_env_refuses() -> None:
                                                   "refused_cells": refused}]})
     assert "| 0 | m185 | 0/1 | 0/1 | 0/1 | n/a | n/a |" in text
     assert "n/a: the env refuses m185 l3, m185 l4 (no episodes, not counted)" in text
+    # Bad arguments are refused at every level: an error, not a table of n/a.
+    with pytest.raises(ValueError, match="robot"):
+        stratified_results.evaluate_cells("expert", "rehabbot/rehab-hip-v2",
+                                          {"robot": "kuka"}, 1, 900)
 
 
 def test_stratified_results_describe_each_algorithms_training() -> None:
