@@ -15,7 +15,7 @@ venv: $(STAMP)
 $(VENV): $(STAMP)
 
 # Re-install whenever the package metadata changes.
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml rehabbot/common/version.py
 	test -x $(PY) || $(PYTHON_BOOTSTRAP) -m venv $(VENV)
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install -e ".[all]"
