@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import re
 import zipfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -153,7 +153,23 @@ def load_trace(path: Path | str) -> Trace:
             missing = [key for key in REQUIRED_KEYS if key not in data.files]
             if missing:
                 raise ValueError(f"missing key(s) {', '.join(missing)}")
-            trace = Trace(
+            trace = _trace_of(data, data.files, path)
+    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as err:
+        raise ValueError(f"{path}: not a readable trace.npz ({err})") from err
+    return _checked(trace, path)
+
+
+def trace_from_arrays(arrays: Mapping[str, np.ndarray]) -> Trace:
+    """A :class:`Trace` of the arrays of :func:`trace_from_episode` (e.g. a trace that
+    :func:`rehabbot.analysis.evaluation.evaluate_policies` returns), without a file."""
+    missing = [key for key in REQUIRED_KEYS if key not in arrays]
+    if missing:
+        raise ValueError(f"the trace lacks key(s) {', '.join(missing)}")
+    return _checked(_trace_of(arrays, list(arrays), Path("<memory>")), Path("<memory>"))
+
+
+def _trace_of(data: Mapping[str, np.ndarray], keys: Sequence[str], path: Path) -> Trace:
+    return Trace(
                 path=path,
                 env_id=_str_item(data["env_id"]),
                 policy=_str_item(data["policy"]),
@@ -166,10 +182,11 @@ def load_trace(path: Path | str) -> Trace:
                 tool_pos_m=_rows_of_points(data["tool_pos_m"]),
                 target_tool_pos_m=_rows_of_points(data["target_tool_pos_m"]),
                 **{key: np.asarray(data[key]).astype(kind) for key, kind in PATIENT_KEYS.items()
-                   if key in data.files},
+                   if key in keys},
             )
-    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as err:
-        raise ValueError(f"{path}: not a readable trace.npz ({err})") from err
+
+
+def _checked(trace: Trace, path: Path) -> Trace:
     n_steps = len(trace.time_s)
     n_joints = trace.robot_qpos_rad.shape[-1] if trace.robot_qpos_rad.ndim == 2 else -1
     consistent = (
