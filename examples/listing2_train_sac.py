@@ -12,6 +12,10 @@ Two differences from the printed listing, both marked below:
 200k steps take about an hour on one CPU core. For checkpoints, evaluation, several seeds
 and a manifest, use ``rehabbot train rehab-reach-v0 --algo sac --hyperparams
 sb3-defaults/sac`` (the same library defaults) instead.
+
+Run it as ``OMP_NUM_THREADS=1 python examples/listing2_train_sac.py``: PyTorch trains this small
+network faster on one CPU thread, and many times faster (14x measured) while other processes
+share the cores.
 """
 
 # The listing keeps the paper's import grouping and its unused import.

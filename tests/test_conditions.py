@@ -66,6 +66,43 @@ def test_tremor_amplitude_needs_a_frequency():
         PatientCondition(tremor_amplitude_nm=1.0)
 
 
+@pytest.mark.parametrize(("fields", "field", "remedy"), [
+    ({"strength_fraction": 0.2}, "strength_fraction", "effort='active_assisted'"),
+    ({"effort_fraction": 0.5}, "effort_fraction", "effort='active_assisted'"),
+    ({"reaction_delay_s": 0.3}, "reaction_delay_s", "effort='active_assisted'"),
+    ({"effort": "resistive", "reaction_delay_s": 0.3}, "reaction_delay_s",
+     "effort='active_assisted'"),
+    ({"effort": "active_assisted", "strength_fraction": 0.0}, "strength_fraction",
+     "strength_fraction > 0"),
+    ({"effort": "resistive", "effort_fraction": 0.0}, "effort_fraction", "effort_fraction > 0"),
+    ({"tremor_hz": 6.0}, "tremor_hz", "tremor_amplitude_nm > 0"),
+])
+def test_a_field_that_cannot_act_is_refused_naming_it(fields, field, remedy):
+    with pytest.raises(ValueError) as err:
+        PatientCondition(**fields)
+    message = str(err.value)
+    assert f"PatientCondition.{field}={fields[field]!r}" in message
+    assert remedy in message
+
+
+def test_a_field_refused_as_inert_acts_once_its_remedy_is_given():
+    # strength_fraction on a passive patient was bit-identical to a healthy one; with an
+    # effort it changes the patient's torques
+    assert PatientCondition(effort="active_assisted", strength_fraction=0.2).acts
+    assert PatientCondition(tremor_hz=6.0, tremor_amplitude_nm=0.5).acts
+
+
+def test_every_shipped_condition_passes_the_inert_field_check():
+    from rehabbot.sim.populations import POPULATIONS
+
+    for _base, condition, _text in CONDITION_VARIANTS.values():
+        assert as_condition(condition).acts or as_condition(condition).rom_scale < 1 \
+            or as_condition(condition).stiffness_scale != 1
+    for population in POPULATIONS.values():
+        for condition in population.conditions:
+            as_condition(condition.to_dict())  # rebuilt from its fields: no ValueError
+
+
 def test_conditions_come_from_dicts_and_integer_grades():
     assert as_condition({"spasticity_mas": 2}).spasticity_mas == "2"
     assert as_condition(None) == PatientCondition()

@@ -18,10 +18,14 @@ Outputs, for each policy, in ``OUT/<label>/``:
 ``evaluation.json`` the summary (mean ± std over episodes), every episode's figures, the seeds,
                     the policy's provenance and the package versions
 ``trace.npz``       the first episode step by step (:mod:`rehabbot.analysis.traces`), read by
-                    ``rehabbot plot`` for the paper's Figs. 3, 5 and 6
+                    ``rehabbot plot`` for the paper's Figs. 3, 5 and 6 and the patient-side
+                    Figs. 7-9
+``patients.md``     with several patients (a population env): one row per patient
 ================== ==========================================================================
 
-With several policies, ``OUT/comparison.md`` holds their summaries side by side.
+With several policies, ``OUT/comparison.md`` holds their summaries side by side (and their
+per-patient tables). Every episode's figures name its patient (``"patient"``: index in the
+population, profile, condition), and ``"per_patient"`` averages each patient's episodes.
 """
 
 from __future__ import annotations
@@ -34,23 +38,35 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 from rehabbot.analysis.metrics import kinematic_summary
+from rehabbot.analysis.patients import format_patient_table, patient_record, per_patient_summary
+from rehabbot.analysis.policy_specs import (
+    CUSTOM_KIND,
+    PolicySpec,
+    check_distinct_labels,
+    describe_spec,
+    is_named_spec,
+    resolve_policy,
+)
+from rehabbot.analysis.quiet import make_env, quiet_known_warnings
+from rehabbot.analysis.recorder import WorkRecorder, patient_limits
 from rehabbot.analysis.traces import TRACE_NAME, load_trace, save_trace_file, trace_from_episode
 from rehabbot.common.errors import DataError, UsageError
 from rehabbot.common.files import atomic_save_all, atomic_write_text
 from rehabbot.common.provenance import package_versions
+from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import runs
-from rehabbot.rl.policies import POLICY_KEYWORDS, env_for, load_policy, model_file
+from rehabbot.rl.policies import POLICY_KEYWORDS, env_for, model_file
 from rehabbot.rl.rollout import Episode, run_episode
 from rehabbot.rl.zoo import is_zoo_spec
 from rehabbot.sim.physics import RULES
 
 REPORT_NAME = "evaluation.json"
 COMPARISON_NAME = "comparison.md"
+PATIENTS_NAME = "patients.md"
 SUMMARY_METRICS = (
     # key in the summary, label in the table, unit
     ("return", "return", ""),
@@ -170,27 +186,61 @@ def label_dir(out_dir: Path, label: Any) -> Path:
     return Path(out_dir) / check_label(label)
 
 
-def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
+def check_custom_label(label: str) -> str:
+    """``label`` of a custom policy if it is a safe folder name, else :class:`UsageError`."""
+    if not LABEL_RE.match(label) or ".." in label:
+        raise UsageError(f"policy label {label!r} is not a safe folder name (letters, digits, "
+                         "'.', '_' and '-' only, at most 100); set the policy's `label` "
+                         "attribute to one")
+    return label
+
+
+def run_env_for(specs: Sequence[PolicySpec], env_id: str | None,
+                env_kwargs: dict | None) -> tuple[str, dict]:
+    """:func:`rehabbot.rl.policies.env_for` of the named specs (custom policies cannot name
+    an env: with only those, ``env_id`` is required)."""
+    named = [str(spec) for spec in specs if is_named_spec(spec)]
+    if not named and env_id is None:
+        raise UsageError(f"{', '.join(describe_spec(s) for s in specs)}: give the env to run "
+                         "in (env_id=..., --env ENV)")
+    return env_for(named, env_id, env_kwargs)
+
+
+def evaluate_policies(specs: Sequence[PolicySpec], env_id: str | None = None,
                       episodes: int = DEFAULT_EPISODES, seed: int = 0,
                       env_kwargs: dict | None = None,
                       deterministic: bool = True) -> list[tuple[dict, dict]]:
-    """Evaluate several policies (``"expert"``, ``"random"``, model paths or zoo agents
-    ``zoo:ENV/ALGO``) on the same episodes of one env; returns each one's report
+    """Evaluate several policies on the same episodes of one env; returns each one's report
     (JSON-ready) and first episode's trace.
+
+    A policy is a name (``"expert"``, ``"aan"``, ``"random"``, a model path, a zoo agent
+    ``"zoo:ENV/ALGO"``), a ``"module:attr"`` string, any object with SB3's
+    ``predict(obs, deterministic=...) -> (action, state)``, or a class or factory that
+    takes the env and returns one (``AssistAsNeeded``, ``lambda env: MyPolicy(env)``); see
+    :mod:`rehabbot.analysis.policy_specs`. A custom policy is labelled by its ``label``
+    attribute, else its class name.
 
     ``env_id`` may be None when a model of a ``rehabbot train`` run or a zoo agent is among
     ``specs`` (its manifest's or zoo file's id and env kwargs are used). Every spec is
     loaded and checked against the env before the first episode runs, so a bad one fails
-    before any work is done.
+    before any work is done. Each episode's figures name its patient (``"patient"``: a
+    population env draws one per episode), and ``"per_patient"`` tabulates them.
     """
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise UsageError(f"episodes={episodes!r} must be an integer >= 1")
-    env_id, kwargs = env_for(specs, env_id, env_kwargs)
-    env = gym.make(env_id, **kwargs)
+    if isinstance(specs, str) or not isinstance(specs, Sequence):
+        raise UsageError(f"specs={specs!r} must be a list of policies (e.g. ['expert'])")
+    env_id, kwargs = run_env_for(specs, env_id, env_kwargs)
+    env = WorkRecorder(make_env(env_id, **kwargs))
     try:
-        policies = [load_policy(spec, env, seed=seed) for spec in specs]
-        for policy in policies:
-            check_label(policy.label)  # before any episode runs
+        with quiet_known_warnings():
+            policies = [resolve_policy(spec, env, seed=seed) for spec in specs]
+        for policy in policies:  # before any episode runs
+            if policy.kind == CUSTOM_KIND:
+                check_custom_label(policy.label)
+            else:
+                check_label(policy.label)
+        check_distinct_labels(policies)
         zoo = [p.label for p in policies if p.kind == "zoo"]
         if zoo and not deterministic:
             raise UsageError(f"{', '.join(zoo)}: zoo agents are deterministic only (their "
@@ -201,9 +251,10 @@ def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
             figures, trace = [], None
             for k in range(episodes):
                 episode = run_episode(env, policy, seed + k, deterministic)
-                figures.append(episode_figures(episode))
+                figures.append({**episode_figures(episode), "patient": patient_record(env)})
                 if trace is None:
-                    trace = trace_from_episode(episode)
+                    trace = {**trace_from_episode(episode), **env.series(),
+                             **patient_limits(env)}
             report = {
                 "env_id": env_id,
                 "env_kwargs": kwargs,
@@ -212,6 +263,7 @@ def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
                 "episode_seeds": [seed + k for k in range(episodes)],
                 "deterministic": deterministic,
                 "summary": summarize(figures),
+                "per_patient": per_patient_summary(figures),
                 "per_episode": figures,
                 "wall_clock_s": time.perf_counter() - started,
                 "versions": package_versions(),
@@ -222,7 +274,7 @@ def evaluate_policies(specs: Sequence[str], env_id: str | None = None,
     return results
 
 
-def evaluate(spec: str, env_id: str | None = None, episodes: int = DEFAULT_EPISODES,
+def evaluate(spec: PolicySpec, env_id: str | None = None, episodes: int = DEFAULT_EPISODES,
              seed: int = 0, env_kwargs: dict | None = None,
              deterministic: bool = True) -> tuple[dict, dict]:
     """Evaluate one policy (:func:`evaluate_policies`); returns its report and trace."""
@@ -264,12 +316,12 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
-def _cell(stat: Any, key: str) -> str:
+def _cell(stat: Any, key: str) -> str | None:
     if key == "success_rate":
         return f"{100 * stat:.0f} %"
     mean, std = stat["mean"], stat["std"]
     if mean is None:
-        return "-"
+        return None
     digits = 0 if abs(mean) >= 100 else (2 if abs(mean) >= 1 else 3)
     return f"{mean:.{digits}f} ± {std:.{digits}f}"
 
@@ -288,28 +340,67 @@ def format_table(reports: Sequence[dict]) -> str:
     rows.append(["episodes (seeds)"] + [
         f"{r['summary']['episodes']} ({r['episode_seeds'][0]}..{r['episode_seeds'][-1]})"
         for r in reports])
-    widths = [max(len(str(row[i])) for row in [header, *rows]) for i in range(len(header))]
-
-    def line(cells: Sequence[str]) -> str:
-        return "| " + " | ".join(str(c).ljust(w) for c, w in zip(cells, widths, strict=True)) + " |"
-
-    separator = "|" + "|".join("-" * (w + 2) for w in widths) + "|"
-    return "\n".join([line(header), separator, *(line(r) for r in rows)])
+    return markdown_table(header, rows)
 
 
-def default_out_dir(specs: Sequence[str], env_id: str | None) -> Path:
+def has_several_patients(report: dict) -> bool:
+    """Whether the report's episodes met more than one patient (a population env)."""
+    return len(report.get("per_patient", ())) > 1
+
+
+def format_patient_tables(reports: Sequence[dict]) -> str:
+    """Per policy, a heading and its per-patient table (:func:`.patients.format_patient_table`);
+    empty when every report met one patient only."""
+    parts = [f"### {r['policy']['label']}: per patient\n\n{format_patient_table(r)}"
+             for r in reports if has_several_patients(r)]
+    return "\n\n".join(parts)
+
+
+def default_out_dir(specs: Sequence[PolicySpec], env_id: str | None) -> Path:
     """``<run>/evaluation`` for one model of a training run, else ``runs/evaluation/<env>``."""
-    run_dirs = {runs.find_run_dir(model_file(spec)) for spec in specs
-                if spec not in POLICY_KEYWORDS and not is_zoo_spec(spec)}
+    run_dirs = {runs.find_run_dir(model_file(spec)) for spec in specs if is_named_spec(spec)
+                and spec not in POLICY_KEYWORDS and not is_zoo_spec(spec)}
     if len(specs) == 1 and len(run_dirs) == 1 and None not in run_dirs:
         return run_dirs.pop() / runs.EVALUATION_DIR
     return Path("runs") / "evaluation" / (env_short_name(env_id) if env_id else "models")
 
 
+def earlier_evaluation(out_dir: Path) -> list[Path]:
+    """The files of an earlier evaluation in ``out_dir``: ``comparison.md`` and every
+    ``<label>/evaluation.json``, ``<label>/trace.npz`` and ``<label>/patients.md``."""
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        return []
+    found = [out_dir / COMPARISON_NAME] if (out_dir / COMPARISON_NAME).is_file() else []
+    for name in (REPORT_NAME, TRACE_NAME, PATIENTS_NAME):
+        found += sorted(path for path in out_dir.glob(f"*/{name}") if path.is_file())
+    return found
+
+
+def remove_earlier_evaluation(out_dir: Path) -> list[Path]:
+    """Remove :func:`earlier_evaluation`'s files (never following a link); returns them."""
+    removed = earlier_evaluation(out_dir)
+    for path in removed:
+        path.unlink()
+    return removed
+
+
+def write_patient_table(out_dir: Path, report: dict) -> Path | None:
+    """``out_dir/patients.md``: the report's per-patient table, when it met several patients
+    (None, and no file, otherwise)."""
+    if not has_several_patients(report):
+        return None
+    path = Path(out_dir) / PATIENTS_NAME
+    atomic_write_text(path, format_patient_table(report) + "\n")
+    return path
+
+
 def write_comparison(out_dir: Path, reports: Sequence[dict]) -> Path:
     """``out_dir/comparison.md``: the reports' table side by side."""
     path = Path(out_dir) / COMPARISON_NAME
-    atomic_write_text(path, format_table(reports) + "\n")
+    patients = format_patient_tables(reports)
+    atomic_write_text(path, format_table(reports) + "\n" + (f"\n{patients}\n" if patients
+                                                             else ""))
     return path
 
 

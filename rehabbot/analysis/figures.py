@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rehabbot.analysis.traces import Trace, load_trace
+from rehabbot.common.extras import missing_module_message
 from rehabbot.common.files import atomic_save_verified
 
 if TYPE_CHECKING:
@@ -60,9 +61,7 @@ def new_figure(figsize: tuple[float, float]) -> Figure:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError as err:
-        raise ImportError(
-            'plotting needs matplotlib: pip install "rehabbot[plot]"'
-        ) from err
+        raise ImportError(missing_module_message("plotting", "matplotlib")) from err
     figure = Figure(figsize=figsize, layout="constrained")
     FigureCanvasAgg(figure)
     return figure
@@ -315,7 +314,7 @@ def build_tool_path(trace: Trace | Path | str) -> Figure:
     try:
         import mpl_toolkits.mplot3d  # noqa: F401  (registers the "3d" projection)
     except ImportError as err:  # pragma: no cover - ships with matplotlib
-        raise ImportError('plotting needs matplotlib: pip install "rehabbot[plot]"') from err
+        raise ImportError(missing_module_message("plotting", "matplotlib")) from err
     n_robots = trace.tool_pos_m.shape[1] // 3
     figure = new_figure((7.0 * n_robots, 6.5))
     names = ("right robot", "left robot") if n_robots == 2 else (None,) * n_robots

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rehabbot.common.extras import missing_module_message
 from rehabbot.common.files import atomic_save
-
-_VIDEO_EXTRA_HINT = 'pip install "rehabbot[video]"'
 
 
 def save_png(path: str | Path, image: np.ndarray) -> Path:
@@ -27,9 +26,7 @@ def save_png(path: str | Path, image: np.ndarray) -> Path:
     try:
         import imageio.v3 as iio
     except ImportError as err:
-        raise ImportError(
-            f"saving PNG images needs the optional dependency imageio: {_VIDEO_EXTRA_HINT}"
-        ) from err
+        raise ImportError(missing_module_message("saving PNG images", "imageio")) from err
     image = np.asarray(image)
     if image.dtype != np.uint8:
         raise ValueError(f"PNG images must be uint8, got {image.dtype}")

@@ -13,7 +13,14 @@ file                              paper figure content
                                                with the torque limits as dashed lines
 ``fig3_tool_path_<label>``        Fig. 3       3-D tool path (purple) with the numbered targets
                                                in order, robot base frame, equal axes
+``fig7_patient_joints_<label>``   (patient)    the patient's joint angles, the prescribed path
+                                               and the range-of-motion bounds
+``fig8_cuff_force_<label>``       (patient)    the cuff force and its limit
+``fig9_work_<label>``             (patient)    the robot's and the patient's work on the limb
 ================================  ===========  ==============================================
+
+Figs. 7-9 (:mod:`rehabbot.analysis.patient_figures`) are drawn for every trace that holds the
+patient's data (every trace ``rehabbot evaluate`` writes now); ``patient=False`` leaves them out.
 
 ``<label>`` is the trace's policy and the short env name (``sac-seed0_rehab-reach-v0``),
 sanitised for file names. When runs of several env ids are plotted together, Fig. 4 is one
@@ -37,7 +44,9 @@ from rehabbot.analysis.figures import (
     save_figure,
 )
 from rehabbot.analysis.learning_curves import build_learning_curves, load_runs
+from rehabbot.analysis.patient_figures import PATIENT_FIGURES, has_patient_data
 from rehabbot.analysis.traces import find_traces, load_trace, sanitize
+from rehabbot.common.extras import install_hint
 from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import runs as run_files
 
@@ -57,7 +66,7 @@ def _ensure_trace(run_dir: Path) -> Path:
     except ImportError as err:
         raise ImportError(
             f"evaluating {run_dir} for Figs. 3, 5, 6 needs the training extras "
-            f'(pip install "rehabbot[train]"): {err}; or pass --no-evaluate'
+            f"({install_hint('stable_baselines3')}): {err}; or pass --no-evaluate"
         ) from err
     return Path(ensure_trace(run_dir)).resolve()
 
@@ -65,11 +74,13 @@ def _ensure_trace(run_dir: Path) -> Path:
 def plot_all(paths: Sequence[Path | str], out_dir: Path | str, smooth: int = DEFAULT_SMOOTH,
              source: str = "train", formats: Sequence[str] = DEFAULT_FORMATS,
              evaluate: bool = True,
-             announce: Callable[[str], None] | None = None) -> list[Path]:
+             announce: Callable[[str], None] | None = None,
+             patient: bool = True) -> list[Path]:
     """Every figure that the data under ``paths`` supports; returns the written files.
 
     Fig. 4 from all runs (skipped with a warning when no run has data yet); Figs. 5, 6 and 3
-    for every ``trace.npz`` found. With ``evaluate`` (default), a run that has ``model.zip``
+    for every ``trace.npz`` found, and with ``patient`` (default) the patient-side Figs. 7-9
+    for every trace that holds their data. With ``evaluate`` (default), a run that has ``model.zip``
     but no trace first gets one (one deterministic episode of its final model,
     :func:`rehabbot.analysis.evaluation.ensure_trace`), and ``announce`` is told so before it
     starts. Traces whose labels coincide get ``-2``, ``-3``, ... suffixes instead of
@@ -117,4 +128,7 @@ def plot_all(paths: Sequence[Path | str], out_dir: Path | str, smooth: int = DEF
         written += save_figure(build_torques(trace), out_dir, f"fig6_torques_{label}", formats)
         written += save_figure(build_tool_path(trace), out_dir, f"fig3_tool_path_{label}",
                                formats)
+        if patient and has_patient_data(trace):
+            for prefix, build in PATIENT_FIGURES:
+                written += save_figure(build(trace), out_dir, f"{prefix}_{label}", formats)
     return written

@@ -18,14 +18,24 @@ key                      what
 ``target_index``         (T + 1,) the active target
 ``patient_qpos_rad``     (T + 1, 3) the patient's exercised joints
 ``interaction_force_n``  (T + 1,) the cuff force
+``target_patient_deg``   (N, 3) the exercised joints' angles at every target (the prescribed
+                         path)
+``patient_joint_names``  (3,) the exercised joints
+``patient_range_deg``    (3, 2) their ranges of motion (after a condition's ``rom_scale``)
+``cuff_force_limit_n``   the cuff's force limit (the safety rule's)
+``robot_work_j``,        (T + 1,) the robot's and the patient's work on the limb since the
+``patient_work_j``       reset [J]
 ======================== ==================================================================
+
+The patient-side keys (from ``target_patient_deg`` on) are optional: traces written before
+them load with those fields None, and the patient-side figures say what is missing.
 """
 
 from __future__ import annotations
 
 import re
 import zipfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,7 +48,14 @@ from rehabbot.rl.rollout import Episode
 TRACE_NAME = "trace.npz"
 TRACE_KEYS = ("env_id", "policy", "seed", "dt_s", "time_s", "robot_qpos_rad", "robot_torque_nm",
               "torque_limit_nm", "joint_names", "tool_pos_m", "target_tool_pos_m",
-              "target_robot_rad", "target_index", "patient_qpos_rad", "interaction_force_n")
+              "target_robot_rad", "target_index", "patient_qpos_rad", "interaction_force_n",
+              "target_patient_deg", "patient_joint_names", "patient_range_deg",
+              "cuff_force_limit_n", "robot_work_j", "patient_work_j")
+# optional keys read into :class:`Trace` (None when absent): key -> dtype
+PATIENT_KEYS: dict[str, type] = {
+    "patient_qpos_rad": float, "interaction_force_n": float, "target_index": int,
+    "target_patient_deg": float, "patient_joint_names": str, "patient_range_deg": float,
+    "cuff_force_limit_n": float, "robot_work_j": float, "patient_work_j": float}
 REQUIRED_KEYS: tuple[str, ...] = (
     "env_id", "policy", "dt_s", "time_s", "robot_qpos_rad", "robot_torque_nm",
     "torque_limit_nm", "joint_names", "tool_pos_m", "target_tool_pos_m",
@@ -60,6 +77,15 @@ class Trace:
     joint_names: list[str]
     tool_pos_m: np.ndarray
     target_tool_pos_m: np.ndarray
+    patient_qpos_rad: np.ndarray | None = None
+    interaction_force_n: np.ndarray | None = None
+    target_index: np.ndarray | None = None
+    target_patient_deg: np.ndarray | None = None
+    patient_joint_names: np.ndarray | None = None
+    patient_range_deg: np.ndarray | None = None
+    cuff_force_limit_n: np.ndarray | None = None
+    robot_work_j: np.ndarray | None = None
+    patient_work_j: np.ndarray | None = None
 
     @property
     def label(self) -> str:
@@ -127,7 +153,23 @@ def load_trace(path: Path | str) -> Trace:
             missing = [key for key in REQUIRED_KEYS if key not in data.files]
             if missing:
                 raise ValueError(f"missing key(s) {', '.join(missing)}")
-            trace = Trace(
+            trace = _trace_of(data, data.files, path)
+    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as err:
+        raise ValueError(f"{path}: not a readable trace.npz ({err})") from err
+    return _checked(trace, path)
+
+
+def trace_from_arrays(arrays: Mapping[str, np.ndarray]) -> Trace:
+    """A :class:`Trace` of the arrays of :func:`trace_from_episode` (e.g. a trace that
+    :func:`rehabbot.analysis.evaluation.evaluate_policies` returns), without a file."""
+    missing = [key for key in REQUIRED_KEYS if key not in arrays]
+    if missing:
+        raise ValueError(f"the trace lacks key(s) {', '.join(missing)}")
+    return _checked(_trace_of(arrays, list(arrays), Path("<memory>")), Path("<memory>"))
+
+
+def _trace_of(data: Mapping[str, np.ndarray], keys: Sequence[str], path: Path) -> Trace:
+    return Trace(
                 path=path,
                 env_id=_str_item(data["env_id"]),
                 policy=_str_item(data["policy"]),
@@ -139,9 +181,12 @@ def load_trace(path: Path | str) -> Trace:
                 joint_names=[str(name) for name in np.asarray(data["joint_names"]).reshape(-1)],
                 tool_pos_m=_rows_of_points(data["tool_pos_m"]),
                 target_tool_pos_m=_rows_of_points(data["target_tool_pos_m"]),
+                **{key: np.asarray(data[key]).astype(kind) for key, kind in PATIENT_KEYS.items()
+                   if key in keys},
             )
-    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as err:
-        raise ValueError(f"{path}: not a readable trace.npz ({err})") from err
+
+
+def _checked(trace: Trace, path: Path) -> Trace:
     n_steps = len(trace.time_s)
     n_joints = trace.robot_qpos_rad.shape[-1] if trace.robot_qpos_rad.ndim == 2 else -1
     consistent = (
@@ -178,6 +223,7 @@ def trace_from_episode(episode: Episode) -> dict[str, np.ndarray]:
         "target_index": episode.target_index,
         "patient_qpos_rad": episode.patient_qpos_rad,
         "interaction_force_n": episode.interaction_force_n,
+        "target_patient_deg": episode.target_patient_deg,
     }
 
 

@@ -11,17 +11,26 @@ episode starts. The file is written under a temporary name, re-opened and its fr
 (:func:`verify_video`), and renamed only then (usual permissions, ``0666`` minus the umask):
 an interrupted render, a full disk or a writer that fails silently leaves no half-written
 video and keeps an earlier file of the same name.
+
+Software rendering is slow (minutes for seconds of video), so :func:`render_episode` reports
+its progress to a ``progress(frames_done, frames_at_most)`` callback after every frame; the
+total is the frames of an episode that runs to the time limit (an episode that ends earlier
+has fewer).
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 
+from rehabbot.analysis.quiet import make_env, quiet_known_warnings
 from rehabbot.common.errors import UsageError
+from rehabbot.common.extras import missing_module_message
 from rehabbot.common.files import atomic_save_verified, check_output_file
 from rehabbot.rl.policies import env_for, load_policy
 
@@ -94,8 +103,7 @@ def _imageio() -> Any:
     try:
         import imageio.v3 as iio
     except ImportError as err:
-        raise RuntimeError('writing videos needs imageio: pip install "rehabbot[video]"'
-                           ) from err
+        raise RuntimeError(missing_module_message("writing videos", "imageio")) from err
     return iio
 
 
@@ -104,8 +112,8 @@ def _imageio_ffmpeg() -> Any:
     try:
         import imageio_ffmpeg
     except ImportError as err:
-        raise RuntimeError('writing .mp4 needs imageio-ffmpeg: pip install '
-                           '"rehabbot[video]" (or write a .gif)') from err
+        raise RuntimeError(missing_module_message("writing .mp4", "imageio_ffmpeg")
+                           + " (or write a .gif)") from err
     return imageio_ffmpeg
 
 
@@ -151,10 +159,24 @@ def _verify_gif(path: Path, frames: int, fps: float) -> None:
                          f"frames lasting {expected_ms:.0f} ms written")
 
 
+Progress = Callable[[int, int], None]  # (frames done, frames at most)
+
+
+def frames_at_most(env: gym.Env, frame_every: int) -> int:
+    """The frames of an episode of ``env`` that runs to its time limit (reset frame included)."""
+    limit = env.spec.max_episode_steps if env.spec is not None else None
+    limit = limit or getattr(env.unwrapped, "max_episode_steps", None) or 1000
+    return 1 + math.ceil(int(limit) / frame_every)
+
+
 def _record_episode(env: gym.Env, policy: Any, writer: _FrameWriter, seed: int,
-                    frame_every: int, deterministic: bool) -> dict[str, Any]:
+                    frame_every: int, deterministic: bool,
+                    progress: Progress | None = None) -> dict[str, Any]:
+    at_most = frames_at_most(env, frame_every)
     obs, info = env.reset(seed=seed)
     writer.append(env.render())
+    if progress is not None:
+        progress(writer.frames, at_most)
     steps, total = 0, 0.0
     while True:
         obs, reward, terminated, truncated, info = env.step(policy.act(obs, deterministic))
@@ -162,6 +184,9 @@ def _record_episode(env: gym.Env, policy: Any, writer: _FrameWriter, seed: int,
         total += float(reward)
         if steps % frame_every == 0 or terminated or truncated:
             writer.append(env.render())
+            if progress is not None:
+                done = terminated or truncated
+                progress(writer.frames, writer.frames if done else max(at_most, writer.frames))
         if terminated or truncated:
             return {"steps": steps, "total": total, "info": info}
 
@@ -169,24 +194,27 @@ def _record_episode(env: gym.Env, policy: Any, writer: _FrameWriter, seed: int,
 def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
                    width: int = 640, height: int = 480, camera: str | None = "overview",
                    frame_every: int = 2, env_kwargs: dict | None = None,
-                   deterministic: bool = True) -> dict:
+                   deterministic: bool = True, progress: Progress | None = None) -> dict:
     """Render one episode of a policy to ``out_path`` (.mp4 or .gif); return what happened.
 
     Every argument and the output path are checked before the episode starts
     (:class:`UsageError`, :class:`OutputError`). The video is written under a temporary
     name, re-opened and its frames counted, then renamed over ``out_path``: a full disk or a
     damaged file raises :class:`OutputError` and leaves an earlier ``out_path`` as it was.
+    ``progress`` (optional) is called after every frame with the frames done and the frames
+    at most (equal on the last frame).
     """
     out_path = check_output_file(check_video_path(out_path), VIDEO_SUFFIXES, "--out")
     if isinstance(frame_every, bool) or not isinstance(frame_every, int) or frame_every < 1:
         raise UsageError(f"frame_every={frame_every!r} must be an integer >= 1")
     check_video_writer(out_path)
     env_id, kwargs = env_for([spec], env_id, env_kwargs)
-    env = gym.make(env_id, render_mode="rgb_array", width=width, height=height,
+    env = make_env(env_id, render_mode="rgb_array", width=width, height=height,
                    camera_name=camera, **kwargs)
     result: dict[str, Any] = {}
     try:
-        policy = load_policy(spec, env, seed=seed)
+        with quiet_known_warnings():
+            policy = load_policy(spec, env, seed=seed)
         fps = 1.0 / (env.unwrapped.dt * frame_every)
         out_path.parent.mkdir(parents=True, exist_ok=True)
 
@@ -194,7 +222,7 @@ def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
             writer = _FrameWriter(tmp, fps)
             try:
                 result.update(_record_episode(env, policy, writer, seed, frame_every,
-                                              deterministic))
+                                              deterministic, progress))
             except BaseException:
                 writer.abort()
                 raise

@@ -66,6 +66,12 @@ def exit_code_for(err: BaseException) -> int:
 
 def _message(err: BaseException) -> str:
     message = str(err)
+    if isinstance(err, ModuleNotFoundError) and "pip install" not in message:
+        from rehabbot.common.extras import OPTIONAL_MODULES, install_hint
+
+        name = (err.name or "").split(".", 1)[0]
+        if name in OPTIONAL_MODULES:  # an optional dependency imported without a hint
+            return f"{message}: {install_hint(name)}"
     if isinstance(err, OSError) and not message:
         return f"{err.strerror or type(err).__name__}: {err.filename}"
     if isinstance(err, DAMAGED_FILE_ERRORS):

@@ -1,7 +1,9 @@
-"""``rehabbot evaluate MODEL|expert|aan|random ...``: every policy on the same episodes of one env,
-a table of clinical figures, and per policy ``evaluation.json`` and ``trace.npz``
-(:mod:`rehabbot.analysis.evaluation`). Every argument is checked, every model loaded and the
-output folder probed before the first episode runs."""
+"""``rehabbot evaluate MODEL|expert|aan|random|module:attr ...``: every policy on the same
+episodes of one env, a table of clinical figures, and per policy ``evaluation.json`` and
+``trace.npz`` (:mod:`rehabbot.analysis.evaluation`). Every argument is checked, every model
+loaded and the output folder probed before the first episode runs; an output folder that holds
+an earlier evaluation is refused unless ``--overwrite`` is given (then the earlier evaluation's
+files are removed, so the two never mix)."""
 
 from __future__ import annotations
 
@@ -40,19 +42,33 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
                "--episodes 20\n"
                "  rehabbot evaluate runs/rehab-reach-v2/sac/seed0/model.zip --env-kwargs "
                "'{\"weight_level\": 4, \"profile\": {\"height_m\": 1.6, \"mass_kg\": 55, "
-               "\"sex\": \"female\"}}'\n\n"
+               "\"sex\": \"female\"}}'\n"
+               "  rehabbot evaluate mypolicies:Hold expert --env rehab-reach-v2  # your own\n\n"
+               "module:attr imports the module (from the current folder or PYTHONPATH) and "
+               "takes its attribute: an object with predict(obs, deterministic=...) -> "
+               "(action, state) is used as it is; a class, or a function without predict, is "
+               "called with the env and must return such an object. Its label (output folder) "
+               "is its `label` attribute, else its class name.\n\n"
                "The env is --env, or the one the models were trained on (from their run's "
                "manifest.json, or the zoo agent's file). Each policy's files go to "
                "OUT/<label>/evaluation.json and OUT/<label>/trace.npz; with several "
-               "policies, OUT/comparison.md.")
-    parser.add_argument("policies", nargs="+", metavar="MODEL|zoo:ENV/ALGO|expert|aan|random",
+               "policies, OUT/comparison.md; with a population env, OUT/<label>/patients.md "
+               "(one row per patient). An OUT holding an earlier evaluation is refused unless "
+               "--overwrite is given.\n\n"
+               "OMP_NUM_THREADS: a model's network runs with one thread (faster for one small "
+               "network, and with other processes on the machine) unless OMP_NUM_THREADS is "
+               "set.")
+    parser.add_argument("policies", nargs="+",
+                        metavar="MODEL|zoo:ENV/ALGO|expert|aan|random|module:attr",
                         help="a model .zip saved by `rehabbot train` (or any SB3 PPO/SAC/TD3 "
                              "zip), an agent shipped in the zoo (zoo:rehab-reach-v1/ppo; "
                              "rehabbot zoo list), 'expert' (scripted expert), 'aan' "
-                             "(assist-as-needed controller) or 'random'")
+                             "(assist-as-needed controller), 'random', or module:attr (your "
+                             "own policy; see below)")
     parser.add_argument("--env", metavar="ENV",
                         help="env id, with or without 'rehabbot/' (default: the env the "
-                             "models were trained on; required for expert, aan and random alone)")
+                             "models were trained on; required for expert, aan, random and "
+                             "module:attr alone)")
     parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
                         help=f"episodes per policy (default: {DEFAULT_EPISODES})")
     parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
@@ -65,31 +81,57 @@ def add_evaluate_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="output folder (default: <run>/evaluation for one model of a "
                              "training run, else runs/evaluation/<env>)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an earlier evaluation in the output folder (its files "
+                             "are removed first)")
     parser.set_defaults(func=cmd_evaluate)
+
+
+def check_no_earlier_evaluation(out_dir: Path, overwrite: bool) -> None:
+    """Refuse (:class:`CliError`, exit 2) an output folder that holds an earlier evaluation,
+    unless ``overwrite``: with the train command's wording."""
+    from rehabbot.analysis import evaluation
+
+    earlier = evaluation.earlier_evaluation(out_dir)
+    if earlier and not overwrite:
+        shown = ", ".join(str(path.relative_to(out_dir)) for path in earlier[:3])
+        more = f" and {len(earlier) - 3} more" if len(earlier) > 3 else ""
+        raise CliError(f"{out_dir} already holds an evaluation ({shown}{more}); choose another "
+                       "folder with --out or start over with --overwrite", EXIT_USAGE)
 
 
 @cli_command
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Run ``rehabbot evaluate``."""
     from rehabbot.analysis import evaluation
+    from rehabbot.cli.threads import one_torch_thread
     from rehabbot.common.files import check_writable_dir
-    from rehabbot.rl.policies import env_for
 
     if args.episodes < 1:
         raise CliError(f"--episodes {args.episodes} must be >= 1", EXIT_USAGE)
-    env_id, _kwargs = env_for(args.policies, args.env, args.env_kwargs)  # checks every spec
+    env_id, _kwargs = evaluation.run_env_for(args.policies, args.env, args.env_kwargs)
     out_dir = args.out or evaluation.default_out_dir(args.policies, env_id)
+    check_no_earlier_evaluation(out_dir, args.overwrite)
     check_writable_dir(out_dir)
+    one_torch_thread(args.policies)
     results = evaluation.evaluate_policies(args.policies, args.env, args.episodes, args.seed,
                                            args.env_kwargs, deterministic=not args.stochastic)
+    if args.overwrite:
+        evaluation.remove_earlier_evaluation(out_dir)
     reports = []
     for report, trace in results:
-        json_path, trace_path = evaluation.save_report(
-            report, trace, evaluation.label_dir(out_dir, report["policy"]["label"]))
+        folder = evaluation.label_dir(out_dir, report["policy"]["label"])
+        json_path, trace_path = evaluation.save_report(report, trace, folder)
         print(f"{report['policy']['label']}: wrote {json_path} and {trace_path}")
+        patients_path = evaluation.write_patient_table(folder, report)
+        if patients_path is not None:
+            print(f"{report['policy']['label']}: wrote {patients_path}")
         reports.append(report)
     table = evaluation.format_table(reports)
     print(f"\n{reports[0]['env_id']}, {args.episodes} episodes per policy\n\n{table}")
+    patients = evaluation.format_patient_tables(reports)
+    if patients:
+        print(f"\n{patients}")
     if len(reports) > 1:
         evaluation.write_comparison(out_dir, reports)
     return EXIT_OK

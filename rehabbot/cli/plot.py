@@ -19,6 +19,11 @@ Draw the paper's figures for your own runs:
   Fig. 5  fig5_kinematics_<label>.{png,pdf} joint velocity, acceleration, jerk vs. time
   Fig. 6  fig6_torques_<label>.{png,pdf}    joint torques with the torque limits
   Fig. 3  fig3_tool_path_<label>.{png,pdf}  3-D tool path with the numbered targets
+the patient's side (for every trace that holds it; --no-patient-figures leaves them out):
+  Fig. 7  fig7_patient_joints_<label>.*     the patient's joint angles, the prescribed path
+                                            and the range-of-motion bounds
+  Fig. 8  fig8_cuff_force_<label>.*         the cuff force and its limit
+  Fig. 9  fig9_work_<label>.*               the robot's and the patient's work on the limb
 <label> is <policy>_<env>. RUN_DIR may be a training run, any directory above runs
 (all manifest.json below it are used) or a directory holding trace.npz files. A run with
 model.zip but no evaluation/trace.npz is evaluated first (one deterministic episode; the
@@ -49,7 +54,8 @@ def add_plot_parser(commands: argparse._SubParsersAction) -> None:
     """Add the ``plot`` subcommand to the ``rehabbot`` parser's subcommands."""
     parser = commands.add_parser(
         "plot",
-        help="draw the paper's figures (learning curves, kinematics, torques, tool path)",
+        help="draw the paper's figures (learning curves, kinematics, torques, tool path) and "
+             "the patient's (joint angles, cuff force, work)",
         description=PLOT_DESCRIPTION,
         epilog=PLOT_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -69,6 +75,9 @@ def add_plot_parser(commands: argparse._SubParsersAction) -> None:
                         help="file formats to write: png, pdf, svg (default: png pdf)")
     parser.add_argument("--no-evaluate", dest="evaluate", action="store_false",
                         help="do not evaluate runs that have model.zip but no trace.npz")
+    parser.add_argument("--no-patient-figures", dest="patient", action="store_false",
+                        help="leave out Figs. 7-9 (the patient's joint angles, cuff force and "
+                             "work)")
     parser.set_defaults(func=cmd_plot)
 
 
@@ -109,6 +118,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             warnings.simplefilter("always")
             written = plot_all(run_dirs, out_dir, smooth=args.smooth, source=args.source,
                                formats=args.formats, evaluate=args.evaluate,
+                               patient=args.patient,
                                announce=lambda text: print(f"rehabbot plot: {text}",
                                                            flush=True))
     except ImportError as err:

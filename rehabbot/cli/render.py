@@ -1,5 +1,6 @@
-"""``rehabbot render MODEL|expert|random --out FILE.mp4|.gif``: a video of one episode with
-the tool's path in purple and the targets (:mod:`rehabbot.analysis.video`)."""
+"""``rehabbot render MODEL|expert|aan|random --out FILE.mp4|.gif``: a video of one episode with
+the tool's path in purple and the targets (:mod:`rehabbot.analysis.video`), with a progress
+line on stderr (frames done of at most, elapsed, estimated time left)."""
 
 from __future__ import annotations
 
@@ -29,19 +30,23 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
                     'pip install "rehabbot[video]". The output path is checked before the '
                     "episode starts; the file is written under a temporary name, re-opened "
                     "and its frames counted, and appears only when complete and readable: a "
-                    "failure (a full disk) exits 1 and keeps an earlier file of that name.",
+                    "failure (a full disk) exits 1 and keeps an earlier file of that name. "
+                    "Software rendering is slow (minutes for a few seconds of video): a "
+                    "progress line on stderr says how many frames are done of at most how "
+                    "many, the time elapsed and the time left.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n"
                "  rehabbot render expert --env rehab-reach-v2 --out expert.mp4\n"
                "  rehabbot render zoo:rehab-reach-v1/ppo --out ppo.mp4\n"
                "  rehabbot render runs/rehab-reach-v2/sac/seed0/model.zip --out sac.gif "
                "--width 480 --height 360")
-    parser.add_argument("policy", metavar="MODEL|zoo:ENV/ALGO|expert|random",
+    parser.add_argument("policy", metavar="MODEL|zoo:ENV/ALGO|expert|aan|random",
                         help="a model .zip saved by `rehabbot train`, an agent shipped in the "
-                             "zoo (zoo:rehab-reach-v1/ppo), 'expert' or 'random'")
+                             "zoo (zoo:rehab-reach-v1/ppo), 'expert' (scripted expert), 'aan' "
+                             "(assist-as-needed controller) or 'random'")
     parser.add_argument("--env", metavar="ENV",
                         help="env id (default: the model's run manifest or the zoo agent's "
-                             "env; required for expert and random)")
+                             "env; required for expert, aan and random)")
     parser.add_argument("--out", type=Path, required=True, metavar="FILE.mp4|FILE.gif",
                         help="video file to write")
     parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
@@ -62,14 +67,18 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
 def cmd_render(args: argparse.Namespace) -> int:
     """Run ``rehabbot render``."""
     from rehabbot.analysis.video import render_episode
+    from rehabbot.cli.progress import ProgressLine
+    from rehabbot.cli.threads import one_torch_thread
 
     taken = [key for key in RENDER_KWARGS if key in (args.env_kwargs or {})]
     if taken:
         raise CliError(f"--env-kwargs: {', '.join(taken)} cannot be given to render (it "
                        "renders rgb_array frames; use --width, --height and --camera)",
                        EXIT_USAGE)
+    one_torch_thread([args.policy])
     result = render_episode(args.policy, args.env, args.out, args.seed, args.width,
-                            args.height, args.camera, args.frame_every, args.env_kwargs)
+                            args.height, args.camera, args.frame_every, args.env_kwargs,
+                            progress=ProgressLine("rehabbot render"))
     outcome = "success" if result["success"] else (result["safety_violation"] or "time limit")
     print(f"wrote {result['path']}: {result['frames']} frames at {result['fps']:.0f} fps, "
           f"{result['policy']} on {result['env_id']} (seed {result['seed']}): "

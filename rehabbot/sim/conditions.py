@@ -156,6 +156,7 @@ class PatientCondition:
                              f"{self.tremor_amplitude_nm!r} needs a tremor_hz in "
                              f"[{TREMOR_BAND_HZ[0]}, {TREMOR_BAND_HZ[1]}] Hz")
         check_choice("PatientCondition.effort", self.effort, EFFORT_MODES)
+        check_fields_act(self)
 
     # -- derived ---------------------------------------------------------------------------
     @property
@@ -189,6 +190,41 @@ class PatientCondition:
         changed = [f"{f.name}={getattr(self, f.name)!r}" for f in dataclasses.fields(self)
                    if getattr(self, f.name) != getattr(default, f.name)]
         return ", ".join(changed) if changed else "healthy, passive"
+
+
+def check_fields_act(condition: PatientCondition) -> None:
+    """``ValueError`` for a field set away from its default that cannot act with the other
+    fields (it would leave the patient bit-identical to one without it), naming the field,
+    its value and what would make it act; as a tremor amplitude without a frequency is."""
+    default = PatientCondition.__dataclass_fields__
+    effort = condition.effort
+    voluntary = ("strength_fraction", "effort_fraction")
+    if effort == "passive":
+        for name in (*voluntary, "reaction_delay_s"):
+            value = getattr(condition, name)
+            if value != default[name].default:
+                raise ValueError(
+                    f"PatientCondition.{name}={value!r} cannot act on a passive patient "
+                    "(effort='passive' applies no voluntary torque); give effort="
+                    "'active_assisted' or 'resistive' for it to act, or leave it out")
+    else:
+        for name in voluntary:
+            value = getattr(condition, name)
+            if value == 0.0:
+                raise ValueError(
+                    f"PatientCondition.{name}={value!r} leaves the {effort} patient no "
+                    f"strength to use, so effort={effort!r} cannot act; give {name} > 0, or "
+                    "effort='passive' for a patient who does not move the limb")
+        if effort == "resistive" and condition.reaction_delay_s != \
+                default["reaction_delay_s"].default:
+            raise ValueError(
+                f"PatientCondition.reaction_delay_s={condition.reaction_delay_s!r} cannot "
+                "act on a resistive patient (only an active_assisted patient follows the "
+                "targets); give effort='active_assisted' for it to act, or leave it out")
+    if condition.tremor_hz > 0.0 and condition.tremor_amplitude_nm == 0.0:
+        raise ValueError(f"PatientCondition.tremor_hz={condition.tremor_hz!r} needs a "
+                         "tremor_amplitude_nm > 0 (in (0, 10] N·m) to act; give one, or "
+                         "leave tremor_hz out")
 
 
 def as_condition(value: Any) -> PatientCondition:
