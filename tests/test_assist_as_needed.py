@@ -104,3 +104,40 @@ def test_assist_as_needed_moves_more_smoothly_than_the_expert():
         return np.abs(np.diff(np.array(actions), axis=0)).max()
 
     assert peak_setpoint_jump(AssistAsNeeded) < 0.5 * peak_setpoint_jump(ScriptedExpert)
+
+
+@pytest.mark.parametrize("env_id", ["rehab-reach-v2", "rehab-hip-v2", "rehab-knee-v2"])
+def test_assist_as_needed_works_on_the_v2_ids(env_id):
+    """The -v2 observation holds no raw angles and its actions are in Box(-1, 1): the
+    controller reads the paper's fields from the env and maps its action onto the unit box
+    (before, it read the agent observation as angles and the cuff-force rule stopped it)."""
+    env = gym.make(f"rehabbot/{env_id}", exercise=0, weight_level=0,
+                   condition={"spasticity_mas": "2"})
+    controller = AssistAsNeeded(env)
+    obs, info = env.reset(seed=0)
+    for _ in range(1000):
+        action = controller.predict(obs)[0]
+        assert env.action_space.contains(action)
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    env.close()
+    assert info["is_success"], info["safety_violation"]
+
+
+def test_assist_as_needed_takes_the_same_steps_in_v1_and_v2_units():
+    """Mapped back to the controller's box, the -v2 action is the -v1 action."""
+    actions = {}
+    for version in ("v1", "v2"):
+        env = gym.make(f"rehabbot/rehab-reach-{version}", exercise=0, weight_level=0)
+        controller = AssistAsNeeded(env)
+        obs, _ = env.reset(seed=0)
+        steps = []
+        for _ in range(20):
+            action = controller.predict(obs)[0]
+            steps.append(action)
+            obs, *_ = env.step(action)
+        actions[version] = np.array(steps, dtype=float)
+        env.close()
+    bound = np.pi / 400
+    np.testing.assert_allclose(actions["v2"] * bound, actions["v1"], rtol=1e-5, atol=1e-9)

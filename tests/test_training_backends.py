@@ -177,7 +177,7 @@ def test_backend_sbx_without_sbx_is_one_clear_line(tmp_path: Path, monkeypatch,
     err = _cli_error(_parse(ENV, "--algo", "sac", "--backend", "sbx", "--out", str(out)))
     assert err.exit_code == 2
     assert "--backend sbx needs the sbx-rl and jax packages" in str(err)
-    assert "pip install 'rehabbot[jax]'" in str(err)
+    assert 'pip install "rehabbot[jax]"' in str(err)
     assert main(["train", ENV, "--algo", "tqc", "--backend", "sbx", "--out", str(out)]) == 2
     line = capsys.readouterr().err
     assert line.startswith("rehabbot: error: --backend sbx needs") and line.count("\n") == 1

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from rehabbot.common.errors import DataError, UsageError
+from rehabbot.common.extras import install_hint
 
 ALGORITHMS = ("ppo", "sac", "td3", "tqc", "crossq")
 OFF_POLICY = frozenset({"sac", "td3", "tqc", "crossq"})
@@ -96,8 +97,7 @@ def algo_class(algo: str, backend: str = "sb3") -> Any:
     try:
         module = importlib.import_module(module_name)
     except ImportError as err:
-        hint = "pip install 'rehabbot[jax]'" if backend == "sbx" \
-            else f"pip install {DISTRIBUTIONS[module_name]}"
+        hint = install_hint(module_name)
         raise BackendUnavailableError(
             f"{ALGO_NAMES[algo]} on the {backend} backend needs the {DISTRIBUTIONS[module_name]} "
             f"package, which is not installed ({hint})") from err

@@ -20,7 +20,9 @@ A passive patient lets the error grow until ``d`` carries the limb, so the contr
 assisting fully; an active patient who keeps up keeps ``e`` small, ``d`` decays and the robot's
 share of the work on the limb (``info["assistance_ratio"]``) falls. It reads the observation and
 the env's current setpoints (a single, unvectorised env), like the expert in
-``joint_position`` mode. Only ``joint_delta`` mode is supported.
+``joint_position`` mode. Only ``joint_delta`` mode is supported. On the ``-v2`` ids it reads
+the paper's fields from the env (``paper_observation()``: the agent observation holds no raw
+angles) and writes its action in ``Box(-1, 1)`` (the controller's box mapped to it).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from rehabbot.envs.config import RehabEnvConfig
+from rehabbot.rl.experts import native_action_box
 
 FORGETTING = 0.98  # f per decision (time constant 50 decisions = 1 s at 50 Hz)
 ERROR_GAIN = 0.05  # g per decision
@@ -66,7 +69,11 @@ class AssistAsNeeded:
         self._base = base
         self._theta_star = base.layout.slice("theta_star")
         self._theta = base.layout.slice("theta")
-        self._bound = base.action_space.high.astype(float)
+        low, high = native_action_box(base, base.config)  # the controller's own box
+        self._bound = high
+        self._unit = base.config.action_scale == "unit"
+        self._center, self._half = (high + low) / 2.0, (high - low) / 2.0
+        self._paper_obs = base.config.observation == "paper"
         self._reference = np.zeros(len(self._bound))
         self._assistance = np.zeros(len(self._bound))
         self._episode_steps = -1
@@ -78,6 +85,8 @@ class AssistAsNeeded:
         if obs.ndim != 1:
             raise ValueError(f"AssistAsNeeded acts in one env; got observations of shape "
                              f"{obs.shape}")
+        if not self._paper_obs:  # the agent observation: the paper's fields from the env
+            obs = np.asarray(self._base.paper_observation(), dtype=float)
         theta, target = obs[self._theta], obs[self._theta_star]
         setpoint = np.asarray(self._base.controller.setpoint_rad, dtype=float)
         steps = self._base.episode_steps
@@ -96,6 +105,8 @@ class AssistAsNeeded:
         error = self._reference - theta
         self._assistance = self.forgetting * self._assistance + self.error_gain * error
         action = np.clip(theta + self._assistance - setpoint, -self._bound, self._bound)
+        if self._unit:
+            action = np.clip((action - self._center) / self._half, -1.0, 1.0)
         return action.astype(np.float32), None
 
     def __call__(self, observation: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import importlib.util
 
+from rehabbot.common.extras import install_hint
 from rehabbot.common.provenance import distribution_version
 from rehabbot.rl.algorithms import (
     ALGO_CLASSES,
@@ -63,7 +64,7 @@ def resolve_backend(backend: str, algo: str) -> str:
     choice, algo = check_backend_choice(backend), check_algo(algo)
     if choice == "sbx" and not sbx_available():
         raise BackendUnavailableError("--backend sbx needs the sbx-rl and jax packages, which "
-                                      "are not installed (pip install 'rehabbot[jax]')")
+                                      f"are not installed ({install_hint('sbx')})")
     resolved = ("sbx" if sbx_available() else "sb3") if choice == "auto" else choice
     if resolved == "sb3":
         module_name = ALGO_CLASSES[("sb3", algo)][0]
@@ -72,8 +73,8 @@ def resolve_backend(backend: str, algo: str) -> str:
                 " or install rehabbot[jax] for the sbx backend"
             raise BackendUnavailableError(
                 f"{ALGO_NAMES[algo]} on the sb3 backend needs the "
-                f"{DISTRIBUTIONS[module_name]} package, which is not installed (pip install "
-                f"{DISTRIBUTIONS[module_name]}{hint})")
+                f"{DISTRIBUTIONS[module_name]} package, which is not installed "
+                f"({install_hint(module_name)}{hint})")
         algo_class(algo, "sb3")  # an sb3-contrib without CrossQ: a clear error now
     return resolved
 

@@ -18,9 +18,10 @@ against that library's class; for SBX, what only PyTorch can run is translated o
 listed (:mod:`rehabbot.rl.sbx_settings`).
 
 The settings shipped with the package name only the libraries' own classes and options, so
-that RL Zoo reads them unchanged too (``python -m rl_zoo3.train --gym-packages rehabbot
---conf-file .../sac.yml``): full env ids, classes named only as ``policy``, ``policy_kwargs``
-as a string of literals.
+that RL Zoo reads them unchanged too (``OMP_NUM_THREADS=1 python -m rl_zoo3.train
+--gym-packages rehabbot --conf-file .../sac.yml``; one PyTorch thread per process: these small
+networks train many times faster so on a loaded CPU): full env ids, classes named only as
+``policy``, ``policy_kwargs`` as a string of literals.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from rehabbot.common.errors import UsageError
+from rehabbot.common.extras import missing_module_message
 from rehabbot.envs.registration import BILATERAL_IDS, ENV_SPECS, env_short_name, resolve_env_id
 from rehabbot.rl.algorithms import (
     ALGO_NAMES,
@@ -426,7 +428,7 @@ def read_yaml(path: Path, what: str, error: type[Exception], name: str | None = 
     try:
         import yaml
     except ImportError as err:
-        raise error(f"reading a {what} needs PyYAML: pip install pyyaml") from err
+        raise error(missing_module_message(f"reading a {what}", "yaml")) from err
     try:
         data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as err:

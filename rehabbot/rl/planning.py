@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from rehabbot.common.errors import RehabbotError, UsageError
+from rehabbot.common.extras import install_hint
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import ALGO_NAMES, BACKENDS, OFF_POLICY, read_model_data
 from rehabbot.rl.backends import check_backend_choice, saved_backend, sbx_available
@@ -219,8 +220,7 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
                                      f"trained with the {trained_on} backend")
         if trained_on == "sbx" and not sbx_available():
             raise TrainingUsageError(f"cannot resume {run_dir}: it was trained with the sbx "
-                                     "backend, which is not installed (pip install "
-                                     "'rehabbot[jax]')")
+                                     f"backend, which is not installed ({install_hint('sbx')})")
         saved_bc = bool(manifest.get("bc"))
         # With --bc the episodes are cloned (manifest "bc"), else put in the replay buffer.
         saved_record = (manifest.get("bc") if saved_bc else manifest.get("demos")) or {}

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from rehabbot.common.errors import DataError, RehabbotError, UsageError
+from rehabbot.common.extras import install_hint
 from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
 from rehabbot.rl import runs
@@ -326,7 +327,7 @@ def _run_on_ray(state: _SweepState, pending: list[Trial], address: str | None,
         import ray
         from ray import tune
     except ImportError as err:
-        raise SweepError('rehabbot sweep needs Ray Tune: pip install "rehabbot[sweep]"'
+        raise SweepError(f"rehabbot sweep needs Ray Tune: {install_hint('ray')}"
                          ) from err
     resources = state.config.resources_per_trial
     started, session_dir = _init_ray(address, cpus)
