@@ -17,7 +17,7 @@ pytest.importorskip("yaml", reason="sweep files need PyYAML")
 
 import yaml
 
-from benchmarks import results_table
+from benchmarks.results import results_table
 from rehabbot.cli import main
 from rehabbot.rl import sweep as sweep_module
 from rehabbot.rl.sweep import check_sweep, run_sweep, run_trial, trial_state

@@ -500,7 +500,7 @@ def test_resume_refuses_other_demonstrations(tmp_path: Path) -> None:
 
 
 def test_training_speed_benchmark_prints_the_table(capsys) -> None:
-    from benchmarks import training_speed
+    from benchmarks.performance import training_speed
 
     assert training_speed.main(["--steps", "40", "--warmup", "110", "--rounds", "2",
                                 "--algos", "sac", "td3", "--backends", "sb3",

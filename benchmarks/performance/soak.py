@@ -81,9 +81,9 @@ from rehabbot.common.signals import handling_signals
 from rehabbot.envs.config import CONTROL_MODES
 from rehabbot.envs.registration import ENV_SPECS
 
-if not __package__:  # run as a script (python benchmarks/soak.py): make `benchmarks` importable
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.soak_report import (
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.performance.soak_report import (
     END_REASONS,
     MAX_CONSECUTIVE_FAILURES,
     WARMUP_STEPS,

@@ -333,6 +333,17 @@ def summary_tables(results: dict[tuple[str, str], list[dict]],
     return [head, *cell_tables]
 
 
+def summarize(results: dict[tuple[str, str], list[dict]],
+              profiles: Sequence[str] = tuple(PROFILES)) -> str:
+    """:func:`summary_tables` as Markdown, each table under its caption (and its note)."""
+    parts = []
+    for table in summary_tables(results, profiles):
+        parts.append(f"{table['caption']}\n\n"
+                     + markdown_table(table["columns"], table["rows"])
+                     + (f"\n\n{table['note']}" if table.get("note") else ""))
+    return "\n\n".join(parts)
+
+
 def headline_markdown(document: dict[str, Any]) -> str:
     """The README's short table from a learning document: env, algo, success IQM and the
     expert's success, one row per row of its summary table."""
