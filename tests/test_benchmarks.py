@@ -67,7 +67,7 @@ def test_robot_placement_measures_reach_margins_and_the_torque_to_hold_the_limb(
         assert 0.0 < knee["torque_share"] < 1.0 and knee["torque_joint"] == 2
     # The FR3 holds the supine leg at level 4 near its joint-2 limit; the UR5e far from it.
     assert by[("fr3", "hip")]["torque_share"] > by[("ur5e", "hip")]["torque_share"] + 0.2
-    assert "| fr3 | knee | 1.75 | 25/25 |" in robot_placement.format_table(rows)
+    assert "| fr3 | knee | 1.75 | 25/25 |" in squeezed(robot_placement.results_markdown(rows))
     assert robot_placement.main(["--robots", "kuka"]) == 2
     assert "unknown robot(s) kuka" in capsys.readouterr().err
 

@@ -31,7 +31,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from rehabbot.common.tables import Align, Cell, markdown_table
+from rehabbot.common.tables import Align, Cell, markdown_table, text_table
 
 SCHEMA = "rehabbot-results/1"
 ROOT = Path(__file__).resolve().parents[2]
@@ -42,7 +42,7 @@ HEADLINE_END = "<!-- headline-results: end -->"
 
 __all__ = ["HEADLINE_END", "HEADLINE_START", "ROOT", "SCHEMA", "block_between", "command_line",
            "load_document", "make_document", "make_table", "render_markdown", "replace_block",
-           "repo_path", "write_page"]
+           "repo_path", "table_markdown", "table_text", "write_page"]
 
 
 def repo_path(path: str | Path) -> str:
@@ -110,8 +110,20 @@ def check_document(document: Mapping[str, Any]) -> None:
     if len(set(ids)) != len(ids):
         raise ValueError(f"table ids repeat: {ids}")
     for table in document["tables"]:
-        markdown_table(table["columns"], table["rows"], align=table.get("align"),
-                       digits=table.get("digits"))
+        table_markdown(table)
+
+
+def table_markdown(table: Mapping[str, Any]) -> str:
+    """One table of a document as Markdown (:func:`rehabbot.common.tables.markdown_table`)."""
+    return markdown_table(table["columns"], table["rows"], align=table.get("align"),
+                          digits=table.get("digits"))
+
+
+def table_text(table: Mapping[str, Any]) -> str:
+    """One table of a document as aligned text for a terminal, under its caption."""
+    return f"{table['caption']}\n" + text_table(table["columns"], table["rows"],
+                                                align=table.get("align"),
+                                                digits=table.get("digits"))
 
 
 def _comment(text: str) -> str:
@@ -142,9 +154,7 @@ def render_markdown(document: Mapping[str, Any]) -> str:
             if section is not None:
                 lines += [f"## {section}", ""]
         level = "###" if section is not None else "##"
-        lines += [f"{level} {table['caption']}", "",
-                  markdown_table(table["columns"], table["rows"], align=table.get("align"),
-                                 digits=table.get("digits")), ""]
+        lines += [f"{level} {table['caption']}", "", table_markdown(table), ""]
         if table.get("note"):
             lines += [table["note"], ""]
     for note in document["notes"]:

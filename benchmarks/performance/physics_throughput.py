@@ -11,9 +11,9 @@ robots other than the UR5e), against the same UR5e baseline.
 
 Usage::
 
-    python benchmarks/physics_throughput.py [--steps 5000] [--warmup 500] [--repeats 3]
-                                            [--presets NAME ...] [--robots NAME ...]
-                                            [--json FILE]
+    python benchmarks/performance/physics_throughput.py [--steps 5000] [--warmup 500]
+        [--repeats 3] [--presets NAME ...] [--robots NAME ...] [--json FILE]
+        [--page docs/results/NAME]
 """
 
 from __future__ import annotations
@@ -26,11 +26,28 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
 
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.documents import (
+    command_line,
+    make_document,
+    make_table,
+    table_markdown,
+    write_page,
+)
+from benchmarks.common.machine import describe_machine
+
 BASELINE_NAME = "robot_only"
+INTRO = """Raw `mujoco.mj_step` rate of every scene preset at its home pose, the robot holding
+its home setpoints (best of the timed repeats after a warm-up), against the bare robot holding
+the same joint angles, measured in the same run: the `x baseline` column is what the patient,
+the straps and the contacts cost relative to the robot alone. `ncon`/`nefc` are the contacts
+and constraint rows at the home pose; `<preset>/fr3` rows hold the FR3 instead of the UR5e."""
 
 
 @dataclass
@@ -144,20 +161,20 @@ def run_benchmark(
     return rows
 
 
-def format_table(rows: Sequence[ThroughputRow]) -> str:
-    """Fixed-width text table of the rows."""
-    header = (
-        f"{'preset':<21} {'nq':>4} {'nv':>4} {'ncon@rest':>9} {'nefc@rest':>9} {'dt [ms]':>7} "
-        f"{'steps/s':>10} {'x realtime':>10} {'x baseline':>10}"
-    )
-    lines = [header, "-" * len(header)]
-    for row in rows:
-        lines.append(
-            f"{row.name:<21} {row.nq:>4} {row.nv:>4} {row.ncon_at_rest:>9} {row.nefc_at_rest:>9} "
-            f"{row.timestep_s * 1e3:>7.2f} {row.steps_per_s:>10.0f} "
-            f"{row.realtime_factor:>10.1f} {row.ratio_to_baseline:>10.2f}"
-        )
-    return "\n".join(lines)
+def results_table(rows: Sequence[ThroughputRow]) -> dict[str, Any]:
+    """The rows as a results-document table; ``x baseline`` is each rate over the robot-only
+    rate measured in the same run."""
+    return make_table(
+        "throughput", "mj_step throughput per scene preset, against the robot alone",
+        ["preset", "nq", "nv", "ncon@rest", "nefc@rest", "dt [ms]", "steps/s", "x realtime",
+         "x baseline"],
+        [[row.name, row.nq, row.nv, row.ncon_at_rest, row.nefc_at_rest,
+          f"{row.timestep_s * 1e3:.2f}", f"{row.steps_per_s:.0f}",
+          f"{row.realtime_factor:.1f}", f"{row.ratio_to_baseline:.2f}"] for row in rows],
+        align=["left", *["right"] * 8],
+        note=f"`{BASELINE_NAME}`: the bare UR5e holding the same joint angles (the baseline). "
+             "`x baseline` is a ratio measured in the same run on the same machine and is the "
+             "figure to compare across machines; absolute rates depend on the machine.")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -170,6 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--robots", nargs="+", metavar="NAME", default=["ur5e"],
                         help="robots to put in each preset (default: ur5e)")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write results as JSON")
+    parser.add_argument("--page", type=Path, metavar="STEM",
+                        help="write the results document STEM.json and its page STEM.md "
+                             "(docs/results/physics-throughput)")
     return parser
 
 
@@ -200,7 +220,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{platform.machine()}; {args.steps} steps x best of {args.repeats} "
         f"after {args.warmup} warm-up steps"
     )
-    print(format_table(rows))
+    table = results_table(rows)
+    print(table_markdown(table))
+    if args.page is not None:
+        document = make_document(
+            title="Physics throughput of every scene preset",
+            intro=INTRO, command=command_line(__file__, argv if argv is not None
+                                              else sys.argv[1:]),
+            generated_by=__file__, tables=[table], machine=describe_machine(),
+            settings={"steps": args.steps, "warmup": args.warmup, "repeats": args.repeats,
+                      "robots": list(args.robots), "presets": presets},
+            data={"rows": [asdict(row) for row in rows]})
+        write_page(document, args.page)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         payload = {

@@ -18,6 +18,7 @@ import numpy as np
 
 from rehabbot.common.files import atomic_write_text
 from rehabbot.common.provenance import package_versions
+from rehabbot.common.tables import markdown_table
 from rehabbot.sim.physics import RULES
 
 END_REASONS = ("success", "truncation", *RULES, "exception", "open")
@@ -253,13 +254,13 @@ def _fmt_mib(value: float | None) -> str:
 
 def _table_row(label: Sequence[str], steps: int, episodes: int, ends: Mapping[str, int],
                exceptions: int, non_finite: int, outside: int, growth: float | None,
-               rate: float | None) -> str:
+               rate: float | None) -> list[str]:
     other = ends.get("exception", 0) + ends.get("open", 0) + ends.get("terminated", 0)
     cells = [*label, str(steps), str(episodes), str(ends.get("success", 0)),
              str(ends.get("truncation", 0)), *(str(ends.get(rule, 0)) for rule in RULES),
              str(other), str(exceptions), str(non_finite), str(outside), _fmt_mib(growth),
              "-" if rate is None else f"{rate:.0f}"]
-    return "| " + " | ".join(cells) + " |"
+    return cells
 
 
 def format_header(report: SoakReport) -> str:
@@ -274,12 +275,11 @@ def format_header(report: SoakReport) -> str:
 
 
 def format_table(report: SoakReport) -> str:
-    """Markdown table: one row per cell and a total row."""
+    """Markdown table (:mod:`rehabbot.common.tables`): one row per cell and a total row."""
     header = ["env", "mode", "steps", "episodes", "success", "trunc.",
               *(RULE_HEADERS.get(rule, rule) for rule in RULES), "other", "exceptions",
               "non-finite", "obs outside", "RSS growth [MiB]", "steps/s"]
-    lines = ["| " + " | ".join(header) + " |",
-             "|" + "|".join(["---"] * 2 + ["---:"] * (len(header) - 2)) + "|"]
+    lines = []
     for cell in report.cells:
         mode = cell.control_mode if cell.status == "complete" \
             else f"{cell.control_mode} [{cell.status}]"
@@ -290,7 +290,7 @@ def format_table(report: SoakReport) -> str:
     lines.append(_table_row(("**total**", ""), report.steps, report.episodes, report.ends(),
                             report.exceptions, report.non_finite, report.obs_outside,
                             report.rss_growth_mib, rate))
-    return "\n".join(lines)
+    return markdown_table(header, lines, align=["left", "left", *["right"] * (len(header) - 2)])
 
 
 def format_footer(report: SoakReport) -> str:

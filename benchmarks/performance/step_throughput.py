@@ -17,8 +17,8 @@ The absolute rates depend on the machine; the share is a ratio measured in the s
 
 Usage::
 
-    python benchmarks/step_throughput.py [--steps 300] [--rounds 7] [--warmup 100]
-                                         [--ids ID ...] [--robot NAME] [--json FILE]
+    python benchmarks/performance/step_throughput.py [--steps 300] [--rounds 7]
+        [--warmup 100] [--ids ID ...] [--robot NAME] [--json FILE] [--page docs/results/NAME]
 
 ``--robot fr3`` makes every id with that robot (``gym.make(id, robot=...)``).
 """
@@ -28,20 +28,35 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import platform
-import shlex
 import statistics
 import sys
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import mujoco
 import numpy as np
 
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.documents import (
+    command_line,
+    make_document,
+    make_table,
+    table_markdown,
+    write_page,
+)
+from benchmarks.common.machine import describe_machine
+
 PHYSICS_SHARE_GOAL = 0.90
+INTRO = """Every registered id made the way users make it (`gym.make(id)`, with the wrappers the
+registration adds), stepped with zero actions, against the raw physics of the same step
+(`mujoco.mj_step(model, data, nstep=frame_skip)` on a copy of the env's model and state after
+`reset`). Rounds of env steps and of physics calls alternate which goes first, so a change of
+the machine's speed hits both alike; the figures are medians over the rounds."""
 
 
 @dataclass
@@ -137,15 +152,22 @@ def measure(env_id: str, steps: int, rounds: int, warmup: int, seed: int,
                realtime_factor=env_rate * dt_s, shares=shares)
 
 
-def format_table(rows: Sequence[Row]) -> str:
-    lines = ["| id | env steps/s | physics steps/s | physics share | overhead [µs/step] "
-             "| x realtime |", "|---|---:|---:|---:|---:|---:|"]
+def results_table(rows: Sequence[Row]) -> dict[str, Any]:
+    """The rows as a results-document table (``physics share`` is the ratio measured in the
+    same run; ``(< goal)`` marks a share under :data:`PHYSICS_SHARE_GOAL`)."""
+    cells = []
     for row in rows:
         flag = "" if row.physics_share >= PHYSICS_SHARE_GOAL else " (< goal)"
-        lines.append(f"| {row.env_id} | {row.env_steps_per_s:.0f} | "
-                     f"{row.physics_steps_per_s:.0f} | {row.physics_share:.1%}{flag} | "
-                     f"{row.overhead_us:.1f} | {row.realtime_factor:.0f} |")
-    return "\n".join(lines)
+        cells.append([row.env_id, f"{row.env_steps_per_s:.0f}", f"{row.physics_steps_per_s:.0f}",
+                      f"{row.physics_share:.1%}{flag}", f"{row.overhead_us:.1f}",
+                      f"{row.realtime_factor:.0f}"])
+    return make_table(
+        "step", "Env steps against the same step's physics",
+        ["id", "env steps/s", "physics steps/s", "physics share", "overhead [µs/step]",
+         "x realtime"], cells, align=["left", *["right"] * 5],
+        note=f"The physics share is physics time / env time per step, medians over interleaved "
+             f"rounds of the same run (the goal: at least {PHYSICS_SHARE_GOAL:.0%}); it is the "
+             "figure to compare across machines, the absolute rates depend on the machine.")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -157,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--ids", nargs="+", metavar="ID", help="default: every rehabbot/ id")
     parser.add_argument("--robot", metavar="NAME", help="make every id with this robot")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows as JSON")
+    parser.add_argument("--page", type=Path, metavar="STEM",
+                        help="write the results document STEM.json and its page STEM.md "
+                             "(docs/results/step-throughput)")
     return parser
 
 
@@ -176,13 +201,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     rows = [measure(i, args.steps, args.rounds, args.warmup, args.seed, args.robot)
             for i in ids]
-    print(f"command: {shlex.join([Path(sys.argv[0]).as_posix(), *(argv or sys.argv[1:])])}")
-    print(f"machine: {platform.platform()}, python {platform.python_version()}, mujoco "
-          f"{mujoco.__version__}, gymnasium {gym.__version__}, numpy {np.__version__}")
-    print(f"gym.make(id), zero actions; median of {args.rounds} interleaved rounds of "
-          f"{args.steps} steps against mj_step on a copy of the model and state; wrappers: "
-          f"{rows[0].wrappers}; goal: physics share >= {PHYSICS_SHARE_GOAL:.0%}\n")
-    print(format_table(rows))
+    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    how = (f"gym.make(id), zero actions; median of {args.rounds} interleaved rounds of "
+           f"{args.steps} steps against mj_step on a copy of the model and state; wrappers: "
+           f"{rows[0].wrappers}; goal: physics share >= {PHYSICS_SHARE_GOAL:.0%}")
+    print(f"command: {command}\nmachine: {describe_machine()}, gymnasium {gym.__version__}, "
+          f"numpy {np.__version__}\n{how}\n")
+    table = results_table(rows)
+    print(table_markdown(table))
+    if args.page is not None:
+        write_page(make_document(
+            title="Env-step throughput: how much of a step is physics", intro=INTRO,
+            command=command, generated_by=__file__, tables=[table],
+            machine=f"{describe_machine()}, gymnasium {gym.__version__}, numpy {np.__version__}",
+            seeds={"reset_seed": args.seed},
+            settings={"steps": args.steps, "rounds": args.rounds, "warmup": args.warmup,
+                      "robot": args.robot, "wrappers": rows[0].wrappers},
+            data={"rows": [asdict(row) for row in rows]}), args.page)
     if args.json is not None:
         args.json.write_text(json.dumps([asdict(r) for r in rows], indent=2) + "\n")
     return 0

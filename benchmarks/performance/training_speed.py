@@ -45,6 +45,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from rehabbot.common.tables import markdown_table
+
 ALGOS = ("sac", "td3", "ppo", "tqc", "crossq")
 BACKENDS = ("sb3", "sbx")
 BASELINE = ("sac", "sb3")
@@ -139,8 +141,9 @@ def measure(algos: Sequence[str], backends: Sequence[str], env_id: str, steps: i
     return rows
 
 
-def format_table(rows: Sequence[Row], backends: Sequence[str]) -> str:
-    """Markdown: one line per algorithm, the backends side by side."""
+def speed_table(rows: Sequence[Row], backends: Sequence[str]) -> str:
+    """Markdown (:mod:`rehabbot.common.tables`): one line per algorithm, the backends side by
+    side."""
     by_key = {(row.algo, row.backend): row for row in rows}
     baseline = by_key.get(BASELINE)
     header = ["algo"]
@@ -150,7 +153,7 @@ def format_table(rows: Sequence[Row], backends: Sequence[str]) -> str:
     header += [f"{b} warm-up [s]" for b in backends]
     header += [f"{b} compile ≈ [s]" for b in backends]
     header += [f"{b} × SB3 SAC" for b in backends]
-    lines = ["| " + " | ".join(header) + " |", "|---|" + "---:|" * (len(header) - 1)]
+    lines = []
     for algo in dict.fromkeys(row.algo for row in rows):
         cells = [algo]
         mine = [by_key.get((algo, b)) for b in backends]
@@ -162,8 +165,8 @@ def format_table(rows: Sequence[Row], backends: Sequence[str]) -> str:
         cells += [f"{r.compile_s:.1f}" if r else "–" for r in mine]
         cells += [f"{r.steps_per_s / baseline.steps_per_s:.2f}" if r and baseline else "–"
                   for r in mine]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        lines.append(cells)
+    return markdown_table(header, lines, align=["left", *["right"] * (len(header) - 1)])
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -236,7 +239,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"gradient_steps=4; PPO n_steps={PPO_N_STEPS}; {args.steps} timed steps per model "
           f"in {args.rounds} interleaved rounds after {args.warmup} warm-up steps (the warm-up "
           "includes JIT compilation)\n")
-    print(format_table(rows, args.backends))
+    print(speed_table(rows, args.backends))
     if args.json is not None:
         args.json.write_text(json.dumps([asdict(r) for r in rows], indent=2) + "\n")
     return 0

@@ -15,7 +15,8 @@ Three tables, in Markdown:
 
 Usage::
 
-    python benchmarks/condition_table.py [--sections spasticity tremor work] [--json FILE]
+    python benchmarks/results/condition_table.py [--sections spasticity tremor work]
+        [--json FILE] [--page docs/results/conditions]
 """
 
 from __future__ import annotations
@@ -24,15 +25,33 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.documents import (
+    command_line,
+    make_document,
+    make_table,
+    table_text,
+    write_page,
+)
 from rehabbot.analysis.condition_probes import stretch_test, tremor_spectrum
 from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.rl.assist_as_needed import AssistAsNeeded
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim.conditions import MAS_GRADES
 
+INTRO = """The measurements behind docs/conditions.md: isokinetic stretches for every Modified
+Ashworth grade at 5 and 100 deg/s (the reflex's peak and mean resistance, the share of the
+sweep it resists and the dynamometer's mean torque; the passive joint's at grade 0), the
+spectral peak and RMS of the held elbow's angle for several tremor frequencies, and the
+scripted expert and the assist-as-needed controller on every exercise of a base -v1 id for a
+list of conditions (success, peak cuff force, the robot's and the patient's work on the limb
+and the assistance ratio)."""
 TREMOR_HZ = (3.0, 5.0, 8.0, 12.0)
 WORK_LEVELS = (0, 2, 4)
 # (label, limb, task_type, condition): the conditions of the work table
@@ -115,9 +134,34 @@ def work_rows() -> list[dict]:
     return rows
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
+def spasticity_table(rows: list[dict]) -> dict[str, Any]:
+    return make_table(
+        "spasticity", "Isokinetic stretches (cuff released; resistance = the reflex's torque "
+        "against the motion)",
+        ["joint", "MAS", "speed [deg/s]", "peak [N·m]", "mean [N·m]", "share of sweep resisted",
+         "dynamometer mean [N·m]"],
+        [[r["joint"], r["grade"], f"{r['speed_deg_s']:.0f}", f"{r['peak_resistance_nm']:.2f}",
+          f"{r['mean_resistance_nm']:.2f}", f"{100 * r['resisted_fraction']:.0f} %",
+          f"{r['dynamometer_mean_nm']:.2f}"] for r in rows])
+
+
+def tremor_table(rows: list[dict]) -> dict[str, Any]:
+    return make_table(
+        "tremor", "Tremor, elbow held by the robot for 10 s (zero actions), seed 0",
+        ["tremor_hz", "spectral peak [Hz]", "RMS about the trend [deg]"],
+        [[f"{r['tremor_hz']:g}" if r["tremor_hz"] else "none", f"{r['peak_hz']:.2f}",
+          f"{r['rms_deg']:.4f}"] for r in rows])
+
+
+def work_table(rows: list[dict]) -> dict[str, Any]:
+    return make_table(
+        "work", f"Work on the limb: every exercise at weight levels {list(WORK_LEVELS)}, seed 0 "
+        "(means over episodes)",
+        ["limb", "condition", "controller", "success", "stops", "peak cuff force [N]",
+         "robot work [J]", "patient work [J]", "assistance ratio"],
+        [[r["limb"], r["condition"], r["controller"], f"{100 * r['success_rate']:.0f} %",
+          ", ".join(r["stops"]) or "-", f"{r['peak_force_n']:.0f}", f"{r['robot_work_j']:.2f}",
+          f"{r['patient_work_j']:.2f}", f"{r['assistance_ratio']:.2f}"] for r in rows])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -125,45 +169,37 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sections", nargs="+", default=["spasticity", "tremor", "work"],
                         choices=["spasticity", "tremor", "work"])
     parser.add_argument("--json", default=None, help="also write the figures to this file")
+    parser.add_argument("--page", type=Path, metavar="STEM",
+                        help="write the results document STEM.json and its page STEM.md "
+                             "(docs/results/conditions)")
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    out: dict = {"command": "python " + " ".join(sys.argv)}
+    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    out: dict = {"command": command}
+    tables = []
     if "spasticity" in args.sections:
         out["spasticity"] = spasticity_rows("elbow_flexion", "arm") + spasticity_rows(
             "knee_flexion", "knee")
-        print("Isokinetic stretches (cuff released; resistance = the reflex's torque against "
-              "the motion):\n")
-        print(_table(["joint", "MAS", "speed [deg/s]", "peak [N·m]", "mean [N·m]",
-                      "share of sweep resisted", "dynamometer mean [N·m]"],
-                     [[r["joint"], r["grade"], f"{r['speed_deg_s']:.0f}",
-                       f"{r['peak_resistance_nm']:.2f}", f"{r['mean_resistance_nm']:.2f}",
-                       f"{100 * r['resisted_fraction']:.0f} %",
-                       f"{r['dynamometer_mean_nm']:.2f}"] for r in out["spasticity"]]))
-        print()
+        tables.append(spasticity_table(out["spasticity"]))
+        print(table_text(tables[-1]) + "\n", flush=True)
     if "tremor" in args.sections:
         out["tremor"] = tremor_rows()
-        print("Tremor, elbow held by the robot for 10 s (zero actions), seed 0:\n")
-        print(_table(["tremor_hz", "spectral peak [Hz]", "RMS about the trend [deg]"],
-                     [[f"{r['tremor_hz']:g}" if r["tremor_hz"] else "none",
-                       f"{r['peak_hz']:.2f}", f"{r['rms_deg']:.4f}"] for r in out["tremor"]]))
-        print()
+        tables.append(tremor_table(out["tremor"]))
+        print(table_text(tables[-1]) + "\n", flush=True)
     if "work" in args.sections:
         out["work"] = work_rows()
-        print(f"Work on the limb: every exercise at weight levels {list(WORK_LEVELS)}, seed 0 "
-              "(means over episodes):\n")
-        print(_table(["limb", "condition", "controller", "success", "stops",
-                      "peak cuff force [N]", "robot work [J]", "patient work [J]",
-                      "assistance ratio"],
-                     [[r["limb"], r["condition"], r["controller"],
-                       f"{100 * r['success_rate']:.0f} %", ", ".join(r["stops"]) or "-",
-                       f"{r['peak_force_n']:.0f}", f"{r['robot_work_j']:.2f}",
-                       f"{r['patient_work_j']:.2f}", f"{r['assistance_ratio']:.2f}"]
-                      for r in out["work"]]))
-        print()
+        tables.append(work_table(out["work"]))
+        print(table_text(tables[-1]) + "\n", flush=True)
     print(f"({time.perf_counter() - started:.0f} s)")
     if args.json:
         with open(args.json, "w") as handle:
             json.dump(out, handle, indent=2)
+    if args.page is not None:
+        write_page(make_document(
+            title="What each patient condition does, measured in the simulation", intro=INTRO,
+            command=command, generated_by=__file__, tables=tables, seeds={"episodes": 0},
+            settings={"sections": args.sections, "work_levels": list(WORK_LEVELS),
+                      "tremor_hz": list(TREMOR_HZ)}, data=out), args.page)
     return 0
 
 

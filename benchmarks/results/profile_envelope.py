@@ -2,7 +2,8 @@
 grid of heights, masses and both sexes (random weight levels, so every level is checked) and
 counts the profiles it refuses (:mod:`rehabbot.feasibility`), by reason.
 
-    python benchmarks/profile_envelope.py [--robot ur5e] [--workers 2] [--out runs/envelope.json]
+    python benchmarks/results/profile_envelope.py [--robot ur5e] [--workers 2]
+        [--out runs/envelope.json]
 
 Prints a Markdown table: per limb and side, the refused share of the grid, the reasons, and the
 lowest height from which every profile up to a given mass is accepted.
@@ -19,6 +20,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+from rehabbot.common.tables import markdown_table
 
 HEIGHTS_M = tuple(float(h) for h in np.round(np.arange(1.20, 2.2001, 0.05), 2))
 MASSES_KG = (30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 100.0, 120.0, 140.0, 160.0, 180.0, 200.0)
@@ -66,19 +69,20 @@ def lowest_supported_height(rows: list[dict], mass_cap_kg: float) -> float | Non
 
 
 def table(rows: list[dict]) -> str:
-    caps = " | ".join(f"all accepted from (mass ≤ {c:.0f} kg)" for c in MASS_CAPS_KG)
-    lines = [f"| limb | side | refused | reasons | {caps} |",
-             "|---|---|---|---|" + "---|" * len(MASS_CAPS_KG)]
+    """Per limb and side: the refused share, the reasons, and the lowest height from which
+    every profile up to each mass cap is accepted (Markdown, :mod:`rehabbot.common.tables`)."""
+    cells = []
     for limb, side in COMBOS:
         mine = [r for r in rows if r["limb"] == limb and r["side"] == side]
         refused = [r for r in mine if r["refused"]]
         reasons = sorted({r["refused"] for r in refused})
-        heights = " | ".join(
-            f"{h:.2f} m" if (h := lowest_supported_height(mine, c)) is not None else "never"
-            for c in MASS_CAPS_KG)
-        lines.append(f"| {limb} | {side} | {len(refused)}/{len(mine)} | "
-                     f"{'; '.join(reasons) or '-'} | {heights} |")
-    return "\n".join(lines)
+        heights = [f"{h:.2f} m" if (h := lowest_supported_height(mine, c)) is not None
+                   else "never" for c in MASS_CAPS_KG]
+        cells.append([limb, side, f"{len(refused)}/{len(mine)}", "; ".join(reasons) or "-",
+                      *heights])
+    return markdown_table(["limb", "side", "refused", "reasons",
+                           *(f"all accepted from (mass ≤ {c:.0f} kg)" for c in MASS_CAPS_KG)],
+                          cells)
 
 
 def main(argv: list[str] | None = None) -> int:

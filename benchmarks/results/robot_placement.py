@@ -18,7 +18,7 @@ A scene the robot cannot reach at home (the env refuses it) is marked ``refused`
 
 Usage::
 
-    python benchmarks/robot_placement.py [--robots ur5e fr3] [--heights 1.4 1.6 1.75 2.0]
+    python benchmarks/results/robot_placement.py [--robots ur5e fr3] [--heights 1.4 1.6 1.75 2.0]
                                          [--json FILE]
 """
 
@@ -33,6 +33,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from rehabbot.common.tables import markdown_table
 from rehabbot.sim import PatientProfile, build_scene
 from rehabbot.sim.robots import ROBOT_NAMES
 from rehabbot.tasks.workspace import solve_workspace, workspace_grid_deg
@@ -91,18 +92,20 @@ def measure(robots: Sequence[str], heights: Sequence[float]) -> list[dict]:
     return rows
 
 
-def format_table(rows: Sequence[dict]) -> str:
-    lines = ["| robot | scene | height [m] | reached | margin [rad] | contacts | "
-             "torque at home, level 4 |", "|---|---|---|---|---|---|---|"]
+def results_markdown(rows: Sequence[dict]) -> str:
+    """The rows as a Markdown table (:mod:`rehabbot.common.tables`); a refused scene's cells
+    are ``-``."""
+    cells: list[list[str | None]] = []
     for r in rows:
-        head = f"| {r['robot']} | {r['scene']} | {r['height_m']:.2f} |"
+        head = [r["robot"], r["scene"], f"{r['height_m']:.2f}"]
         if "refused" in r:
-            lines.append(f"{head} refused | - | - | - |")
+            cells.append([*head, "refused", None, None, None])
             continue
-        lines.append(f"{head} {r['reached']}/{r['poses']} | {r['margin_rad']:.2f} | "
-                     f"{r['contacts']} | {100 * r['torque_share']:.0f} % (joint "
-                     f"{r['torque_joint']}) |")
-    return "\n".join(lines)
+        cells.append([*head, f"{r['reached']}/{r['poses']}", f"{r['margin_rad']:.2f}",
+                      str(r["contacts"]),
+                      f"{100 * r['torque_share']:.0f} % (joint {r['torque_joint']})"])
+    return markdown_table(["robot", "scene", "height [m]", "reached", "margin [rad]", "contacts",
+                           "torque at home, level 4"], cells)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -119,7 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     rows = measure(args.robots, args.heights)
-    print(format_table(rows))
+    print(results_markdown(rows))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
     return 0
