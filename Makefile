@@ -43,8 +43,8 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 bench: $(STAMP)
-	$(PY) benchmarks/physics_throughput.py
-	$(PY) benchmarks/step_throughput.py
+	$(PY) benchmarks/performance/physics_throughput.py
+	$(PY) benchmarks/performance/step_throughput.py
 
 # The README's scene pictures, rendered by our own code.
 images: $(STAMP)

@@ -50,8 +50,8 @@ into place).
 
 Usage::
 
-    python benchmarks/soak.py [--steps 1000000] [--seed 0] [--env ID ...] [--mode MODE ...]
-                              [--workers 1] [--out FILE.json] [--quiet]
+    python benchmarks/performance/soak.py [--steps 1000000] [--seed 0] [--env ID ...]
+        [--mode MODE ...] [--workers 1] [--out FILE.json] [--quiet]
 """
 
 from __future__ import annotations

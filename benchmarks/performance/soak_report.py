@@ -1,5 +1,5 @@
 """The soak's report: what each cell found (:class:`CellReport`), the whole run
-(:class:`SoakReport`), its table and its JSON file (see ``benchmarks/soak.py``)."""
+(:class:`SoakReport`), its table and its JSON file (see ``benchmarks/performance/soak.py``)."""
 
 from __future__ import annotations
 

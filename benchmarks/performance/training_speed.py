@@ -26,7 +26,7 @@ the machine; only the ratios compare across machines.
 
 Usage::
 
-    python benchmarks/training_speed.py [--steps 2048] [--algos sac td3 ppo tqc crossq]
+    python benchmarks/performance/training_speed.py [--steps 2048] [--algos sac td3 ppo tqc crossq]
         [--backends sb3 sbx] [--rounds 4] [--warmup 512] [--env rehabbot/rehab-reach-v0]
         [--net-arch 64 64] [--json FILE]
 """

@@ -9,7 +9,7 @@ medians over ``--rounds`` rounds, so a change of the machine's speed hits both a
 
 Usage::
 
-    python benchmarks/work_meter_cost.py [--ids ID ...] [--steps 300] [--rounds 7]
+    python benchmarks/performance/work_meter_cost.py [--ids ID ...] [--steps 300] [--rounds 7]
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
 
 Usage::
 
-    python benchmarks/bilateral_sync.py MODEL_OR_RUN_DIR ... [--episodes 10] [--seed 1000]
+    python benchmarks/probes/bilateral_sync.py MODEL_OR_RUN_DIR ... [--episodes 10] [--seed 1000]
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Does an off-policy agent's critic rank the scripted expert's action above its reverse? A
 diagnosis of SAC/TD3 runs that fail (README, Results, "Why SAC failed on SBX").
 
-    python benchmarks/critic_probe.py MODEL.zip [--episodes 2] [--seed 1000]
+    python benchmarks/probes/critic_probe.py MODEL.zip [--episodes 2] [--seed 1000]
 
 The scripted expert runs whole episodes of the model's env (its id and kwargs from the run's
 manifest). In every state ``s`` it visits, the model's critic (the mean of its Q-networks) is

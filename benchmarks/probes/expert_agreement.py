@@ -1,7 +1,8 @@
 """How closely a trained policy's actions follow the scripted expert's, along the policy's own
 episodes: a diagnosis of agents that fail (README, Results, "SAC on the -v1 reward").
 
-    python benchmarks/expert_agreement.py MODEL.zip [--episodes 4] [--seed 1000] [--steps 300]
+    python benchmarks/probes/expert_agreement.py MODEL.zip [--episodes 4] [--seed 1000]
+        [--steps 300]
 
 For every step of each episode (deterministic actions, the env and its kwargs from the run's
 manifest) it compares the policy's action ``a`` with the action ``e`` the scripted expert would

@@ -7,8 +7,8 @@
    versus holding still to the time limit and versus the expert (undiscounted returns, as
    ``evaluate_policy`` prints them).
 
-    python benchmarks/reward_trap.py            # every id (about 3 minutes on one core)
-    python benchmarks/reward_trap.py --ids rehab-reach-v0 rehab-reach-v1
+    python benchmarks/probes/reward_trap.py            # every id (about 3 minutes on one core)
+    python benchmarks/probes/reward_trap.py --ids rehab-reach-v0 rehab-reach-v1
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python benchmarks/scene_tour.py --out runs/scenes
+    python benchmarks/probes/scene_tour.py --out runs/scenes
 
 For every preset in :data:`rehabbot.sim.PRESETS` this writes one PNG per camera
 (``DIR/<preset>_<camera>.png``), runs :func:`rehabbot.sim.sweep.run_sweep` and prints one
@@ -148,7 +148,7 @@ def write_summary(path: Path, reports: Sequence[PresetReport], duration_s: float
 def build_parser() -> argparse.ArgumentParser:
     """Command-line options of the scene tour."""
     parser = argparse.ArgumentParser(
-        prog="python benchmarks/scene_tour.py",
+        prog="python benchmarks/probes/scene_tour.py",
         description="Render every scene preset and run its scripted exercise sweep.",
     )
     parser.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")

@@ -8,9 +8,9 @@ A comparison is "asserted" by tests/test_stop_penalty.py when holding still avoi
 discounted, when the episode never out-earned the hold step for step before it stopped (no
 "headway"); the others are counted apart.
 
-    python benchmarks/stop_audit.py --json results/stop_audit.json      # every id (~1 h)
-    python benchmarks/stop_audit.py --ids rehab-hip-v1 rehab-knee-v1 --modes joint_delta
-    python benchmarks/stop_audit.py --drift   # how far holding still lets the joints travel
+    python benchmarks/probes/stop_audit.py --json results/stop_audit.json      # every id (~1 h)
+    python benchmarks/probes/stop_audit.py --ids rehab-hip-v1 rehab-knee-v1 --modes joint_delta
+    python benchmarks/probes/stop_audit.py --drift   # how far holding still lets the joints travel
                                               # in torque mode (control.TORQUE_HOLD_*)
 """
 

@@ -9,7 +9,7 @@ and the best periodic-evaluation success rate.
 
 Usage::
 
-    python benchmarks/ablation_table.py runs/ablation runs/results [--window 20000]
+    python benchmarks/results/ablation_table.py runs/ablation runs/results [--window 20000]
 """
 
 from __future__ import annotations

@@ -17,8 +17,8 @@ limb and the assistance ratio (means over episodes).
 
 Usage::
 
-    python benchmarks/condition_results.py [RUNS] [--population-runs DIR] [--healthy-runs DIR]
-                                           [--episodes 20] [--seed 1000] [--ids ID ...]
+    python benchmarks/results/condition_results.py [RUNS] [--population-runs DIR]
+        [--healthy-runs DIR] [--episodes 20] [--seed 1000] [--ids ID ...]
                                            [--json FILE]
 """
 

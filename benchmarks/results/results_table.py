@@ -13,7 +13,7 @@ manifest. Rows are printed as a Markdown table, and with ``--json`` written to a
 
 Usage::
 
-    python benchmarks/results_table.py runs/results [--episodes 50] [--seed 1000] [--json F]
+    python benchmarks/results/results_table.py runs/results [--episodes 50] [--seed 1000] [--json F]
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ For each preset: the largest cuff error at reset over a grid of patient profiles
 weight level, the largest joint drift while holding still for 2 s, and the scripted sweep's
 ranges, cuff error and peak robot torque at weight levels 0 and 4.
 
-    python benchmarks/scene_report.py [--json FILE]
+    python benchmarks/results/scene_report.py [--json FILE]
 """
 
 from __future__ import annotations

@@ -62,7 +62,7 @@ PROFILES = {
     "f160": {"height_m": 1.60, "mass_kg": 60.0, "sex": "female"},
     "m185": {"height_m": 1.85, "mass_kg": 90.0, "sex": "male"},
 }
-# The patients zoo agents are chosen on (benchmarks/zoo_select.py): none of them is a test
+# The patients zoo agents are chosen on (benchmarks/results/zoo_select.py): none of them is a test
 # patient. A healthy -v2 episode is the same for a deterministic policy whatever its seed (the
 # home state has no noise, as in the paper), so validation and test must differ in who is in
 # the chair, not only in their seeds.

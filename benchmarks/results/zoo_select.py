@@ -1,16 +1,16 @@
 """Choose the zoo's agents on validation episodes, and export them.
 
-    python benchmarks/stratified_results.py RUNS... --profiles validation --per-cell 1 \
+    python benchmarks/results/stratified_results.py RUNS... --profiles validation --per-cell 1 \
         --seed 40000 --json val.json
-    python benchmarks/zoo_select.py val.json [more.json ...] [--export] [--zoo DIR]
+    python benchmarks/results/zoo_select.py val.json [more.json ...] [--export] [--zoo DIR]
         [--min-success 0.5] [--skip ENV/AGENT ...]
 
-For every env x algorithm row of ``benchmarks/stratified_results.py`` (the runs of one id,
+For every env x algorithm row of ``benchmarks/results/stratified_results.py`` (the runs of one id,
 robot and algorithm), the run whose final model finished the most validation episodes is
 chosen (ties: the lower training seed). The validation episodes are ``stratified_results``'
 cells (every exercise x weight level x profile) with patients of their own (``--profiles
 validation``) and seeds of their own (40 000 onwards), never the test patients and episodes
-(50 000 onwards) that ``docs/results-v2.md`` reports, so the published figures are not the
+(50 000 onwards) that ``docs/results/learning-v2.md`` reports, so the published figures are not the
 ones the choice was made on (a healthy id's episode depends on the patient, not the seed).
 A row whose best seed finishes fewer than ``--min-success`` of its validation episodes
 (default half) is not shipped: the table says so. ``--export`` writes each choice to
@@ -97,7 +97,7 @@ def selection_note(choice: dict[str, Any], validation: dict[str, Any]) -> dict[s
                                 "per_run": choice["episodes_per_run"]},
         "success_by_seed": {str(k): v for k, v in sorted(choice["success_by_seed"].items())},
         "chosen_seed": choice["seed"],
-        "test_results": "docs/results-v2.md (held-out episodes from seed 50000)"}}
+        "test_results": "docs/results/learning-v2.md (held-out episodes from seed 50000)"}}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
