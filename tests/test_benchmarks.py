@@ -55,7 +55,7 @@ def test_bilateral_sync_reads_the_gap_of_symmetric_episodes(capsys) -> None:
     expert = bilateral_sync.sync_of("expert", episodes=2, seed=0)
     assert expert["success"] == 1.0 and expert["mean_gap"] == 0.0 and expert["reward_sync"] == 0
     assert bilateral_sync.main(["expert", "--episodes", "1"]) == 0
-    assert "| expert | 100 % | 0.000 | 0.000 | 0.00 |" in capsys.readouterr().out
+    assert "| expert | 100 % | 0.000 | 0.000 | 0.00 |" in squeezed(capsys.readouterr().out)
 
 
 def test_robot_placement_measures_reach_margins_and_the_torque_to_hold_the_limb(capsys):
@@ -293,11 +293,11 @@ def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, caps
                                          "profile_set": "validation",
                                          "results": [entry(algo, successes)]}))
     assert zoo_select.main([*map(str, files)]) == 0
-    rows = capsys.readouterr().out
+    rows = squeezed(capsys.readouterr().out)
     assert "| rehab-knee-v2/td3 | 0 | 0: 40 % |" in rows and "no (below 50 %)" in rows
     assert "| rehab-knee-v2/ppo | 0 | 0: 50 % |" in rows and rows.count("| yes |") == 1
     assert zoo_select.main([*map(str, files), "--min-success", "0.6"]) == 0
-    assert capsys.readouterr().out.count("| yes |") == 0
+    assert squeezed(capsys.readouterr().out).count("| yes |") == 0
     assert zoo_select.main([*map(str, files), "--skip", "rehab-knee-v2/ppo"]) == 0
     assert "no (--skip)" in capsys.readouterr().out
     other = tmp_path / "c.json"

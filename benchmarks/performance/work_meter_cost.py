@@ -23,6 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 import rehabbot  # noqa: F401  (registers the ids)
+from rehabbot.common.tables import markdown_table
 
 DEFAULT_IDS = ("rehabbot/rehab-reach-v1", "rehabbot/rehab-knee-v1",
                "rehabbot/rehab-reach-spastic-v1")
@@ -61,13 +62,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=7)
     args = parser.parse_args(argv)
     print(f"median of {args.rounds} interleaved rounds of {args.steps} zero-action steps\n")
-    print("| id | µs/step with the count | without | cost [µs/step] | cost [%] |")
-    print("|---|---:|---:|---:|---:|")
+    cells = []
     for env_id in args.ids:
         with_count, without = measure(env_id, args.steps, args.rounds)
-        print(f"| {env_id} | {1e6 * with_count:.0f} | {1e6 * without:.0f} | "
-              f"{1e6 * (with_count - without):.0f} | "
-              f"{100 * (with_count / without - 1):.1f} % |", flush=True)
+        cells.append([env_id, f"{1e6 * with_count:.0f}", f"{1e6 * without:.0f}",
+                      f"{1e6 * (with_count - without):.0f}",
+                      f"{100 * (with_count / without - 1):.1f} %"])
+    print(markdown_table(["id", "µs/step with the count", "without", "cost [µs/step]",
+                          "cost [%]"], cells, align=["left", *["right"] * 4]))
     return 0
 
 

@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 import rehabbot  # noqa: F401  (registers the ids)
+from rehabbot.common.tables import markdown_table
 from rehabbot.rl.policies import env_for, load_policy
 
 ENV_ID = "rehabbot/rehab-bilateral-v1"
@@ -57,12 +58,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     specs = [str(Path(p) / "model.zip") if Path(p).is_dir() else p for p in args.policies]
     print(f"{ENV_ID}, symmetric exercises, {args.episodes} episodes from seed {args.seed}\n")
-    print("| policy | success | mean sync gap | largest sync gap | reward_sync per episode |")
-    print("|---|---|---|---|---|")
+    cells = []
     for spec in ["expert", *specs]:
         r = sync_of(spec, args.episodes, args.seed)
-        print(f"| {r['policy']} | {100 * r['success']:.0f} % | {r['mean_gap']:.3f} | "
-              f"{r['peak_gap']:.3f} | {r['reward_sync']:.2f} |")
+        cells.append([r["policy"], f"{100 * r['success']:.0f} %", f"{r['mean_gap']:.3f}",
+                      f"{r['peak_gap']:.3f}", f"{r['reward_sync']:.2f}"])
+    print(markdown_table(["policy", "success", "mean sync gap", "largest sync gap",
+                          "reward_sync per episode"], cells))
     return 0
 
 

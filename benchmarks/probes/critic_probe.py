@@ -22,6 +22,7 @@ from collections import defaultdict
 import gymnasium as gym
 import numpy as np
 
+from rehabbot.common.tables import markdown_table
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.rl.policies import env_for, load_policy
 
@@ -111,13 +112,11 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    print("| seed | exercise | target | states | Q(s,e) > Q(s,-e) | mean Q(s,e) - Q(s,-e) "
-          "| mean cosine pi(s) to e |")
-    print("|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['seed']} | {r['exercise']} | {r['target']} | {r['states']} | "
-              f"{100 * r['ranked_right']:.0f} % | {r['mean_gap']:.2f} | "
-              f"{r['mean_cosine']:.2f} |")
+    print(markdown_table(
+        ["seed", "exercise", "target", "states", "Q(s,e) > Q(s,-e)", "mean Q(s,e) - Q(s,-e)",
+         "mean cosine pi(s) to e"],
+        [[r["seed"], r["exercise"], r["target"], r["states"], f"{100 * r['ranked_right']:.0f} %",
+          f"{r['mean_gap']:.2f}", f"{r['mean_cosine']:.2f}"] for r in rows]))
     return 0
 
 

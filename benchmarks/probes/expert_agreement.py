@@ -20,6 +20,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 
+from rehabbot.common.tables import markdown_table
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.rl.policies import env_for, load_policy
 
@@ -71,13 +72,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.episodes < 1 or args.steps < 1:
         parser.error("--episodes and --steps must be >= 1")
     rows = agreement(args.model, args.episodes, args.seed, args.steps)
-    print("| seed | exercise | steps | mean cosine to the expert | steps opposing | median |a|/|e| "
-          "| targets reached | ended |")
-    print("|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(f"| {r['seed']} | {r['exercise']} | {r['steps']} | {r['mean_cosine']:.2f} | "
-              f"{100 * r['opposing_share']:.0f} % | {r['median_norm_ratio']:.2f} | "
-              f"{r['targets_reached']}/{r['num_targets']} | {r['ended']} |")
+    print(markdown_table(
+        ["seed", "exercise", "steps", "mean cosine to the expert", "steps opposing",
+         "median |a|/|e|", "targets reached", "ended"],
+        [[r["seed"], r["exercise"], r["steps"], f"{r['mean_cosine']:.2f}",
+          f"{100 * r['opposing_share']:.0f} %", f"{r['median_norm_ratio']:.2f}",
+          f"{r['targets_reached']}/{r['num_targets']}", r["ended"]] for r in rows]))
     return 0
 
 

@@ -17,6 +17,7 @@ import argparse
 
 import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.analysis.reward_audit import stall_cases, stop_cases
+from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import ENV_SPECS, resolve_env_id
 
 GAMMAS = (0.95, 0.99, 0.999)
@@ -24,8 +25,7 @@ GAMMAS = (0.95, 0.99, 0.999)
 
 def stall_table(ids: list[str], seed: int) -> None:
     print("## Reaching versus stalling short of a target (expert episodes, weight level 2)\n")
-    print("| id | exercise | gamma | targets where stalling pays | worst (reach - stall) |")
-    print("|---|---|---|---|---|")
+    cells = []
     for env_id in ids:
         for exercise in (0, 1):
             cases = stall_cases(env_id, exercise, GAMMAS, seed=seed)
@@ -33,26 +33,27 @@ def stall_table(ids: list[str], seed: int) -> None:
                 mine = [c for c in cases if c.gamma == gamma]
                 trapped = [c.target for c in mine if not c.reaching_pays]
                 worst = min(c.reach_value - c.stall_value for c in mine)
-                print(f"| {env_id.split('/')[-1]} | {exercise} | {gamma} | "
-                      f"{len(trapped)}/{len(mine)} {trapped[:8]} | {worst:+.1f} |")
-    print()
+                cells.append([env_id.split("/")[-1], exercise, gamma,
+                              f"{len(trapped)}/{len(mine)} {trapped[:8]}", f"{worst:+.1f}"])
+    print(markdown_table(["id", "exercise", "gamma", "targets where stalling pays",
+                          "worst (reach - stall)"], cells) + "\n")
 
 
 def stop_table(ids: list[str], seed: int) -> None:
     print("## Safety stops (undiscounted returns from the reset state, exercise 0, level 0)\n")
-    print("| id | mode | joint pushed | rule | step | stop return | hold return | "
-          "expert return | last step | hold from there |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    cells = []
     for env_id in ids:
         for mode in ("joint_delta", "torque"):
             for c in stop_cases(env_id, mode, seed=seed):
                 there = "-" if c.hold_from_there is None else f"{c.hold_from_there:.1f}"
                 if c.hold_from_there_stop:
                     there += f" (stops: {c.hold_from_there_stop})"
-                print(f"| {env_id.split('/')[-1]} | {mode} | {c.joint} | {c.violation} | "
-                      f"{c.stop_step} | {c.stop_return:.1f} | {c.hold_return:.1f} | "
-                      f"{c.expert_return:.1f} | {c.last_step_reward:.1f} | {there} |")
-    print()
+                cells.append([env_id.split("/")[-1], mode, c.joint, c.violation, c.stop_step,
+                              f"{c.stop_return:.1f}", f"{c.hold_return:.1f}",
+                              f"{c.expert_return:.1f}", f"{c.last_step_reward:.1f}", there])
+    print(markdown_table(["id", "mode", "joint pushed", "rule", "step", "stop return",
+                          "hold return", "expert return", "last step", "hold from there"],
+                         cells) + "\n")
 
 
 def main(argv=None) -> int:

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rehabbot.common.tables import markdown_table
+
 
 def read_episodes(run: Path) -> list[tuple[int, float, int, bool, bool]]:
     """(cumulative steps, return, length, success, safety stop) per training episode."""
@@ -81,16 +83,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     rows = [summarize(run, args.window) for run in runs]
     print(f"training episodes that ended in the last {args.window} steps of each run\n")
-    print("| run | algo | settings | env kwargs | steps | return per step | safety stops "
-          "| successes / episodes | best eval success |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    cells = []
     for r in rows:
         per_step = "-" if r["return_per_step"] is None else f"{r['return_per_step']:.3f}"
         best = "-" if r["best_eval_success"] is None else f"{100 * r['best_eval_success']:.0f} %"
         kwargs = ", ".join(f"{k}={v}" for k, v in r["env_kwargs"].items()) or "-"
-        print(f"| {r['run']} | {r['algo']} | {r['settings']} | {kwargs} | "
-              f"{r['steps'] // 1000}k | {per_step} | {r['safety_stops']} | "
-              f"{r['successes']} / {r['window_episodes']} | {best} |")
+        cells.append([r["run"], r["algo"], r["settings"], kwargs, f"{r['steps'] // 1000}k",
+                      per_step, r["safety_stops"], f"{r['successes']} / {r['window_episodes']}",
+                      best])
+    print(markdown_table(["run", "algo", "settings", "env kwargs", "steps", "return per step",
+                          "safety stops", "successes / episodes", "best eval success"], cells))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n")
     return 0

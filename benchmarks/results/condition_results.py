@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 from rehabbot.analysis.evaluation import evaluate_policies
+from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import CONDITION_VARIANTS, POPULATION_VARIANTS, env_short_name
 
 
@@ -90,19 +91,20 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     print(f"{args.episodes} episodes per policy, seeds {args.seed}..{args.seed + args.episodes - 1}"
           "\n")
-    print("| env | policy | success | return | peak cuff force [N] | stops | robot work [J] | "
-          "assistance ratio | ROM achieved |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    cells = []
     for env_id, kwargs, base, trained, label in cases:
         for row in evaluate_case(env_id, kwargs, base, trained, label, args.episodes, args.seed,
                                  _model(args.healthy_runs, base)):
             rows.append(row)
             name = env_short_name(env_id) + (" (test patients)" if kwargs else "")
             stops = ", ".join(f"{n} {rule}" for rule, n in row["stops"].items()) or "-"
-            print(f"| {name} | {row['policy']} | {100 * row['success_rate']:.0f} % | "
-                  f"{row['return']:.0f} | {row['peak_cuff_force_n']:.0f} | {stops} | "
-                  f"{row['robot_work_j']:.2f} | {row['assistance_ratio']:.2f} | "
-                  f"{row['rom_achieved_fraction']:.2f} |", flush=True)
+            cells.append([name, row["policy"], f"{100 * row['success_rate']:.0f} %",
+                          f"{row['return']:.0f}", f"{row['peak_cuff_force_n']:.0f}", stops,
+                          f"{row['robot_work_j']:.2f}", f"{row['assistance_ratio']:.2f}",
+                          f"{row['rom_achieved_fraction']:.2f}"])
+            print(f"{name} / {row['policy']}: done", file=sys.stderr, flush=True)
+    print(markdown_table(["env", "policy", "success", "return", "peak cuff force [N]", "stops",
+                          "robot work [J]", "assistance ratio", "ROM achieved"], cells))
     print(f"\n({time.perf_counter() - started:.0f} s)")
     if args.json:
         Path(args.json).write_text(json.dumps({"command": "python " + " ".join(sys.argv),

@@ -29,6 +29,7 @@ import numpy as np
 
 from rehabbot.analysis.aggregate import iqm_interval
 from rehabbot.analysis.evaluation import evaluate
+from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import env_short_name
 
 HELD_OUT_PROFILES = {
@@ -145,22 +146,21 @@ def _row(env_id: str, name: str, source: str, runs: list[dict],
 
 
 def format_rows(rows: list[dict]) -> str:
-    header = ("| env | policy | settings | steps | seeds | success, IQM [95 % CI] | "
-              "success, all episodes (held-out profiles) | return, IQM [95 % CI] | "
-              "steps to finish | SPARC | peak cuff force [N] | safety stops | "
-              "wall-clock [min] |")
-    lines = [header, "|" + "---|" * 13]
+    header = ["env", "policy", "settings", "steps", "seeds", "success, IQM [95 % CI]",
+              "success, all episodes (held-out profiles)", "return, IQM [95 % CI]",
+              "steps to finish", "SPARC", "peak cuff force [N]", "safety stops",
+              "wall-clock [min]"]
+    lines = []
     for r in rows:
         steps = "/".join(f"{s // 1000}k" for s in r["steps"]) or "-"
         seeds = ",".join(str(s) for s in r["seeds"]) or "-"
         held = r["held_out_success_rate"]
         held = "" if held is None else f" ({100 * held:.0f} %)"
-        lines.append(f"| {r['env']} | {r['policy']} | {r['settings']} | {steps} | {seeds} | "
-                     f"{r['success_iqm']} % | {100 * r['success_rate']:.0f} %{held} of "
-                     f"{r['episodes']} | {r['return_iqm']} | {r['steps_to_finish']} | "
-                     f"{r['sparc']} | {r['peak_cuff_force_n']} | {r['safety_stops']} | "
-                     f"{r['wall_clock_min']} |")
-    return "\n".join(lines)
+        lines.append([r["env"], r["policy"], r["settings"], steps, seeds, f"{r['success_iqm']} %",
+                      f"{100 * r['success_rate']:.0f} %{held} of {r['episodes']}",
+                      r["return_iqm"], r["steps_to_finish"], r["sparc"],
+                      r["peak_cuff_force_n"], r["safety_stops"], r["wall_clock_min"]])
+    return markdown_table(header, lines)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import runs, zoo
 from rehabbot.rl.zoo_export import export_policy
@@ -118,9 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--min-success {args.min_success} must be in [0, 1]")
     validation = merge([json.loads(path.read_text()) for path in args.validation])
     picked = choices(validation)
-    print("| agent | chosen seed | validation success by seed | run | shipped |")
-    print("|---|---|---|---|---|")
-    shipped = []
+    shipped, cells = [], []
     for choice in picked:
         rates = ", ".join(f"{seed}: {100 * rate:.0f} %"
                           for seed, rate in sorted(choice["success_by_seed"].items()))
@@ -131,8 +130,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                    else "yes")
         if verdict == "yes":
             shipped.append(choice)
-        print(f"| {name} | {choice['seed']} | {rates} | {choice['run_dir']} | {verdict} |",
-              flush=True)
+        cells.append([name, choice["seed"], rates, choice["run_dir"], verdict])
+    print(markdown_table(["agent", "chosen seed", "validation success by seed", "run",
+                          "shipped"], cells), flush=True)
     if args.export:
         for choice in shipped:
             out = zoo.zoo_path(choice["env_id"], choice["agent"], args.zoo)
