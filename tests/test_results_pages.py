@@ -41,7 +41,8 @@ def page_id(path: Path) -> str:
 
 
 def test_there_are_results_pages() -> None:
-    assert {"learning-v2", "physics-throughput", "step-throughput"} <= {p.stem for p in PAGES}
+    assert {"learning-v2", "physics-throughput", "step-throughput", "conditions",
+            "expert-baseline"} <= {p.stem for p in PAGES}
     assert {p.stem for p in RESULTS.glob("*.md")} == {p.stem for p in PAGES}
 
 
