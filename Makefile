@@ -42,9 +42,12 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
+# The performance pages of docs/results/ (ratios against a baseline measured in the same run),
+# written by the commands they record.
 bench: $(STAMP)
-	$(PY) benchmarks/physics_throughput.py
-	$(PY) benchmarks/step_throughput.py
+	$(PY) benchmarks/performance/physics_throughput.py --robots ur5e fr3 \
+	  --page docs/results/physics-throughput
+	$(PY) benchmarks/performance/step_throughput.py --page docs/results/step-throughput
 
 # The README's scene pictures, rendered by our own code.
 images: $(STAMP)

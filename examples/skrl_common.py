@@ -6,7 +6,7 @@ The deterministic policy (the Gaussian's mean, clipped to the action box) runs
 ``--episodes-per-cell`` episodes of every cell, seeds counting up from 60 000 (away from the
 training envs'). ``--out`` gets ``policy.pt`` (the policy's ``state_dict``) and ``result.json``
 (the command, seed, settings, skrl version and every episode), which
-``benchmarks/stratified_results.py --skrl`` renders as a row of its own.
+``benchmarks/results/stratified_results.py --skrl`` renders as a row of its own.
 """
 
 from __future__ import annotations

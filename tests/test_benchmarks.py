@@ -1,5 +1,7 @@
-"""The benchmark scripts run and report what they claim (their figures are measured by hand
-and quoted in the README; here only that the tables are produced and consistent)."""
+"""The benchmark scripts run and report what they claim: here that their tables are produced
+and consistent, on tiny runs. The published figures are written by the scripts themselves to
+``docs/results/`` (a JSON document and its Markdown page, benchmarks/common/documents.py);
+tests/test_results_pages.py checks those pages against their JSON and their sweep files."""
 
 from __future__ import annotations
 
@@ -9,17 +11,18 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks import (
-    bilateral_sync,
-    expert_agreement,
-    profile_envelope,
-    robot_placement,
-    step_throughput,
-)
+from benchmarks.performance import step_throughput
+from benchmarks.probes import bilateral_sync, expert_agreement
+from benchmarks.results import profile_envelope, robot_placement
 from rehabbot.envs.rehab_env import RehabEnv
 
 ENV = "rehabbot/rehab-reach-v0"
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def squeezed(text: str) -> str:
+    """Markdown tables with their padding taken out: runs of spaces as one."""
+    return re.sub(" +", " ", text)
 
 
 def test_step_throughput_measures_the_env_as_users_make_it(capsys) -> None:
@@ -52,7 +55,7 @@ def test_bilateral_sync_reads_the_gap_of_symmetric_episodes(capsys) -> None:
     expert = bilateral_sync.sync_of("expert", episodes=2, seed=0)
     assert expert["success"] == 1.0 and expert["mean_gap"] == 0.0 and expert["reward_sync"] == 0
     assert bilateral_sync.main(["expert", "--episodes", "1"]) == 0
-    assert "| expert | 100 % | 0.000 | 0.000 | 0.00 |" in capsys.readouterr().out
+    assert "| expert | 100 % | 0.000 | 0.000 | 0.00 |" in squeezed(capsys.readouterr().out)
 
 
 def test_robot_placement_measures_reach_margins_and_the_torque_to_hold_the_limb(capsys):
@@ -64,7 +67,7 @@ def test_robot_placement_measures_reach_margins_and_the_torque_to_hold_the_limb(
         assert 0.0 < knee["torque_share"] < 1.0 and knee["torque_joint"] == 2
     # The FR3 holds the supine leg at level 4 near its joint-2 limit; the UR5e far from it.
     assert by[("fr3", "hip")]["torque_share"] > by[("ur5e", "hip")]["torque_share"] + 0.2
-    assert "| fr3 | knee | 1.75 | 25/25 |" in robot_placement.format_table(rows)
+    assert "| fr3 | knee | 1.75 | 25/25 |" in squeezed(robot_placement.results_markdown(rows))
     assert robot_placement.main(["--robots", "kuka"]) == 2
     assert "unknown robot(s) kuka" in capsys.readouterr().err
 
@@ -107,7 +110,7 @@ def test_critic_probe_reads_the_critic_and_scores_its_ranking(tmp_path, monkeypa
     import numpy as np
     import yaml
 
-    from benchmarks import critic_probe
+    from benchmarks.probes import critic_probe
     from rehabbot.cli.train import add_train_parser, cmd_train
     from rehabbot.tasks.observation import THETA, THETA_STAR
 
@@ -148,7 +151,7 @@ def test_critic_probe_reads_the_critic_and_scores_its_ranking(tmp_path, monkeypa
 def test_stratified_results_cover_every_cell_and_report_per_cell(tmp_path) -> None:
     """Every exercise x weight level x profile gets its episodes (seeds counting up, the same
     for every policy); the table's per-cell counts and IQM come from those episodes."""
-    from benchmarks import stratified_results
+    from benchmarks.results import stratified_results
 
     episodes = stratified_results.evaluate_cells(
         "expert", "rehabbot/rehab-knee-v2", {"max_episode_steps": 3}, 1, 700)
@@ -158,10 +161,10 @@ def test_stratified_results_cover_every_cell_and_report_per_cell(tmp_path) -> No
     assert not any(e["success"] for e in episodes)  # 3 steps: no exercise is done
     fake = [{**e, "success": e["weight_level"] < 4, "safety_violation":
              "cuff_force" if e["weight_level"] == 4 else None} for e in episodes]
-    text = stratified_results.summarize({
+    text = squeezed(stratified_results.summarize({
         ("rehabbot/rehab-knee-v2", "sac"): [{"train_seed": 0, "episodes": fake},
                                             {"train_seed": 1, "episodes": fake}],
-        ("rehabbot/rehab-knee-v2", "expert"): [{"train_seed": None, "episodes": episodes}]})
+        ("rehabbot/rehab-knee-v2", "expert"): [{"train_seed": None, "episodes": episodes}]}))
     assert "| rehab-knee-v2 | sac | - | 0, 1 | 80, 80 % | 80 % | 0 % |" in text
     # The validation patients are none of the test patients.
     test_bodies = {json.dumps(p, sort_keys=True) for p in stratified_results.PROFILES.values()}
@@ -175,7 +178,7 @@ def test_stratified_results_leave_out_the_cells_an_env_refuses() -> None:
     """The FR3 cannot hold the 1.85 m man's leg at weight levels 3 and 4: those cells have no
     episodes (their seeds skipped, so every other cell keeps its seed), are recorded with the
     env's reason and shown as n/a."""
-    from benchmarks import stratified_results
+    from benchmarks.results import stratified_results
 
     refused: list[dict] = []
     kwargs = {"robot": "fr3", "max_episode_steps": 2}
@@ -188,9 +191,9 @@ def test_stratified_results_leave_out_the_cells_an_env_refuses() -> None:
     kept = {stratified_results.cell_key(e): e["seed"] for e in episodes}
     assert kept[(1, 2, "m185")] == 900 + 2 * 5 * 2 + 5 + 2  # profile, exercise, level order
     assert (0, 3, "m185") not in kept and (1, 4, "m185") not in kept
-    text = stratified_results.summarize({
+    text = squeezed(stratified_results.summarize({
         ("rehabbot/rehab-hip-v2 (fr3)", "sac"): [{"train_seed": 0, "episodes": episodes,
-                                                  "refused_cells": refused}]})
+                                                  "refused_cells": refused}]}))
     assert "| 0 | m185 | 0/1 | 0/1 | 0/1 | n/a | n/a |" in text
     assert "n/a: the env refuses m185 l3, m185 l4 (no episodes, not counted)" in text
     # Bad arguments are refused at every level: an error, not a table of n/a.
@@ -201,7 +204,7 @@ def test_stratified_results_leave_out_the_cells_an_env_refuses() -> None:
 
 def test_stratified_results_describe_each_algorithms_training() -> None:
     """n_steps is an off-policy learner's return length but PPO's rollout per env."""
-    from benchmarks.stratified_results import training_text
+    from benchmarks.results.stratified_results import training_text
 
     def manifest(algo: str, **kwargs) -> dict:
         return {"algo": algo, "backend": "sbx", "n_envs": 8, "timesteps_done": 1000,
@@ -213,7 +216,7 @@ def test_stratified_results_describe_each_algorithms_training() -> None:
             == "sbx MlpPolicy, 10-step returns, 1000 steps")
     assert training_text(manifest("td3")) == "sbx MlpPolicy, 1000 steps"
     # Demonstrations in the buffer and a cloned start are rows of their own.
-    from benchmarks.stratified_results import row_label
+    from benchmarks.results.stratified_results import row_label
 
     demos = training_text({**manifest("sac"), "demos": {"episodes": 20}})
     cloned = training_text({**manifest("ppo", n_steps=256), "bc": {"episodes": 20}})
@@ -231,8 +234,8 @@ def test_zoo_select_picks_each_rows_best_seed_on_validation_episodes(tmp_path) -
     episodes are refused."""
     import json
 
-    from benchmarks import zoo_select
-    from benchmarks.stratified_results import env_label
+    from benchmarks.results import zoo_select
+    from benchmarks.results.stratified_results import env_label
 
     def run(seed: int, successes: int, robot: str | None = None) -> dict:
         kwargs = {"robot": robot} if robot else {}
@@ -272,7 +275,7 @@ def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, caps
     whose best seed finishes fewer than --min-success of its episodes is not shipped."""
     import json
 
-    from benchmarks import zoo_select
+    from benchmarks.results import zoo_select
 
     def entry(algo: str, successes: int) -> dict:
         folder = tmp_path / algo
@@ -290,11 +293,11 @@ def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, caps
                                          "profile_set": "validation",
                                          "results": [entry(algo, successes)]}))
     assert zoo_select.main([*map(str, files)]) == 0
-    rows = capsys.readouterr().out
+    rows = squeezed(capsys.readouterr().out)
     assert "| rehab-knee-v2/td3 | 0 | 0: 40 % |" in rows and "no (below 50 %)" in rows
     assert "| rehab-knee-v2/ppo | 0 | 0: 50 % |" in rows and rows.count("| yes |") == 1
     assert zoo_select.main([*map(str, files), "--min-success", "0.6"]) == 0
-    assert capsys.readouterr().out.count("| yes |") == 0
+    assert squeezed(capsys.readouterr().out).count("| yes |") == 0
     assert zoo_select.main([*map(str, files), "--skip", "rehab-knee-v2/ppo"]) == 0
     assert "no (--skip)" in capsys.readouterr().out
     other = tmp_path / "c.json"
@@ -304,20 +307,3 @@ def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, caps
         zoo_select.main([str(files[0]), str(other)])
     with pytest.raises(SystemExit):
         zoo_select.main([str(files[0]), "--min-success", "1.5"])
-
-
-def test_the_published_results_page_is_its_json_rendered(tmp_path) -> None:
-    """docs/results-v2.md is what stratified_results renders from docs/results-v2.json (every
-    episode): no number on the page is typed by hand."""
-    from benchmarks import stratified_results
-
-    page = ROOT / "docs" / "results-v2.md"
-    saved = json.loads((ROOT / "docs" / "results-v2.json").read_text())
-    out = tmp_path / "page.md"
-    assert stratified_results.main([
-        "--from-json", str(ROOT / "docs" / "results-v2.json"), "--per-cell",
-        str(saved["per_cell"]), "--seed", str(saved["seed"]), "--markdown", str(out)]) == 0
-    published = page.read_text().split("\n", 1)
-    rendered = out.read_text().split("\n", 1)
-    assert published[0].startswith("<!-- generated by: python benchmarks/stratified_results.py")
-    assert published[1] == rendered[1]

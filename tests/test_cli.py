@@ -229,7 +229,7 @@ def test_view_steps_physics_in_the_viewer(xvfb_display: str) -> None:
 def test_scene_tour_renders_cameras_and_summarises_sweep(tmp_path: Path, capsys) -> None:
     import json
 
-    from benchmarks import scene_tour
+    from benchmarks.probes import scene_tour
     from rehabbot.sim import build_scene
 
     code = scene_tour.main(
@@ -254,7 +254,7 @@ def test_scene_tour_renders_cameras_and_summarises_sweep(tmp_path: Path, capsys)
 
 
 def test_scene_tour_rejects_unknown_preset(tmp_path: Path, capsys) -> None:
-    from benchmarks import scene_tour
+    from benchmarks.probes import scene_tour
 
     assert scene_tour.main(["--out", str(tmp_path), "--presets", "bogus"]) == 2
     assert "upper_right" in capsys.readouterr().err

@@ -92,7 +92,7 @@ def test_expert_is_evaluated_by_stable_baselines3():
     assert mean > 0 and std == pytest.approx(0.0, abs=1e-6)
 
 
-# Held-out patients of the results table (benchmarks/results_table.py) and the edges of the
+# Held-out patients of the results table (benchmarks/results/results_table.py) and the edges of the
 # arm scenes' promised range (README, Failure modes).
 ARM_PROFILES = ({"height_m": 1.50, "mass_kg": 50.0, "sex": "female"},
                 {"height_m": 1.60, "mass_kg": 60.0, "sex": "female"},

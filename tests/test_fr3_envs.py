@@ -216,7 +216,8 @@ def test_a_level_at_which_an_fr3_joint_saturates_holding_the_leg_is_refused():
     RehabEnv(limb="hip", profile=profile, weight_level=4)  # the UR5e holds him
 
 
-# The FR3's envelope the README promises (python benchmarks/profile_envelope.py --robot fr3):
+# The FR3's envelope the README promises
+# (python benchmarks/results/profile_envelope.py --robot fr3):
 # every arm and knee profile; the hip from the grid's lowest fully accepted height + 5 cm
 # (right 1.35 m, left 1.60 m on the grid) up to 50 kg (at 2.15-2.20 m, 60 kg is refused).
 FR3_HIP_FROM_M = {"right": 1.40, "left": 1.65}

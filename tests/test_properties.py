@@ -40,7 +40,7 @@ CUFF_TOLERANCE_MOVING_M = 1e-2
 # must build; the tests that are about something else draw heights from WORKING_HEIGHT_M.
 WORKING_HEIGHT_M = (1.40, pt.HEIGHT_RANGE_M[1])
 REFUSAL_WORDS = ("does not support", "at rest", "cannot reach")
-# The envelope the README promises (python benchmarks/profile_envelope.py): the lowest
+# The envelope the README promises (python benchmarks/results/profile_envelope.py): the lowest
 # height [m] by limb (or limb and side), and the highest mass [kg] by limb.
 # The grid's lowest fully accepted height + 5 cm (its spacing), so that heights between grid
 # points are covered too.

@@ -149,7 +149,7 @@ def test_a_safety_stop_never_pays_on_reach_v1():
 @pytest.mark.parametrize("env_id", ALL_IDS)
 def test_a_safety_stop_never_pays_on_any_id(env_id, mode):
     # Shoulder pan, shoulder lift and wrist 1 drive every id into a rule in both modes
-    # (benchmarks/reward_trap.py pushes all six).
+    # (benchmarks/probes/reward_trap.py pushes all six).
     cases = stop_cases(env_id, mode, joints=(0, 1, 3))
     assert sum(c.violation is not None for c in cases) >= 2, cases
     _assert_stops_never_pay(cases)

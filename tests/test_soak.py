@@ -1,4 +1,4 @@
-"""The random-action soak (``benchmarks/soak.py``): a short clean run of every cell, its
+"""The random-action soak (``benchmarks/performance/soak.py``): a short clean run of every cell, its
 reproducibility, the detectors (with deliberately faulty envs), the JSON report, bad arguments
 and interrupts."""
 
@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -16,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from benchmarks.soak import END_REASONS, SoakReport, main, run_soak
+from benchmarks.performance.soak import END_REASONS, SoakReport, main, run_soak
 from rehabbot.envs.control import CONTROL_MODES
 from rehabbot.envs.registration import ENV_SPECS
 
@@ -184,7 +185,7 @@ def test_main_exits_1_on_problems_and_prints_the_table(tmp_path: Path, capsys) -
     code = main(["--steps", "400", "--env", "rehab-reach-v0", "--quiet", "--out", str(out)],
                 make_env=faulty_env)
     assert code == 1
-    printed = capsys.readouterr().out
+    printed = re.sub(" +", " ", capsys.readouterr().out)  # the table's padding out
     assert "seed 0" in printed and "mujoco" in printed
     assert printed.count("| rehab-reach-v0 |") == 4 and "| **total** |" in printed
     assert "FOUND PROBLEMS" in printed and "RuntimeError" in printed
@@ -293,8 +294,8 @@ def test_sigterm_stops_the_run_with_exit_143(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_the_script_runs_from_the_repository_root(tmp_path) -> None:
     out = tmp_path / "soak.json"
-    result = subprocess.run([sys.executable, "benchmarks/soak.py", "--steps", "40", "--env",
-                             "rehab-knee-v0", "--mode", "joint_delta", "--out", str(out),
+    result = subprocess.run([sys.executable, "benchmarks/performance/soak.py", "--steps", "40",
+                             "--env", "rehab-knee-v0", "--mode", "joint_delta", "--out", str(out),
                              "--quiet"], capture_output=True, text=True, timeout=300,
                             cwd=Path(__file__).resolve().parents[1])
     assert result.returncode == 0, result.stderr

@@ -7,7 +7,7 @@ gap ``G`` to the best hold). An episode that made headway first (moved towards t
 which holding does not) can be worth more than holding under discounting whatever the stop
 costs: 0.95^195 = 5e-5, so a penalty 195 steps later would need to be 20,000 times the
 progress; that is progress paying, not the stop, and such comparisons are counted, not
-asserted (``benchmarks/stop_audit.py`` prints the counts).
+asserted (``benchmarks/probes/stop_audit.py`` prints the counts).
 
 The property test drives random joints of random ids, in every control mode, in a random
 direction at a random fraction of the action bound into a stop and checks it by replaying the

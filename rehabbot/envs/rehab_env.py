@@ -87,7 +87,7 @@ Named terms, each reported as ``info["reward_<name>"]``; the reward is their sum
 (``intermediate_bonus`` / ``final_bonus`` when ``||theta - theta*_i||_inf <
 target_tolerance_rad``), optional ``reward_smoothness`` and ``reward_effort``, ``reward_safety``
 on a stop (a stop never pays); stalling can be worth more than reaching a target
-(``benchmarks/reward_trap.py``). ``reward="progress"`` (the -v1 ids),
+(``benchmarks/probes/reward_trap.py``). ``reward="progress"`` (the -v1 ids),
 :class:`rehabbot.tasks.reward.ProgressReward`: ``reward_progress`` (``progress_weight`` x the decrease
 of the joint-space path still to travel), ``reward_bonus``, ``reward_time = -time_cost``, the
 optional terms and ``reward_safety``; reaching each target beats stalling for every gamma in

@@ -22,8 +22,8 @@ DEFAULT_EVAL_EPISODES = 5
 VEC_ENV_KINDS = ("dummy", "subproc")
 DEFAULT_BC_EPISODES = 20  # expert episodes behaviour cloning fits when --demos is not given
 # Scripted-expert episodes in the replay buffer with which the shipped off-policy settings
-# (sac.yml, td3.yml, ...) were validated (docs/results-v2.md): `rehabbot train` adds them
-# unless --demos says otherwise.
+# (sac.yml, td3.yml, ...) were validated (docs/results/learning-v2.md): `rehabbot train` adds
+# them unless --demos says otherwise.
 SHIPPED_DEMOS = 20
 
 

@@ -38,6 +38,7 @@ from rehabbot.common.errors import DataError, RehabbotError, UsageError
 from rehabbot.common.extras import install_hint
 from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
+from rehabbot.common.tables import text_table
 from rehabbot.rl import runs
 from rehabbot.rl.backends import DEFAULT_BACKEND
 from rehabbot.rl.planning import check_demonstrations, find_resume_point, run_is_complete
@@ -426,16 +427,12 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
 
 
 def format_table(records: Sequence[Mapping[str, Any]]) -> str:
-    """The trials as a plain-text table: run folder, status, what was done, steps,
-    wall-clock."""
-    rows = [("trial", "status", "action", "steps", "wall-clock")]
+    """The trials as a plain-text table (:func:`rehabbot.common.tables.text_table`): run
+    folder, status, what was done, steps, wall-clock."""
+    rows = []
     for record in records:
         steps = f"{record.get('timesteps_done') or 0}/{record['total_timesteps']}"
         wall = record.get("wall_clock_s")
-        rows.append((record["key"], record["status"], record.get("action") or "-", steps,
-                     runs.format_duration(float(wall)) if wall is not None else "-"))
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    lines = ["  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True))
-             .rstrip() for row in rows]
-    lines.insert(1, "  ".join("-" * width for width in widths))
-    return "\n".join(lines)
+        rows.append([record["key"], record["status"], record.get("action") or None, steps,
+                     runs.format_duration(float(wall)) if wall is not None else None])
+    return text_table(["trial", "status", "action", "steps", "wall-clock"], rows)

@@ -50,7 +50,7 @@ RULES = ("instability", "range_of_motion", "cuff_force", "unintended_contact")
 UNSTABLE_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                      mujoco.mjtWarning.mjWARN_BADQACC)
 # Speeds and forces no motion of these scenes reaches: random torques at the UR5e limits with
-# the safety rules switched off peak at about 64 rad/s and 6.4 kN (benchmarks/soak.py).
+# the safety rules switched off peak at about 64 rad/s and 6.4 kN (benchmarks/performance/soak.py).
 BLOWUP_SPEED_RAD_S = 1000.0
 BLOWUP_FORCE_N = 1.0e5
 

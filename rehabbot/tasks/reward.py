@@ -37,13 +37,13 @@ term                value
 ``-||theta - theta*_i||`` every step; when a target is reached the distance switches to the next
 target and the per-step reward drops (from about -0.07 to -0.72 on the shoulder exercise), so
 for gamma = 0.99 holding still just short of a target is worth more than reaching it
-(``benchmarks/reward_trap.py``). This design pays for the same task without the trap. Let ``D =
-sum_k (||theta_k - theta*_ik||_2 + sum_{j > i} ||theta*_jk - theta*_(j-1)k||_2)`` be the path
-still to travel in robot joint space (rad), summed over the arms ``k``: the distance to the
-active target plus the lengths between the targets after it. ``D`` never jumps up at a target
-switch (triangle inequality), so ``-progress_weight x D`` is a potential in the sense of Ng,
-Harada and Russell (1999) and an episode's progress terms add up to ``progress_weight x
-(D_start - D_end)`` whatever the route.
+(``benchmarks/probes/reward_trap.py``). This design pays for the same task without the trap. Let ``D
+= sum_k (||theta_k - theta*_ik||_2 + sum_{j > i} ||theta*_jk - theta*_(j-1)k||_2)`` be the path
+still to travel in robot joint space (rad), summed over the arms ``k``: the distance to the active
+target plus the lengths between the targets after it. ``D`` never jumps up at a target switch
+(triangle inequality), so ``-progress_weight x D`` is a potential in the sense of Ng, Harada and
+Russell (1999) and an episode's progress terms add up to ``progress_weight x (D_start - D_end)``
+whatever the route.
 
 ==================  ===========================================================================
 term                value

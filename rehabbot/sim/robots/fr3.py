@@ -214,7 +214,7 @@ SEED_POSTURES_RAD = np.array([
 # FR3's shoulder sits 0.333 m above its base and its wrist is offset from the flange, so its
 # stand moves to where the limb's whole workspace box lies inside its reach on one IK branch,
 # at least 0.1 rad inside every joint's range, for patients of 1.4-2.0 m
-# (benchmarks/robot_placement.py measures it).
+# (benchmarks/results/robot_placement.py measures it).
 BASE_OFFSET_M = (
     ("arm", (-0.45, 0.0, -0.10)),  # beside the shoulder instead of in front of it
     ("leg_seated", (-0.25, 0.20, -0.20)),  # closer to the knee, lower, further out
