@@ -1,5 +1,5 @@
 """Audits of a reward design, measured in the sim: is reaching a target worth more than
-stalling short of it, and does a safety stop ever pay? (``benchmarks/reward_trap.py`` prints
+stalling short of it, and does a safety stop ever pay? (``benchmarks/probes/reward_trap.py`` prints
 them; ``tests/test_reward_v1.py`` asserts them.)
 
 Both replay seeded episodes: the same seed, options and actions reproduce a state exactly

@@ -11,7 +11,7 @@ Steps, each with its output under ``OUT``:
 1. ``rehabbot train rehab-knee-v2 --algo sac --demos 20`` (the shipped settings of ``-v2``:
    SBX's or SB3's own ``MlpPolicy``, 10-step returns; SBX when it is installed; 20
    scripted-expert episodes in the replay buffer first, without which the knee learns on
-   some seeds only: ``docs/results-v2.md``) → ``OUT/runs/rehab-knee-v2/sac/seed<k>/`` (model,
+   some seeds only: ``docs/results/learning-v2.md``) → ``OUT/runs/rehab-knee-v2/sac/seed<k>/`` (model,
    checkpoints, monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run the
    demo again: it resumes from the last checkpoint.
 2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the

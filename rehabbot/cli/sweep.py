@@ -13,7 +13,7 @@ from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, cli_command
 SWEEP_EPILOG = """\
 examples:
   rehabbot sweep sweeps/example.yaml                  # a local Ray with one CPU per trial
-  rehabbot sweep sweeps/results-v2.yaml --cpus 16     # the -v2 results grid
+  rehabbot sweep sweeps/results-v2/sac-knee.yaml --cpus 16  # runs of the -v2 results page
   rehabbot sweep sweeps/example.yaml --dry-run        # what would run, what is done
   rehabbot sweep sweeps/example.yaml --address ray://head:10001   # an existing cluster
 
@@ -23,7 +23,7 @@ OUT/<env>/<algo>/seed<k>, or OUT/<variant>/<env>/<algo>/seed<k> for a grid varia
 lists every trial and its status, OUT/_ray holds Ray Tune's own files. Running the same
 command again skips finished trials and continues interrupted ones from their newest
 checkpoint (--resume does the same, and insists that OUT holds a sweep). `rehabbot plot OUT`
-and benchmarks/results_table.py OUT read the sweep's runs.
+and benchmarks/results/results_table.py OUT read the sweep's runs.
 
 exit codes: 0 every trial finished, 1 a trial failed or Ray failed, 2 bad usage (unknown key,
 env id or algorithm in the file), 130 interrupted (run the command again to resume)."""
