@@ -166,3 +166,29 @@ def test_v2_observation_space_is_the_same_for_every_patient() -> None:
         obs, _ = env.reset(seed=seed)
         assert space.contains(obs)
         assert env.unwrapped.current_env.observation_space == space
+
+
+def test_the_rollout_records_angles_not_agent_fields_on_v2() -> None:
+    """The clinical evaluator's episode record (rehabbot.rl.rollout) reads the robot's and the
+    patient's angles and the tool position from the paper's fields, which a -v2 observation
+    does not hold: the same expert episode records the same kinematics on -v1 and -v2 (before
+    the fix, -v2 recorded tracking errors as angles: peak joint speeds of 10 rad/s)."""
+    from rehabbot.rl.policies import load_policy
+    from rehabbot.rl.rollout import run_episode
+
+    episodes = {}
+    for version in ("v1", "v2"):
+        env = gym.make(f"rehabbot/rehab-knee-{version}", exercise=0, weight_level=2)
+        episodes[version] = run_episode(env, load_policy("expert", env), seed=0)
+        env.close()
+    v1, v2 = episodes["v1"], episodes["v2"]
+    assert v1.success and v2.success
+    steps = min(v1.length, v2.length)
+    # The expert reads its errors from a different observation on each id (rounding differs
+    # in the last bits), so the paths agree to a milliradian, not bit for bit; reading the
+    # agent fields instead would be off by radians.
+    for field in ("robot_qpos_rad", "patient_qpos_rad", "tool_pos_m"):
+        np.testing.assert_allclose(getattr(v2, field)[:steps], getattr(v1, field)[:steps],
+                                   atol=1e-3, err_msg=field)
+    speed = np.abs(np.diff(v2.robot_qpos_rad, axis=0)) / v2.dt_s
+    assert speed.max() < np.pi  # the UR5e's fastest joint

@@ -61,6 +61,8 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
     qpos, tool, patient, torque, force, index, muscle = [], [], [], [], [], [], []
 
     def record(observation: np.ndarray, step_info: dict) -> None:
+        # The -v2 ids' agent observation holds errors, not angles: read the paper's fields.
+        observation = step_info.get("paper_observation", observation)
         qpos.append(np.array(observation[theta], dtype=float))
         tool.append(np.array(observation[p], dtype=float))
         patient.append(np.array(observation[phi], dtype=float))
