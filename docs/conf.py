@@ -41,7 +41,6 @@ exclude_patterns = [
     "_build",
     "**/*.json",
     "**/.ipynb_checkpoints",
-    "research-notes/README.md",
 ]
 # docs/results/*.json sit beside the generated results pages; they are data, not pages.
 
@@ -55,6 +54,7 @@ nb_execution_raise_on_error = True
 nb_execution_timeout = 600
 nb_execution_excludepatterns: list[str] = []
 nb_merge_streams = True
+nb_execution_show_tb = True  # a failing tutorial prints its traceback in the build log
 
 # -- autodoc ---------------------------------------------------------------------------------
 autodoc_member_order = "bysource"
