@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 
-.PHONY: venv test test-fast demo lint bench images clean distclean
+.PHONY: venv test test-fast demo docs lint bench images clean distclean
 
 venv: $(STAMP)
 
@@ -39,6 +39,12 @@ test-fast: $(STAMP)
 demo: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot demo --out runs/demo
 
+# The documentation site (Sphinx, MyST, Furo) into docs/_build/html, in strict mode: a warning,
+# a broken cross-reference (-n) or a tutorial that fails to execute fails the build; every
+# problem is reported before it stops (--keep-going).
+docs: $(STAMP)
+	MUJOCO_GL=$(MUJOCO_GL) $(PY) -m sphinx -W --keep-going -n -b html docs docs/_build/html
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
@@ -58,7 +64,7 @@ images: $(STAMP)
 
 # Build outputs and caches; keeps the virtual environment and runs/ (experiment results).
 clean:
-	rm -rf build dist *.egg-info .pytest_cache .ruff_cache .hypothesis
+	rm -rf build dist *.egg-info .pytest_cache .ruff_cache .hypothesis docs/_build docs/_generated
 	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +
 
 # Everything `clean` removes, plus the virtual environment.

@@ -6,8 +6,8 @@ through a therapy exercise together or in turns (Gymnasium API). Registered as
 ## Description
 The paper's two-arm scene (its Figs. 2-3): the ``upper_bilateral`` preset, a robot on a stand
 beside each shoulder, each cuff on its hand. Each episode runs one entry of the bilateral
-exercise table: an arm exercise (shoulder or elbow flexion, :data:`rehabbot.tasks.exercises.
-EXERCISES`) done with a pattern (:mod:`rehabbot.tasks.bilateral`): ``"symmetric"`` (both arms
+exercise table: an arm exercise (shoulder or elbow flexion,
+:data:`rehabbot.tasks.exercises.EXERCISES`) done with a pattern (:mod:`rehabbot.tasks.bilateral`): ``"symmetric"`` (both arms
 through the same key poses at the same time) or ``"alternating"`` (the right arm moves to a
 key pose while the left holds, then the left follows). A target is reached when both robots
 are within ``target_tolerance_rad`` of it on every joint.

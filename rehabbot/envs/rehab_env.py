@@ -1,9 +1,10 @@
 """``RehabEnv``: a UR5e strapped to a patient's hand or leg moves the limb through a therapy
-exercise (Gymnasium API). The four registered ids of the paper are this class with different
-keyword arguments (:mod:`rehabbot.envs.registration`).
+exercise (Gymnasium API). Every registered one-robot, one-limb id (the paper's four ``-v0`` ids,
+their ``-v1`` and ``-v2``, the condition variants) is this class with different keyword
+arguments (:mod:`rehabbot.envs.registration`); ``PopulationEnv`` holds one per patient.
 
 ## Description
-A seated (arm, knee) or supine (hip) patient, sized from a :class:`PatientProfile`, has one
+A seated (arm, knee) or supine (hip) patient, sized from a :class:`~rehabbot.sim.patient.PatientProfile`, has one
 hand or shank strapped to the cuff of a UR5e. The agent moves the robot's joints; the
 patient's relaxed limb follows the cuff. Each episode runs one exercise of the limb's table
 (:data:`rehabbot.tasks.exercises.EXERCISES`, or the ``exercises`` kwarg), defined in the
@@ -140,11 +141,11 @@ applied on top; ``RehabEnv(config)`` takes a whole config instead.
 | ``side`` | scene | ``"right"`` | ``"right"`` or ``"left"`` arm / leg |
 | ``task_type`` | task | ``"reaching"`` | ``"reaching"`` (the key poses) or ``"trajectory"`` (dense min-jerk waypoints) |
 | ``control_mode`` | control | ``"joint_delta"`` | see Action space |
-| ``profile`` | patient | ``None`` | :class:`PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
-| ``condition`` | patient | ``None`` | :class:`PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive. A condition variant id (``rehab-reach-spastic-v1``, ...) refuses a ``condition=`` that would replace its own: use the base id |
+| ``profile`` | patient | ``None`` | :class:`~rehabbot.sim.patient.PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
+| ``condition`` | patient | ``None`` | :class:`~rehabbot.sim.conditions.PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive. A condition variant id (``rehab-reach-spastic-v1``, ...) refuses a ``condition=`` that would replace its own: use the base id |
 | ``weight_level`` | patient | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
 | ``exercise`` | task | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
-| ``exercises`` | task | ``None`` | the exercise table: :class:`Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
+| ``exercises`` | task | ``None`` | the exercise table: :class:`~rehabbot.tasks.exercises.Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |
 | ``robot`` | scene | ``"ur5e"`` | the robot on the cuff: ``"ur5e"`` (the paper's) or ``"fr3"`` (Franka Research 3, 7 joints) |
 | ``cuff`` | scene | ``"connect"`` | ``"connect"`` (strap: position only) or ``"weld"`` |
 | ``base_reorientation_deg`` | scene | 0.0 | rotation of the robot base about its vertical axis, in [-180, 180] |
@@ -163,7 +164,7 @@ applied on top; ``RehabEnv(config)`` takes a whole config instead.
 | ``terminate_on_safety`` | safety | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
 | ``safety_penalty`` | reward | ``"hold"`` | ``"hold"`` (every reward: the gap to the best hold of the episode, one step more and a margin of 1.0, so a stop never pays) or, paper reward only, ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
 | ``safety_penalty_steps`` | reward | None | charge at most this many steps at the current hold cost instead (0.2.0's default was 100; with a cap a stop can pay) |
-| ``rom_tolerance_deg`` | safety | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range, in [0, 10] deg (10: the knee hyperextension a CPM device allows, domain-facts §4.2) |
+| ``rom_tolerance_deg`` | safety | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range, in [0, 10] deg (10: the knee hyperextension a CPM device allows, the Artromot K1's -10 deg; ``docs/envs.md``, Safety terminations) |
 | ``cuff_force_limit_n`` | safety | None | cuff force rule: limit in N for every cuff, in [1, 880] N (880 = 4 x the largest ISO/TS 15066 quasi-static limit, thighs 220 N); None = the quasi-static limit of the region each cuff holds |
 | ``contact_tolerance_m`` | safety | 0.002 | contact rule: penetration that counts as contact, in [0, 0.01] m (2 x the deepest limb compression at an ISO/TS 15066 quasi-static limit, upper arm 150 N / 30 N/mm = 5 mm) |
 | ``max_episode_steps`` | task | 1000 | horizon used by the safety penalty, in [1, 10**6] (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` sets both: the env takes its TimeLimit's ``m`` as its horizon; ``m <= 0`` (Gymnasium's ``-1`` = no time limit included) is refused (:mod:`rehabbot.envs.registration`). A ``RehabEnv`` built directly never truncates: wrap it as ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` |
