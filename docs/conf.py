@@ -80,16 +80,8 @@ nitpick_ignore_regex = [
     (r"py:class", r"Figure"),  # matplotlib's, in rehabbot.analysis.figures' annotations
     (r"py:.*", r"(Path|Callable|Iterable|Iterator|Sequence|Mapping|Any|Literal|Self)"),
 ]
-# Defects in docstrings of modules this change does not own (issue 27's report lists them for
-# their owners); each entry is exact, so that a new broken reference still fails the build.
-nitpick_ignore = [
-    ("py:class", "rehabbot.envs.build.\nEnvParts"),  # envs/core.py: a role split over two lines
-    ("py:mod", "rehabbot.sim.\npatient_drive"),  # envs/core.py: a role split over two lines
-    ("py:mod", "rehabbot.statics"),  # sim/paths.py, sim/scene.py: rehabbot.sim.statics
-    ("py:mod", "safety"),  # tasks/__init__.py: :mod:`.safety` (the rules are in sim.physics)
-    ("py:exc", "error"),  # rl/hyperparams.py read_yaml: "Raises: error:" (a parameter)
-    ("py:exc", "an OutputError"),  # rl/run_folder.py: "FolderLockedError (an OutputError):"
-]
+# Our own docstrings resolve: nothing of rehabbot is ignored (third parties: above).
+nitpick_ignore: list[tuple[str, str]] = []
 # A glob toctree (tutorials/, results/) may match nothing until its pages land; Sphinx gives
 # that warning no type, so suppress_warnings cannot select it: _EmptyGlob (below) drops it.
 

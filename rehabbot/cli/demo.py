@@ -11,9 +11,10 @@ Steps, each with its output under ``OUT``:
 1. ``rehabbot train rehab-knee-v2 --algo sac --demos 20`` (the shipped settings of ``-v2``:
    SBX's or SB3's own ``MlpPolicy``, 10-step returns; SBX when it is installed; 20
    scripted-expert episodes in the replay buffer first, without which the knee learns on
-   some seeds only: ``docs/results/learning-v2.md``) → ``OUT/runs/rehab-knee-v2/sac/seed<k>/`` (model,
-   checkpoints, monitor CSVs, TensorBoard logs, manifest). Interrupted (Ctrl-C)? Run the
-   demo again: it resumes from the last checkpoint.
+   some seeds only: ``docs/results/learning-v2.md``) →
+   ``OUT/runs/rehab-knee-v2/sac/seed<k>/`` (model, checkpoints, monitor CSVs, TensorBoard
+   logs, manifest). Interrupted (Ctrl-C)? Run the demo again: it resumes from the last
+   checkpoint.
 2. ``rehabbot evaluate`` of the trained model, the scripted expert and random actions on the
    same episode seeds → ``OUT/evaluation/<policy>/evaluation.json`` and ``trace.npz``.
 3. ``rehabbot plot`` → ``OUT/figures/`` (Fig. 3 tool path, Fig. 4 learning curve, Fig. 5
@@ -24,7 +25,7 @@ Steps, each with its output under ``OUT``:
 
 The default budget (100 000 steps) trains in about 20 minutes on one CPU core (SBX) and ends
 with an agent that finishes most episodes of the knee exercises (SBX's runs:
-``docs/results-v2.md``). Up to 0.3.0 the demo trained PPO through network code of ours on a
+``docs/results/learning-v2.md``). Up to 0.3.0 the demo trained PPO through network code of ours on a
 ``-v1`` id; before that SAC on ``rehab-reach-v0``, whose reward traps agents (0 %).
 """
 

@@ -77,14 +77,14 @@ PRESET_OF: dict[tuple[str, str], str] = {
 # rule off (1e9 or True did, before these bounds).
 # Range-of-motion rule: the most a joint may go beyond its anatomical range. 10 deg is the
 # hyperextension a continuous-passive-motion device allows the knee (Artromot K1 extends to
-# -10 deg, domain-facts.md section 4.2) and about the spread between the normal-range tables
+# -10 deg, its manual's range) and about the spread between the normal-range tables
 # (AAOS vs Boone & Azen, section 3); beyond it the rule would accept joints past any range a
 # clinician or a device accepts.
 ROM_TOLERANCE_MAX_DEG = 10.0
 # Unintended-contact rule: the deepest penetration that may go unreported. At the ISO/TS 15066
 # quasi-static force limit the limb regions compress by at most F/k = 150 N / 30 N/mm = 5 mm
 # (upper arm; hand 1.9, forearm 4.0, thigh 4.4, lower leg 2.2 mm: Tables A.2 and A.3,
-# domain-facts.md section 4.1); twice that is the bound.
+# the body-region stiffnesses of its Annex A); twice that is the bound.
 CONTACT_TOLERANCE_MAX_M = 0.01
 # Cuff force rule: a limit given in N. Four times the largest ISO/TS 15066 quasi-static limit
 # of the limb regions (thighs and knees, 220 N), i.e. twice its transient limit (440 N); above

@@ -1,13 +1,13 @@
 """The one env core of :class:`~rehabbot.envs.rehab_env.RehabEnv` (one robot) and
 :class:`~rehabbot.envs.bilateral_env.BilateralEnv` (two): ``reset`` and ``step`` for any number
-of arms, over the parts the env's builder resolved once (:class:`rehabbot.envs.build.
-EnvParts`).
+of arms, over the parts the env's builder resolved once
+(:class:`rehabbot.envs.build.EnvParts`).
 
 One ``step`` reads in four modules: this one, :mod:`rehabbot.envs.control` (what the action
 does to the robots' controls), :mod:`rehabbot.sim.physics` (``frame_skip`` physics steps, the
 work on the limb and the safety rules) and :mod:`rehabbot.tasks.reward` (what the step pays).
-A patient condition that applies torques adds its torque laws (:mod:`rehabbot.sim.
-patient_drive`). In order:
+A patient condition that applies torques adds its torque laws
+(:mod:`rehabbot.sim.patient_drive`). In order:
 
 1. the action is checked and written into ``data.ctrl`` by the controller (on the ``-v2`` ids
    first mapped from ``Box(-1, 1)`` onto the controller's box);

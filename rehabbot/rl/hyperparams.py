@@ -421,8 +421,8 @@ def read_yaml(path: Path, what: str, error: type[Exception], name: str | None = 
     """The YAML document in ``path`` (``{}`` for an empty file).
 
     Raises:
-        error: PyYAML is missing, or the file is unreadable or not YAML (the message names
-            ``what`` and the file, as ``name`` if given).
+        Exception: of the class ``error``: PyYAML is missing, or the file is unreadable or
+            not YAML (the message names ``what`` and the file, as ``name`` if given).
     """
     name = str(path) if name is None else name
     try:

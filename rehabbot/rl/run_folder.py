@@ -21,7 +21,7 @@ def lock_run_dir(plan: RunPlan) -> tuple[FolderLock, Path | None]:
 
     Raises:
         DataError: the run folder is a symbolic link.
-        FolderLockedError (an OutputError): another process writes the run folder.
+        FolderLockedError: (an OutputError) another process writes the run folder.
         TrainingError: another process started or advanced the run since it was planned.
     """
     run_dir = plan.run_dir

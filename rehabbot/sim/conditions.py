@@ -4,7 +4,7 @@ A :class:`PatientCondition` describes what is wrong with the exercised limb, in 
 units. The default is today's patient: healthy, relaxed, passive; an env built with it is
 bit-identical to one built without it. :mod:`rehabbot.sim.patient_drive` turns a condition
 into joint torques every physics step; ``docs/conditions.md`` has the models, their equations,
-their calibration and their sources (``domain-facts.md`` §6).
+their calibration and their sources (its Sources section).
 
 The numbers of this module are engineering estimates wherever the literature gives no table
 (no numeric MAS-to-parameter mapping was found; ``docs/conditions.md`` says which).
@@ -57,7 +57,8 @@ class SpasticReflex:
 CATCH_SHIFT_PER_RAD_S = 0.2  # mu: the catch moves this fraction of the range per rad/s
 CATCH_RAMP = 0.03  # the catch builds up over this fraction of the range
 RELEASE_WIDTH = 0.05  # the release decays over this fraction of the range
-REFLEX_LATENCY_S = 0.03  # stretch-reflex latency (SpasticMyoElbow, domain-facts §6.1)
+# Stretch-reflex latency: SpasticMyoElbow (Yu et al. 2024, arXiv:2412.04700).
+REFLEX_LATENCY_S = 0.03
 
 # Calibrated so that: no grade fires at 5 deg/s (every threshold is above it); at 100 deg/s
 # (1.745 rad/s) the catch is at 90 % of the range for grade 1 (end of range), 60 % for 1+

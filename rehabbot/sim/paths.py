@@ -34,7 +34,7 @@ def coupled_path(scene: Scene, patient_deg: np.ndarray, dt_s: float) -> CoupledP
 
     Each waypoint is solved by IK warm-started from the previous one, so the robot stays on
     one continuous branch; the servo setpoints add the static preload that carries the limb
-    there (:mod:`rehabbot.statics`). A redundant robot (more than six joints) takes, at each
+    there (:mod:`rehabbot.sim.statics`). A redundant robot (more than six joints) takes, at each
     waypoint, the posture nearest its home angles, as the workspace sweep of the setpoint
     bounds does (:mod:`rehabbot.sim.ik`).
     """

@@ -305,7 +305,7 @@ def balance_home(scene: Scene) -> np.ndarray:
     """Make the home state a static equilibrium; return the robots' servo setpoints (n, 6).
 
     Compliant joints rest at home (spring reference = home angle), so the cuffs carry the limb
-    (:mod:`rehabbot.statics`); the robot setpoints are pre-loaded with that load and each
+    (:mod:`rehabbot.sim.statics`); the robot setpoints are pre-loaded with that load and each
     posture spring's reference is shifted to cancel the gravity and cuff torque on its joint.
     """
     model = scene.model
