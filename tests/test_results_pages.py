@@ -43,7 +43,8 @@ def page_id(path: Path) -> str:
 def test_there_are_results_pages() -> None:
     assert {"learning-v2", "physics-throughput", "step-throughput", "conditions",
             "expert-baseline"} <= {p.stem for p in PAGES}
-    assert {p.stem for p in RESULTS.glob("*.md")} == {p.stem for p in PAGES}
+    # index.md is the section's hand-written front page (a toctree), not a results page.
+    assert {p.stem for p in RESULTS.glob("*.md")} - {"index"} == {p.stem for p in PAGES}
 
 
 @pytest.mark.parametrize("path", PAGES, ids=page_id)
