@@ -359,7 +359,7 @@ def test_evaluate_runs_a_zoo_spec_in_the_agents_env(env, zoo_root, tmp_path,
     assert main(["evaluate", f"zoo:{ENV}/td3", "--out", str(out)]) == 2
     assert "available:" in capsys.readouterr().err
     assert main(["evaluate", f"zoo:{ENV}/linear", "--stochastic", "--episodes", "1",
-                 "--out", str(out)]) == 2
+                 "--out", str(tmp_path / "stochastic")]) == 2
     assert "deterministic" in capsys.readouterr().err
 
 

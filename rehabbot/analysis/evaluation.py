@@ -377,9 +377,11 @@ def earlier_evaluation(out_dir: Path) -> list[Path]:
     return found
 
 
-def remove_earlier_evaluation(out_dir: Path) -> list[Path]:
-    """Remove :func:`earlier_evaluation`'s files (never following a link); returns them."""
-    removed = earlier_evaluation(out_dir)
+def remove_earlier_evaluation(out_dir: Path, keep: Sequence[Path] = ()) -> list[Path]:
+    """Remove :func:`earlier_evaluation`'s files but those in ``keep`` (the files a new
+    evaluation has just written over them), never following a link; returns the removed."""
+    kept = {Path(path).resolve() for path in keep}
+    removed = [path for path in earlier_evaluation(out_dir) if path.resolve() not in kept]
     for path in removed:
         path.unlink()
     return removed

@@ -2,8 +2,9 @@
 episodes of one env, a table of clinical figures, and per policy ``evaluation.json`` and
 ``trace.npz`` (:mod:`rehabbot.analysis.evaluation`). Every argument is checked, every model
 loaded and the output folder probed before the first episode runs; an output folder that holds
-an earlier evaluation is refused unless ``--overwrite`` is given (then the earlier evaluation's
-files are removed, so the two never mix)."""
+an earlier evaluation is refused unless ``--overwrite`` is given (then each file is replaced
+atomically, and once every new file is written the earlier evaluation's other files are
+removed, so the two never mix; a failed write keeps the earlier file)."""
 
 from __future__ import annotations
 
@@ -116,16 +117,16 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     one_torch_thread(args.policies)
     results = evaluation.evaluate_policies(args.policies, args.env, args.episodes, args.seed,
                                            args.env_kwargs, deterministic=not args.stochastic)
-    if args.overwrite:
-        evaluation.remove_earlier_evaluation(out_dir)
-    reports = []
-    for report, trace in results:
+    reports, written = [], []
+    for report, trace in results:  # each file replaced atomically: a failure keeps the old one
         folder = evaluation.label_dir(out_dir, report["policy"]["label"])
         json_path, trace_path = evaluation.save_report(report, trace, folder)
         print(f"{report['policy']['label']}: wrote {json_path} and {trace_path}")
+        written += [json_path, trace_path]
         patients_path = evaluation.write_patient_table(folder, report)
         if patients_path is not None:
             print(f"{report['policy']['label']}: wrote {patients_path}")
+            written.append(patients_path)
         reports.append(report)
     table = evaluation.format_table(reports)
     print(f"\n{reports[0]['env_id']}, {args.episodes} episodes per policy\n\n{table}")
@@ -133,5 +134,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     if patients:
         print(f"\n{patients}")
     if len(reports) > 1:
-        evaluation.write_comparison(out_dir, reports)
+        written.append(evaluation.write_comparison(out_dir, reports))
+    if args.overwrite:  # only now, all written: what the new evaluation did not replace goes
+        evaluation.remove_earlier_evaluation(out_dir, keep=written)
     return EXIT_OK
