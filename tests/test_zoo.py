@@ -182,6 +182,7 @@ def test_exported_trained_sb3_run_reproduces_the_model(algo, env, observations,
     model = _sb3_model(algo, env)
     model.learn(300)
     run = tmp_path / "run"
+    run.mkdir()
     model.save(run / "model")
     manifest = {"env_id": FULL_ID, "algo": algo, "seed": 7, "env_kwargs": {},
                 "timesteps_done": 300, "command": ["/somewhere/rehabbot", "train", ENV]}
@@ -204,6 +205,7 @@ def test_vecnormalize_statistics_are_exported(env, observations, tmp_path) -> No
     for _ in range(50):
         venv.step(np.array([venv.action_space.sample()]))
     run = tmp_path / "run"
+    run.mkdir()
     model = _perturbed(_sb3_model("ppo", env))
     model.save(run / "model")
     from rehabbot.rl.vecnormalize_io import save_vecnormalize
@@ -378,6 +380,7 @@ def test_render_runs_a_zoo_spec(env, zoo_root, tmp_path) -> None:
 def test_export_command_writes_the_zoo_file(env, zoo_root, tmp_path, capsys) -> None:
     pytest.importorskip("stable_baselines3")
     run = tmp_path / "run"
+    run.mkdir()
     _perturbed(_sb3_model("td3", env)).save(run / "model")
     (run / "manifest.json").write_text(json.dumps({"env_id": FULL_ID, "algo": "td3",
                                                    "seed": 3, "timesteps_done": 10}))

@@ -400,12 +400,11 @@ class RehabEnvCore(RehabEnvBase):
             x[agent.setpoint] = self.controller.setpoint_rad
         x[agent.velocity] = self._qvel[self._dof_adr]
         x[agent.forces] = self.safety.cuff_forces_n(self.data)
-        v = agent.matrix @ x
-        if not math.isfinite(v.sum()):  # an unstable step: no NaN reaches the agent
-            velocity, forces = x[agent.velocity], x[agent.forces]
+        if not math.isfinite(x.sum()):  # an unstable step: no NaN reaches the agent (and no
+            velocity, forces = x[agent.velocity], x[agent.forces]  # NumPy warning the user)
             velocity[~np.isfinite(velocity)] = 0.0
             forces[~np.isfinite(forces)] = 1e9  # finite: 0 x inf would spread NaN
-            v = agent.matrix @ x
+        v = agent.matrix @ x
         head, bounded = v[:agent.tanh_stop], v[agent.bounded]
         np.tanh(head, out=head)
         np.minimum(bounded, agent.bounded_high, out=bounded)  # the ufuncs: np.clip's Python
