@@ -22,7 +22,7 @@ from rehabbot.envs.control import CONTROL_MODES
 from rehabbot.envs.registration import ENV_SPECS
 
 N_CELLS = len(ENV_SPECS) * len(CONTROL_MODES)  # every id x 4 modes
-SHORT_STEPS = N_CELLS * 300  # 300 steps per cell
+SHORT_STEPS = N_CELLS * 200  # 200 steps per cell
 FAULT_EVERY = 100  # the faulty envs misbehave on every 100th step call
 
 
