@@ -134,14 +134,9 @@ def _patch_napoleon_inline_attributes():
 _patch_napoleon_inline_attributes()
 
 
-# Docstrings whose reStructuredText does not parse (a defect to fix in the module, listed in
-# the report of issue 27): shown verbatim, as a literal block, so that nothing is lost.
-VERBATIM_DOCSTRINGS = {
-    "rehabbot.rl.zoo",  # a cell of its table holds an inline literal split over two lines
-    "rehabbot.analysis.evaluation",  # table: text in the column margin
-    "rehabbot.analysis.plotting",  # table: text in the column margin
-    "rehabbot.rl.sbx_settings",  # table: text in the column margin
-}
+# Docstrings whose reStructuredText does not parse would be shown verbatim, as a literal
+# block, so that nothing is lost; none is listed today (a new one fails the strict build).
+VERBATIM_DOCSTRINGS: set[str] = set()
 
 
 def _verbatim_docstring(app, what, name, obj, options, lines):

@@ -14,14 +14,14 @@ of motion achieved versus prescribed (:func:`range_of_motion_deg`).
 
 Outputs, for each policy, in ``OUT/<label>/``:
 
-================== ==========================================================================
+=================== =========================================================================
 ``evaluation.json`` the summary (mean ± std over episodes), every episode's figures, the seeds,
                     the policy's provenance and the package versions
 ``trace.npz``       the first episode step by step (:mod:`rehabbot.analysis.traces`), read by
                     ``rehabbot plot`` for the paper's Figs. 3, 5 and 6 and the patient-side
                     Figs. 7-9
 ``patients.md``     with several patients (a population env): one row per patient
-================== ==========================================================================
+=================== =========================================================================
 
 With several policies, ``OUT/comparison.md`` holds their summaries side by side (and their
 per-patient tables). Every episode's figures name its patient (``"patient"``: index in the

@@ -2,7 +2,7 @@
 Fig. 4 from the training runs, Figs. 5, 6 and 3 from every evaluated episode (``trace.npz``).
 
 ================================  ===========  ==============================================
-file                              paper figure content
+file                              figure       content
 ================================  ===========  ==============================================
 ``fig4_learning_curves``          Fig. 4       episode return, episode length and success rate
                                                versus environment steps: one line per

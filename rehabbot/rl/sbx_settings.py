@@ -6,23 +6,24 @@ so :func:`rehabbot.rl.hyperparams.hyperparameters_from_mapping` reads it for SBX
 rules, and the run's manifest lists each change (``hyperparameters.backend_changes``: the key,
 what was given, what is used instead or ``null`` when dropped, and why):
 
-=================================== =======================================================
-``policy``: a PyTorch policy class  SBX's ``MlpPolicy`` (the SBX network reads the
-(SB3's or sb3-contrib's)            observation as it is)
-``policy_kwargs``:
-  ``features_extractor_class/_kwargs`` dropped (SBX's MLP policies have no extractor)
-  ``activation_fn`` (``nn.ReLU``, …) the Flax function of the same name (``flax.linen.relu``)
-  ``optimizer_class`` (``optim.Adam``) the Optax optimizer (``optax.adam``); its kwargs
-                                    renamed (``betas`` -> ``b1``, ``b2``; ``alpha`` ->
-                                    ``decay``) or dropped if Optax has no such argument
-  ``batch_norm_momentum`` (CrossQ)  ``1 - m``: PyTorch weighs the new batch by ``m`` (SB3's
-                                    default 0.01), Flax the running average (SBX's 0.99)
-  any other key SBX's policy lacks  dropped (e.g. PPO's ``full_std``, CrossQ's
-                                    ``batch_norm_eps``)
-an SB3 constructor argument that    dropped (SAC/TQC ``target_update_interval``: SBX updates
-SBX's class lacks                   the target networks every gradient step;
-                                    ``optimize_memory_usage``; PPO's ``stats_window_size``)
-=================================== =======================================================
+- ``policy``, a PyTorch policy class (SB3's or sb3-contrib's): SBX's ``MlpPolicy`` (the SBX
+  network reads the observation as it is).
+- ``policy_kwargs``:
+
+  - ``features_extractor_class/_kwargs``: dropped (SBX's MLP policies have no extractor);
+  - ``activation_fn`` (``nn.ReLU``, …): the Flax function of the same name
+    (``flax.linen.relu``);
+  - ``optimizer_class`` (``optim.Adam``): the Optax optimizer (``optax.adam``); its kwargs
+    renamed (``betas`` -> ``b1``, ``b2``; ``alpha`` -> ``decay``) or dropped if Optax has no
+    such argument;
+  - ``batch_norm_momentum`` (CrossQ): ``1 - m``: PyTorch weighs the new batch by ``m`` (SB3's
+    default 0.01), Flax the running average (SBX's 0.99);
+  - any other key SBX's policy lacks: dropped (e.g. PPO's ``full_std``, CrossQ's
+    ``batch_norm_eps``).
+
+- an SB3 constructor argument that SBX's class lacks: dropped (SAC/TQC
+  ``target_update_interval``: SBX updates the target networks every gradient step;
+  ``optimize_memory_usage``; PPO's ``stats_window_size``).
 
 Everything else means the same on both backends and is kept, including ``n_steps`` (n-step
 returns: SBX uses SB3's n-step replay buffer), ``train_freq``/``gradient_steps`` (SBX runs the

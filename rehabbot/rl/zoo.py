@@ -2,20 +2,21 @@
 trained model, exported to a small ``.npz`` of float32 arrays and run with NumPy alone (no
 PyTorch, JAX or Stable-Baselines3, no download).
 
-=================================== ======================================================
-``load(env_id, algo)``              the shipped agent as a :class:`ZooPolicy` (SB3's
-                                    ``predict``); also ``rehabbot.zoo.load``
-``available()``                     the ``(env_id, algo)`` pairs shipped
-``load_file(path)``                 an agent from any zoo file
+==================================== ===========================================================
+``load(env_id, algo)``               the shipped agent as a :class:`ZooPolicy` (SB3's
+                                     ``predict``); also ``rehabbot.zoo.load``
+``available()``                      the ``(env_id, algo)`` pairs shipped
+``load_file(path)``                  an agent from any zoo file
 ``load_full_model(env_id, algo)``    the whole trained SB3/SBX model behind an agent, where the
-                                    zoo keeps it (``<algo>.zip`` beside the ``.npz``): for
-                                    ``learn`` (fine-tuning), critics included
-``rehabbot.rl.zoo_export.           write a zoo file from a trained SB3 model (SAC, TD3, PPO;
-export_policy(model, env_id, algo,  TQC, CrossQ from sb3-contrib) or SBX model (SAC, TD3,
-out_path, metadata)``               PPO, TQC, CrossQ), a model zip or a run folder
-                                    (``rehabbot zoo export RUN_DIR``; default output: the zoo
-                                    folder of the package)
-=================================== ======================================================
+                                     zoo keeps it (``<algo>.zip`` beside the ``.npz``): for
+                                     ``learn`` (fine-tuning), critics included
+``zoo_export.export_policy(...)``    write a zoo file (:mod:`rehabbot.rl.zoo_export`; ``model,
+                                     env_id, algo, out_path, metadata``) from a trained SB3
+                                     model (SAC, TD3, PPO; TQC, CrossQ from sb3-contrib) or SBX
+                                     model (SAC, TD3, PPO, TQC, CrossQ), a model zip or a run
+                                     folder (``rehabbot zoo export RUN_DIR``; default output:
+                                     the zoo folder of the package)
+==================================== ===========================================================
 
 **Where the files are.** ``rehabbot/zoo/<env-short-name>/<algo>.npz`` (package data; e.g.
 ``rehabbot/zoo/rehab-reach-v1/sac.npz``), or the folder named by the environment variable
@@ -28,17 +29,17 @@ run an agent in the env it was trained on (:mod:`rehabbot.rl.policies`).
 observations: ``ops`` (a string array) names the steps, and ``op<k>.<param>`` hold their
 parameters:
 
-================= ==========================================================================
-``normalize``     VecNormalize's ``clip((x - mean) / sqrt(var + epsilon), -clip, clip)``
+================== =========================================================================
+``normalize``      VecNormalize's ``clip((x - mean) / sqrt(var + epsilon), -clip, clip)``
 ``tracking_error`` the input of the ``-v1`` agents' networks (:func:`tracking_error_features`;
-                  ``center``, ``half_range``, ``fine_scale_rad``: NaN for none)
-``dense``         ``x @ weight.T + bias`` (``weight`` has PyTorch's (out, in) shape)
-``batch_norm``    ``(x - mean) / sqrt(var + epsilon) * scale + bias`` (running statistics)
-activations       ``relu``, ``tanh``, ``elu`` (``alpha``), ``leaky_relu`` (``slope``),
-                  ``silu``, ``sigmoid``
-``clip``          ``clip(x, low, high)``
-``unscale``       ``low + (x + 1) / 2 * (high - low)``: a squashed action to the action box
-================= ==========================================================================
+                   ``center``, ``half_range``, ``fine_scale_rad``: NaN for none)
+``dense``          ``x @ weight.T + bias`` (``weight`` has PyTorch's (out, in) shape)
+``batch_norm``     ``(x - mean) / sqrt(var + epsilon) * scale + bias`` (running statistics)
+activations        ``relu``, ``tanh``, ``elu`` (``alpha``), ``leaky_relu`` (``slope``),
+                   ``silu``, ``sigmoid``
+``clip``           ``clip(x, low, high)``
+``unscale``        ``low + (x + 1) / 2 * (high - low)``: a squashed action to the action box
+================== =========================================================================
 
 plus ``observation_low``/``observation_high`` and ``action_low``/``action_high`` (the
 spaces, checked against the env) and ``metadata``, a JSON string: env id and kwargs,
