@@ -318,6 +318,58 @@ def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path)
     assert [s["status"] for s in manifest["segments"]] == ["killed", "finished"]
 
 
+def _swallowed_interrupt() -> None:
+    """What a library that eats KeyboardInterrupt does (measured: JAX's extension modules while
+    being imported); without the trainer's latch this Ctrl-C would be lost."""
+    try:
+        signal.raise_signal(signal.SIGINT)
+        sum(range(1000))  # the handler runs at the next bytecode
+    except KeyboardInterrupt:
+        pass
+
+
+def test_a_ctrl_c_while_planning_is_not_lost(tmp_path: Path, monkeypatch) -> None:
+    from rehabbot.rl import training
+
+    real = training.as_hyperparameters
+
+    def importing_the_library(*args, **kwargs):
+        _swallowed_interrupt()
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(training, "as_hyperparameters", importing_the_library)
+    before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        train_run(ENV, "td3", 0, 1_000_000, tmp_path / "runs", env_kwargs=ENV_KWARGS,
+                  eval_freq=0, progress_bar=False, backend="sb3",
+                  hyperparams={**SMALL["td3"], "learning_starts": 999_999})
+    assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").rglob("*.zip"))
+
+
+def test_a_ctrl_c_while_setting_up_stops_before_learning_and_leaves_nothing(
+        tmp_path: Path, monkeypatch) -> None:
+    from rehabbot.rl import training
+
+    real = training._setup
+    learned = []
+
+    def setting_up(*args, **kwargs):
+        model, *rest = real(*args, **kwargs)
+        _swallowed_interrupt()
+        monkeypatch.setattr(model, "learn", lambda *a, **k: learned.append(True))
+        return (model, *rest)
+
+    monkeypatch.setattr(training, "_setup", setting_up)
+    out = tmp_path / "runs"
+    with pytest.raises(KeyboardInterrupt):
+        train_run(ENV, "td3", 0, 1_000_000, out, env_kwargs=ENV_KWARGS, eval_freq=0,
+                  progress_bar=False, backend="sb3",
+                  hyperparams={**SMALL["td3"], "learning_starts": 999_999})
+    assert learned == []
+    assert not (out / ENV / "td3" / "seed0").exists()  # a new run leaves nothing behind
+
+
 def test_sigterm_in_process_stops_and_restores_the_handlers(tmp_path: Path) -> None:
     out = tmp_path / "runs"
     run_dir = out / ENV / "td3" / "seed0"

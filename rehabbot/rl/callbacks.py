@@ -8,6 +8,7 @@ import contextlib
 import functools
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from rehabbot.common.files import atomic_write
 from rehabbot.rl import runs
@@ -63,16 +64,17 @@ def callback_classes() -> tuple[type, type]:
             return model_path
 
     class Stopper(BaseCallback):
-        """Stops ``learn`` after a signal, and PPO exactly at the requested step count."""
+        """Stops ``learn`` once ``latch`` (a :class:`~rehabbot.common.signals.SignalLatch`)
+        holds a signal, and PPO exactly at the requested step count."""
 
-        def __init__(self, target: int, exact_rollouts: bool) -> None:
+        def __init__(self, target: int, exact_rollouts: bool, latch: Any) -> None:
             super().__init__(verbose=0)
             self.target = target
             self.exact_rollouts = exact_rollouts
-            self.stop_signal: int | None = None
+            self.latch = latch
 
         def _on_step(self) -> bool:
-            if self.stop_signal is not None:
+            if self.latch.signum is not None:
                 return False
             if self.exact_rollouts and self.model.num_timesteps >= self.target:
                 n_steps, n_rollout = self.locals.get("n_steps"), self.locals.get(

@@ -37,7 +37,7 @@ from rehabbot.common.files import (
     check_writable_dir,
 )
 from rehabbot.common.provenance import git_commit, now_iso, package_versions
-from rehabbot.common.signals import handling_signals
+from rehabbot.common.signals import SignalLatch, deferring_signals, handling_signals
 from rehabbot.envs.registration import resolve_env_id
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
@@ -150,24 +150,6 @@ def _make_vec_env(plan: RunPlan, n_envs: int, seed: int, monitor_dir: Path | Non
         if vec == "subproc" and n_envs > 1 else DummyVecEnv(factories)
     venv.seed(seed)
     return venv
-
-
-@contextlib.contextmanager
-def _stop_on_signals(stopper: Any):
-    """SIGINT/SIGTERM ask ``stopper`` to stop at the next step; a second one raises
-    KeyboardInterrupt. The previous handlers come back afterwards."""
-
-    def handler(signum: int, _frame: Any) -> None:
-        if stopper.stop_signal is None:
-            stopper.stop_signal = signum
-            print(f"\nreceived {signal.Signals(signum).name}: stopping at the next step and "
-                  "saving a checkpoint (send it again to stop at once)", file=sys.stderr,
-                  flush=True)
-        else:
-            raise KeyboardInterrupt
-
-    with handling_signals(handler):
-        yield
 
 
 def _progress_bar_available() -> bool:
@@ -383,20 +365,35 @@ def execute(plan: RunPlan) -> Path:
 
 
 def _execute_locked(plan: RunPlan, created_root: Path | None) -> Path:
-    import torch
-    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    # SIGINT/SIGTERM are latched from here on and acted on between steps: a KeyboardInterrupt
+    # raised inside the native libraries set up below can be swallowed or abort the process.
+    latch = SignalLatch("stopping once the run is set up; nothing is saved before the first "
+                        "step")
+    with handling_signals(latch):
+        return _execute_latched(plan, created_root, latch)
 
-    torch.set_num_threads(1)
+
+def _execute_latched(plan: RunPlan, created_root: Path | None, latch: SignalLatch) -> Path:
     run_dir = plan.run_dir
     run = _Run(plan)
     try:
+        import torch
+        from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+
+        torch.set_num_threads(1)
         prepare_run_dir(plan)
         model, venv, eval_venv, done, previous_evals = _setup(plan, run)
+        if latch.signum is not None:  # came while setting up: nothing learned, nothing saved
+            venv.close()
+            if eval_venv is not None:
+                eval_venv.close()
+            raise KeyboardInterrupt
     except BaseException:
         if plan.resume is None:  # leave nothing half-written behind
             with contextlib.suppress(OSError):
                 discard_new_run(plan, created_root)
         raise
+    latch.doing = "stopping at the next step and saving a checkpoint"
 
     checkpointer_cls, stopper_cls = callback_classes()
     n_envs = plan.n_envs
@@ -407,7 +404,8 @@ def _execute_locked(plan: RunPlan, created_root: Path | None) -> Path:
     checkpointer = checkpointer_cls(
         max(plan.checkpoint_freq // n_envs, 1) if plan.checkpoint_freq > 0 else sys.maxsize,
         str(run_dir / runs.CHECKPOINT_DIR), on_saved)
-    stopper = stopper_cls(plan.total_timesteps, exact_rollouts=plan.algo not in OFF_POLICY)
+    stopper = stopper_cls(plan.total_timesteps, exact_rollouts=plan.algo not in OFF_POLICY,
+                          latch=latch)
     # The evaluation of a step runs before its checkpoint: a checkpoint at step n means that
     # the evaluation due at n is in the log (a resume from it does not skip it).
     callbacks: list[Any] = []
@@ -429,7 +427,7 @@ def _execute_locked(plan: RunPlan, created_root: Path | None) -> Path:
 
     progress = plan.progress_bar and _progress_bar_available()
     try:
-        with _stop_on_signals(stopper), warnings.catch_warnings():
+        with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="Training and eval env are not of the "
                                     "same type")
             try:
@@ -437,15 +435,15 @@ def _execute_locked(plan: RunPlan, created_root: Path | None) -> Path:
                     model.learn(plan.total_timesteps - done, callback=CallbackList(callbacks),
                                 reset_num_timesteps=plan.resume is None,
                                 tb_log_name=ALGO_NAMES[plan.algo], progress_bar=progress)
-            except KeyboardInterrupt:
-                stopper.stop_signal = stopper.stop_signal or signal.SIGINT
+            except KeyboardInterrupt:  # a second signal
+                latch.signum = latch.signum or signal.SIGINT
         done = int(model.num_timesteps)
         checkpointer.init_callback(model)  # a finish-only resume never ran learn
-        if stopper.stop_signal is not None:
+        if latch.signum is not None:
             checkpoint = checkpointer.save_now()
             run.write(status="interrupted", timesteps_done=done,
                       last_checkpoint=run.rel(checkpoint))
-            raise TrainingInterrupted(run_dir, done, checkpoint, stopper.stop_signal)
+            raise TrainingInterrupted(run_dir, done, checkpoint, latch.signum)
         checkpoint = checkpointer.save_now()  # final checkpoint, so that --resume can extend
         vec_normalize = model.get_vec_normalize_env()
         if vec_normalize is not None:
@@ -523,6 +521,20 @@ def plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: in
     With ``resume``, seeds that have no run yet are started afresh (``--resume`` with more
     seeds than were started); it is an error only if no seed has anything to resume.
     """
+    # Planning imports the learning library (JAX, PyTorch): a Ctrl-C is latched until it is
+    # done (see rehabbot.common.signals).
+    with deferring_signals("stopping once the run is planned"):
+        return _plan_seeds(env_id, algo, seeds, total_timesteps, out_dir, hyperparams,
+                           env_kwargs, resume, overwrite, n_envs, checkpoint_freq, eval_freq,
+                           eval_episodes, progress_bar, vec, backend, demos, bc)
+
+
+def _plan_seeds(env_id: str, algo: str, seeds: Sequence[int], total_timesteps: int | None,
+                out_dir: str | Path, hyperparams: Any, env_kwargs: Mapping[str, Any] | None,
+                resume: bool, overwrite: bool, n_envs: int | None,
+                checkpoint_freq: int | None, eval_freq: int | None,
+                eval_episodes: int | None, progress_bar: bool, vec: str, backend: str,
+                demos: int | None, bc: bool) -> list[RunPlan]:
     env_id = resolve_env_id(env_id)
     algo = check_algo(algo)
     hp = as_hyperparameters(hyperparams, env_id, algo, resolve_backend(backend, algo))
