@@ -10,6 +10,15 @@ import pytest
 from rehabbot.common.signals import SignalLatch, deferring_signals, handling_signals
 
 
+@pytest.fixture(autouse=True)
+def python_sigint_handler():
+    """Python's own SIGINT handler for each test (an earlier test in the same worker may have
+    left another, such as SIG_IGN, to which a latched signal would be handed back)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def _swallowing_library() -> None:
     """Native code that eats a KeyboardInterrupt raised inside it (measured in JAX's
     extension modules): with Python's default handler the Ctrl-C would be lost here."""
@@ -26,11 +35,10 @@ def test_the_default_handler_loses_the_signal_in_a_swallowing_library() -> None:
 
 def test_a_deferred_signal_is_delivered_after_the_block() -> None:
     done = []
-    with pytest.raises(KeyboardInterrupt):
-        with deferring_signals("test") as latch:
-            _swallowing_library()
-            assert latch.signum == signal.SIGINT
-            done.append("the block ran to its end")
+    with pytest.raises(KeyboardInterrupt), deferring_signals("test") as latch:
+        _swallowing_library()
+        assert latch.signum == signal.SIGINT
+        done.append("the block ran to its end")
     assert done == ["the block ran to its end"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 

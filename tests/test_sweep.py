@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import re
+import signal
 from pathlib import Path
 
 import pytest
@@ -301,7 +302,11 @@ def test_a_sweep_on_a_local_ray_writes_run_folders_and_resumes(tmp_path, capsys,
     path = _write(tmp_path, _config(tmp_path, seeds=[0, 1], timesteps=200))
     out = tmp_path / "out"
 
+    handlers = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
     assert main(["sweep", str(path), "--cpus", "2"]) == 0
+    # Ray's own SIGINT and SIGTERM handlers do not outlive the sweep (they would swallow a
+    # later signal).
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == handlers
     printed = capsys.readouterr().out
     run_dirs = [out / ENV / "sac" / f"seed{seed}" for seed in (0, 1)]
     manifests = [_manifest(run_dir) for run_dir in run_dirs]

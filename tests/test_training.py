@@ -318,6 +318,15 @@ def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path)
     assert [s["status"] for s in manifest["segments"]] == ["killed", "finished"]
 
 
+@pytest.fixture
+def python_sigint_handler():
+    """Python's own SIGINT handler for the test (an earlier test in the same worker may have
+    left another, such as SIG_IGN, to which a latched signal would be handed back)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def _swallowed_interrupt() -> None:
     """What a library that eats KeyboardInterrupt does (measured: JAX's extension modules while
     being imported); without the trainer's latch this Ctrl-C would be lost."""
@@ -328,7 +337,8 @@ def _swallowed_interrupt() -> None:
         pass
 
 
-def test_a_ctrl_c_while_planning_is_not_lost(tmp_path: Path, monkeypatch) -> None:
+def test_a_ctrl_c_while_planning_is_not_lost(tmp_path: Path, monkeypatch,
+                                             python_sigint_handler) -> None:
     from rehabbot.rl import training
 
     real = training.as_hyperparameters
@@ -348,7 +358,7 @@ def test_a_ctrl_c_while_planning_is_not_lost(tmp_path: Path, monkeypatch) -> Non
 
 
 def test_a_ctrl_c_while_setting_up_stops_before_learning_and_leaves_nothing(
-        tmp_path: Path, monkeypatch) -> None:
+        tmp_path: Path, monkeypatch, python_sigint_handler) -> None:
     from rehabbot.rl import training
 
     real = training._setup

@@ -38,6 +38,7 @@ from rehabbot.common.errors import DataError, RehabbotError, UsageError
 from rehabbot.common.extras import install_hint
 from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
+from rehabbot.common.signals import keeping_signal_handlers
 from rehabbot.common.tables import text_table
 from rehabbot.rl import runs
 from rehabbot.rl.backends import DEFAULT_BACKEND
@@ -419,7 +420,10 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
         where = f"the Ray cluster at {address}" if address else f"a local Ray ({local_cpus} CPUs)"
         announce(f"running {len(pending)} trials on {where}, resources per trial "
                  f"{config.resources_per_trial}; Ray's files in {config.out / RAY_DIR}")
-        interrupted = _run_on_ray(state, pending, address, local_cpus)
+        # ray.init leaves a SIGTERM handler and Tuner.fit a SIGINT handler of their own behind,
+        # which would swallow a later signal in the same process.
+        with keeping_signal_handlers():
+            interrupted = _run_on_ray(state, pending, address, local_cpus)
     if not dry_run:
         state.write()
     return SweepResult(out=config.out, records=list(state.records.values()),
