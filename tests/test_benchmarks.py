@@ -307,3 +307,51 @@ def test_zoo_select_merges_files_and_ships_only_rows_that_learned(tmp_path, caps
         zoo_select.main([str(files[0]), str(other)])
     with pytest.raises(SystemExit):
         zoo_select.main([str(files[0]), "--min-success", "1.5"])
+
+
+MUSCLE_JOINT_XML = """
+<mujoco>
+  <compiler angle="radian"/>
+  <option gravity="0 0 -9.81"/>
+  <worldbody>
+    <body name="link">
+      <joint name="hinge" type="hinge" axis="0 1 0" range="0 2"/>
+      <joint name="follower" type="slide" axis="1 0 0" range="-1 1"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.03" mass="1"/>
+    </body>
+  </worldbody>
+  <equality>
+    <joint joint1="follower" joint2="hinge" polycoef="0 0.01 0.002 0 0"/>
+  </equality>
+  <actuator>
+    <muscle name="stretched_by_flexion" joint="hinge" gear="0.05" lengthrange="0 0.1"
+            range="0.75 1.05" fpmax="1.3" force="100"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def test_myo_probe_measures_passive_muscle_torque_and_follows_coupled_joints() -> None:
+    """The probe of MyoSuite's models (benchmarks/probes/myo_models.py, which needs myo-sim)
+    on a one-muscle joint: a passive muscle that flexion stretches pulls back (negative torque)
+    and harder the further it is stretched, with no force while slack; the joint coupled to
+    the measured one by a polynomial equality follows it."""
+    import mujoco
+    import numpy as np
+
+    from benchmarks.probes import myo_models
+
+    model = mujoco.MjModel.from_xml_string(MUSCLE_JOINT_XML)
+    hinge = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "hinge")
+    coupled = myo_models._coupled_joints(model, hinge)
+    assert [joint for joint, _ in coupled] == [
+        mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "follower")]
+    np.testing.assert_array_equal(coupled[0][1], [0, 0.01, 0.002, 0, 0])
+    rows = myo_models.passive_torque_curve(model, "hinge", points=9)
+    angles = [row["angle_deg"] for row in rows]
+    assert angles[0] == 0.0 and abs(angles[-1] - np.degrees(2.0)) < 1e-9
+    torque = np.array([row["total_torque_nm"] for row in rows])
+    assert torque[0] == 0.0  # slack at full extension
+    assert torque[-1] < 0 and np.all(np.diff(torque) <= 0)  # stretched by flexion: resists
+    assert all(row["joint_torque_nm"] == 0.0 for row in rows)  # no joint spring here
+    assert model.opt.gravity.tolist() == [0.0, 0.0, 0.0]  # measured without gravity
