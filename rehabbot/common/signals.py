@@ -26,21 +26,18 @@ def handling_signals(handler: Callable[[int, Any], None]) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
-    for signum in STOP_SIGNALS:
-        signal.signal(signum, handler)
-    try:
+    with keeping_signal_handlers():
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, handler)
         yield
-    finally:
-        for signum, old in previous.items():
-            signal.signal(signum, old if old is not None else signal.SIG_DFL)
 
 
 @contextlib.contextmanager
 def keeping_signal_handlers() -> Iterator[None]:
     """Put back the SIGINT and SIGTERM handlers after the block, whatever a library installed in
-    it (Ray Tune's ``Tuner.fit`` leaves a SIGINT handler that only sets a flag of its own, so a
-    later Ctrl-C in the same process would be lost). Main thread only, as signal handlers are."""
+    it (``ray.init`` leaves a SIGTERM handler and Ray Tune's ``Tuner.fit`` a SIGINT handler that
+    only sets a flag of its own, so a later signal in the same process would be lost). Main
+    thread only, as signal handlers are."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
