@@ -8,6 +8,7 @@ on two cores); ``pytest --full`` (``make test``, CI) runs everything.
 """
 
 import os
+import signal
 
 import pytest
 
@@ -26,3 +27,12 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     if slow:
         config.hook.pytest_deselected(items=slow)
         items[:] = [item for item in items if item.get_closest_marker("slow") is None]
+
+
+@pytest.fixture
+def python_sigint_handler():
+    """Python's own SIGINT handler for the test (an earlier test in the same worker may have
+    left another, such as SIG_IGN, to which a latched signal would be handed back)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)

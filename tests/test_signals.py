@@ -6,37 +6,21 @@ from __future__ import annotations
 import signal
 
 import pytest
+from swallowed_signals import swallowed_interrupt
 
 from rehabbot.common.signals import SignalLatch, deferring_signals, handling_signals
 
-
-@pytest.fixture(autouse=True)
-def python_sigint_handler():
-    """Python's own SIGINT handler for each test (an earlier test in the same worker may have
-    left another, such as SIG_IGN, to which a latched signal would be handed back)."""
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    yield
-    signal.signal(signal.SIGINT, previous)
-
-
-def _swallowing_library() -> None:
-    """Native code that eats a KeyboardInterrupt raised inside it (measured in JAX's
-    extension modules): with Python's default handler the Ctrl-C would be lost here."""
-    try:
-        signal.raise_signal(signal.SIGINT)
-        sum(range(1000))  # the handler runs at the next bytecode
-    except KeyboardInterrupt:
-        pass
+pytestmark = pytest.mark.usefixtures("python_sigint_handler")
 
 
 def test_the_default_handler_loses_the_signal_in_a_swallowing_library() -> None:
-    _swallowing_library()  # the defect the latch guards against: nothing comes out
+    swallowed_interrupt()  # the defect the latch guards against: nothing comes out
 
 
 def test_a_deferred_signal_is_delivered_after_the_block() -> None:
     done = []
     with pytest.raises(KeyboardInterrupt), deferring_signals("test") as latch:
-        _swallowing_library()
+        swallowed_interrupt()
         assert latch.signum == signal.SIGINT
         done.append("the block ran to its end")
     assert done == ["the block ran to its end"]

@@ -24,6 +24,8 @@ import pytest
 pytest.importorskip("stable_baselines3", reason='training tests need "rehabbot[train]"')
 pytest.importorskip("yaml", reason="hyperparameter files need PyYAML")
 
+from swallowed_signals import swallowed_interrupt
+
 from rehabbot.cli import CliError
 from rehabbot.cli.train import add_train_parser, cmd_train
 from rehabbot.envs.registration import ENV_SPECS
@@ -318,25 +320,6 @@ def test_resume_after_a_hard_kill_drops_logs_past_the_checkpoint(tmp_path: Path)
     assert [s["status"] for s in manifest["segments"]] == ["killed", "finished"]
 
 
-@pytest.fixture
-def python_sigint_handler():
-    """Python's own SIGINT handler for the test (an earlier test in the same worker may have
-    left another, such as SIG_IGN, to which a latched signal would be handed back)."""
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    yield
-    signal.signal(signal.SIGINT, previous)
-
-
-def _swallowed_interrupt() -> None:
-    """What a library that eats KeyboardInterrupt does (measured: JAX's extension modules while
-    being imported); without the trainer's latch this Ctrl-C would be lost."""
-    try:
-        signal.raise_signal(signal.SIGINT)
-        sum(range(1000))  # the handler runs at the next bytecode
-    except KeyboardInterrupt:
-        pass
-
-
 def test_a_ctrl_c_while_planning_is_not_lost(tmp_path: Path, monkeypatch,
                                              python_sigint_handler) -> None:
     from rehabbot.rl import training
@@ -344,7 +327,7 @@ def test_a_ctrl_c_while_planning_is_not_lost(tmp_path: Path, monkeypatch,
     real = training.as_hyperparameters
 
     def importing_the_library(*args, **kwargs):
-        _swallowed_interrupt()
+        swallowed_interrupt()
         return real(*args, **kwargs)
 
     monkeypatch.setattr(training, "as_hyperparameters", importing_the_library)
@@ -366,7 +349,7 @@ def test_a_ctrl_c_while_setting_up_stops_before_learning_and_leaves_nothing(
 
     def setting_up(*args, **kwargs):
         model, *rest = real(*args, **kwargs)
-        _swallowed_interrupt()
+        swallowed_interrupt()
         monkeypatch.setattr(model, "learn", lambda *a, **k: learned.append(True))
         return (model, *rest)
 
