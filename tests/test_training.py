@@ -363,6 +363,27 @@ def test_a_ctrl_c_while_setting_up_stops_before_learning_and_leaves_nothing(
     assert not (out / ENV / "td3" / "seed0").exists()  # a new run leaves nothing behind
 
 
+def test_a_ctrl_c_while_finishing_comes_out_after_the_run_is_whole(
+        tmp_path: Path, monkeypatch, python_sigint_handler) -> None:
+    from rehabbot.rl import training
+
+    real = training.atomic_write
+
+    def saving(path, *args, **kwargs):
+        if Path(path).name == "model.zip":  # the final save, after the last step
+            swallowed_interrupt()
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(training, "atomic_write", saving)
+    out = tmp_path / "runs"
+    with pytest.raises(KeyboardInterrupt):
+        train_run(ENV, "td3", 0, 200, out, env_kwargs=ENV_KWARGS, eval_freq=0,
+                  progress_bar=False, backend="sb3",
+                  hyperparams={**SMALL["td3"], "learning_starts": 100})
+    run_dir = out / ENV / "td3" / "seed0"
+    assert _manifest(run_dir)["status"] == "finished" and (run_dir / "model.zip").is_file()
+
+
 def test_sigterm_in_process_stops_and_restores_the_handlers(tmp_path: Path) -> None:
     out = tmp_path / "runs"
     run_dir = out / ENV / "td3" / "seed0"

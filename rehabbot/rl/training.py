@@ -37,7 +37,7 @@ from rehabbot.common.files import (
     check_writable_dir,
 )
 from rehabbot.common.provenance import git_commit, now_iso, package_versions
-from rehabbot.common.signals import SignalLatch, deferring_signals, handling_signals
+from rehabbot.common.signals import SignalLatch, deferring_signals
 from rehabbot.envs.registration import resolve_env_id
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import ALGO_NAMES, OFF_POLICY, algo_class, check_algo
@@ -367,10 +367,12 @@ def execute(plan: RunPlan) -> Path:
 def _execute_locked(plan: RunPlan, created_root: Path | None) -> Path:
     # SIGINT/SIGTERM are latched from here on and acted on between steps: a KeyboardInterrupt
     # raised inside the native libraries set up below can be swallowed or abort the process.
-    latch = SignalLatch("stopping once the run is set up; nothing is saved before the first "
-                        "step")
-    with handling_signals(latch):
-        return _execute_latched(plan, created_root, latch)
+    # One that comes after the last step, while the run is finished, is delivered again once
+    # the run is whole (deferring_signals).
+    with deferring_signals("stopping once the run is set up; nothing is saved before the "
+                           "first step") as latch:
+        run_dir = _execute_latched(plan, created_root, latch)
+    return run_dir
 
 
 def _execute_latched(plan: RunPlan, created_root: Path | None, latch: SignalLatch) -> Path:
