@@ -88,6 +88,14 @@ SUMMARY_METRICS = (
     ("peak_patient_torque_nm", "peak patient torque", "N·m"),
     ("rom_achieved_fraction", "ROM achieved / prescribed", ""),
 )
+# The muscles' figures: episodes of MyoSuite's legs only (patient_model="myo"); a report
+# and its table have them when its episodes do.
+MUSCLE_METRICS = (
+    ("muscle_work_j", "muscle work on the limb", "J"),
+    ("peak_muscle_force_n", "peak muscle force", "N"),
+    ("mean_muscle_activation", "mean muscle activation", ""),
+    ("mean_muscle_excitation", "mean muscle excitation", ""),
+)
 PRESCRIBED_MIN_DEG = 1.0  # joints the exercise moves less than this are left out of the ROM
 DEFAULT_EPISODES = 10
 
@@ -122,6 +130,8 @@ def episode_figures(episode: Episode) -> dict[str, Any]:
         "rom_achieved_fraction": (float(achieved[moved].sum() / prescribed[moved].sum())
                                   if moved.any() else None),
     })
+    if episode.muscle_work_j is not None:
+        figures.update({key: getattr(episode, key) for key, _label, _unit in MUSCLE_METRICS})
     figures.update(kinematic_summary(episode.robot_qpos_rad, episode.dt_s,
                                      tool_m=episode.tool_pos_m,
                                      torque_nm=episode.robot_torque_nm))
@@ -155,6 +165,10 @@ def summarize(episodes: list[dict]) -> dict:
             continue
         mean, std = _mean_std([e.get(key) for e in episodes])
         summary[key] = {"mean": mean, "std": std}
+    if any("muscle_work_j" in e for e in episodes):
+        for key, _label, _unit in MUSCLE_METRICS:
+            mean, std = _mean_std([e.get(key) for e in episodes])
+            summary[key] = {"mean": mean, "std": std}
     counts = dict.fromkeys(RULES, 0)
     for episode in episodes:
         if episode["safety_violation"] is not None:
@@ -330,9 +344,13 @@ def format_table(reports: Sequence[dict]) -> str:
     """A Markdown table, one column per policy (mean ± std over episodes)."""
     header = ["metric"] + [r["policy"]["label"] for r in reports]
     rows = []
-    for key, label, unit in SUMMARY_METRICS:
+    metrics = list(SUMMARY_METRICS)
+    if any("muscle_work_j" in r["summary"] for r in reports):
+        metrics += MUSCLE_METRICS
+    for key, label, unit in metrics:
         name = f"{label} [{unit}]" if unit and unit != "%" else label
-        rows.append([name] + [_cell(r["summary"][key], key) for r in reports])
+        rows.append([name] + [_cell(r["summary"][key], key) if key in r["summary"] else None
+                              for r in reports])
     rules = reports[0]["summary"]["safety_terminations"]
     for rule in rules:
         rows.append([f"safety stops: {rule}"]

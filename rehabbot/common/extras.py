@@ -23,6 +23,7 @@ OPTIONAL_MODULES: dict[str, tuple[str, str]] = {
     "ray": ("ray", "sweep"),
     "sbx": ("sbx-rl", "jax"),
     "jax": ("jax", "jax"),
+    "myo_sim": ("myo-sim", "myo"),
 }
 
 

@@ -135,6 +135,7 @@ def _holding_force_n(scene: Scene, data: mujoco.MjData, sequence: TargetSequence
     model = scene.model
     data.qpos[:] = scene.home_qpos
     data.qpos[scene.exercised_qpos_adr] = np.radians(sequence.patient_deg[k])
+    scene.follow_coupled_joints(data.qpos)
     data.qpos[scene.robots[0].qpos_adr] = sequence.robot_rad[k]
     data.qvel[:] = 0.0
     mujoco.mj_forward(model, data)

@@ -5,7 +5,8 @@ validated once, frozen, grouped by what it configures.
 group           class              keyword arguments (the env docstring's table)
 ==============  =================  ===========================================================
 ``scene``       SceneConfig        ``limb``, ``side``, ``robot``, ``cuff``,
-                                   ``base_reorientation_deg``, ``timestep_s``
+                                   ``base_reorientation_deg``, ``timestep_s``,
+                                   ``patient_model``
 ``patient``     PatientConfig      ``profile``, ``condition``, ``weight_level``
 ``task``        TaskConfig         ``task_type``, ``exercises``, ``exercise``,
                                    ``target_tolerance_rad``, ``observation``,
@@ -136,12 +137,16 @@ class SceneConfig:
     cuff: str = "connect"
     base_reorientation_deg: float = 0.0
     timestep_s: float = 0.002
+    patient_model: str = "rigid"
 
     def __post_init__(self) -> None:
         check_choice("limb", self.limb, LIMBS)
         check_choice("side", self.side, SIDES)
         check_choice("robot", self.robot, ROBOT_NAMES)
         SceneOptions(**self.scene_options())  # ValueError naming a bad scene option
+        if self.patient_model == "myo" and self.limb == "arm":
+            raise ValueError("patient_model='myo' is built for limb='knee' and limb='hip' "
+                             "only: MyoSuite's arm is not seated in RehabBot's scenes yet")
 
     @property
     def preset(self) -> str:
@@ -153,7 +158,7 @@ class SceneConfig:
         return {"robot": self.robot, "cuff": self.cuff,
                 "side": None if self.limb == "arm" else self.side,
                 "base_reorientation_deg": self.base_reorientation_deg,
-                "timestep_s": self.timestep_s}
+                "timestep_s": self.timestep_s, "patient_model": self.patient_model}
 
 
 @dataclass(frozen=True)
@@ -353,7 +358,7 @@ class RehabEnvConfig:
     def _check_across_groups(self) -> None:
         """The checks that need two groups: the exercise table (the scene's limb and the
         task's exercises) and the joint_velocity bound (the scene's robot)."""
-        table = exercise_table(self.scene.limb, self.task.exercises)
+        table = exercise_table(self.scene.limb, self.task.exercises, self.scene.patient_model)
         object.__setattr__(self, "exercise_table", table)
         task = self.task
         if task.exercises is not None and task.exercises != table:
@@ -365,6 +370,8 @@ class RehabEnvConfig:
         object.__setattr__(self, "task", task)
         check_number("max_speed_rad_s", self.control.max_speed_rad_s, 1e-3,
                      get_robot(self.scene.robot).max_speed_rad_s)
+        if self.scene.patient_model == "myo":
+            check_myo_patient(self.patient)
 
     # -- flat keywords ---------------------------------------------------------------------
     @classmethod
@@ -430,6 +437,21 @@ class RehabEnvConfig:
     def safety_thresholds(self) -> SafetyThresholds:
         """The thresholds of the safety rules."""
         return self.safety.thresholds()
+
+
+def check_myo_patient(patient: PatientConfig) -> None:
+    """What MyoSuite's legs support today: the default profile (they are one adult size) and
+    the passive patient of relaxed muscles. ``ValueError`` naming what is not."""
+    if patient.profile != PatientProfile():
+        raise ValueError(f"patient_model='myo': MyoSuite's legs are one adult size, so the "
+                         f"profile must be the default {PatientProfile()}, got "
+                         f"{patient.profile}")
+    changed = {name: value for name, value in patient.condition.to_dict().items()
+               if value != PatientCondition().to_dict()[name]}
+    if changed:
+        raise ValueError(f"patient_model='myo' has no muscle model of a condition yet (its "
+                         f"muscles are passive); condition field(s) {changed} act on the rigid "
+                         f"patient only")
 
 
 def kwarg_names(config_class: type = RehabEnvConfig) -> tuple[str, ...]:

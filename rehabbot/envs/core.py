@@ -370,7 +370,7 @@ class RehabEnvCore(RehabEnvBase):
             **terms,  # reward_distance, reward_bonus, ...
             "interaction_force_n": force_n,  # the largest cuff force
             "robot_torque_nm": self._qfrc_actuator[self._dof_adr].copy(),
-            **self._physics.info(),  # patient_torque_nm, patient/robot_work_j, assistance
+            **self._physics.info(self.data),  # patient torque and work, robot work, muscles
             "patient_qpos": self._qpos[self._patient_qpos_adr].copy(),
             "exercise": self._exercise,
             "weight_level": self.scene.weight_level,

@@ -43,6 +43,12 @@ class Episode:
     robot_work_j: float = 0.0  # work on the limb over the episode: the robot's (cuff)
     patient_work_j: float = 0.0  # ... and the patient's (muscles)
     assistance_ratio: float = float("nan")  # robot's share of the positive work on the limb
+    # MyoSuite's legs only (patient_model="myo"; None for the rigid patient): the exercised
+    # leg's muscles over the episode (rehabbot.sim.muscles).
+    muscle_work_j: float | None = None  # their forces' work on the limb
+    peak_muscle_force_n: float | None = None  # the largest pull of one muscle
+    mean_muscle_activation: float | None = None  # mean over steps and muscles
+    mean_muscle_excitation: float | None = None
 
     @property
     def length(self) -> int:
@@ -59,6 +65,7 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
     obs, info = env.reset(seed=seed)
     sequence = base.target_sequence
     qpos, tool, patient, torque, force, index, muscle = [], [], [], [], [], [], []
+    activation, excitation = [], []
 
     def record(observation: np.ndarray, step_info: dict) -> None:
         # The -v2 ids' agent observation holds errors, not angles: read the paper's fields.
@@ -70,6 +77,9 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
         force.append(float(step_info["interaction_force_n"]))
         index.append(int(step_info["target_index"]))
         muscle.append(np.array(step_info["patient_torque_nm"], dtype=float))
+        if "muscle_activation" in step_info:
+            activation.append(float(step_info["muscle_activation"]))
+            excitation.append(float(step_info["muscle_excitation"]))
 
     record(obs, info)
     total, truncated = 0.0, False
@@ -101,4 +111,16 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
         targets_reached=int(info["target_index"]) + int(success),
         num_targets=int(info["num_targets"]),
         robot_work_j=float(info["robot_work_j"]), patient_work_j=float(info["patient_work_j"]),
-        assistance_ratio=float(info["assistance_ratio"]))
+        assistance_ratio=float(info["assistance_ratio"]),
+        **_muscle_figures(info, activation, excitation))
+
+
+def _muscle_figures(info: dict, activation: list[float], excitation: list[float]) -> dict:
+    """The Episode's muscle fields from the last ``info`` and the per-step means (none for
+    the rigid patient)."""
+    if "muscle_work_j" not in info:
+        return {}
+    return {"muscle_work_j": float(info["muscle_work_j"]),
+            "peak_muscle_force_n": float(info["peak_muscle_force_n"]),
+            "mean_muscle_activation": float(np.mean(activation)),
+            "mean_muscle_excitation": float(np.mean(excitation))}

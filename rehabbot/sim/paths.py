@@ -50,6 +50,7 @@ def coupled_path(scene: Scene, patient_deg: np.ndarray, dt_s: float) -> CoupledP
     rests = [seed.copy() for seed in seeds]
     for t, row in enumerate(patient_deg):
         data.qpos[scene.exercised_qpos_adr] = np.radians(row)
+        scene.follow_coupled_joints(data.qpos)
         mujoco.mj_kinematics(model, data)
         for k, handle in enumerate(scene.robots):
             site = handle.patient_cuff_site_id

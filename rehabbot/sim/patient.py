@@ -185,6 +185,9 @@ def joint_table() -> tuple[PatientJoint, ...]:
 JOINTS: tuple[PatientJoint, ...] = joint_table()
 JOINT_NAMES: tuple[str, ...] = tuple(j.name for j in JOINTS)
 JOINT_BY_NAME: dict[str, PatientJoint] = {j.name: j for j in JOINTS}
+# The hinges of the legs (hip, knee, ankle of both sides).
+LEG_JOINT_NAMES: tuple[str, ...] = tuple(j.name for j in JOINTS
+                                         if j.body.rsplit("_", 1)[0] in ("thigh", "shank", "foot"))
 
 # Segments of each limb, proximal to distal (weight levels scale these).
 LIMB_BODIES: dict[str, tuple[str, ...]] = {
@@ -291,6 +294,41 @@ def _ellipsoid(body, name, pos, half_sizes, rgba=_CLOTH):
     return geom
 
 
+def _add_leg(pelvis: mujoco.MjsBody, side: str, seg: dict[str, Segment], pelvis_length_m: float,
+             hip_y: float, height_m: float, cuff_limbs: tuple[str, ...]) -> None:
+    """One leg, hanging along -z from its hip joint centre (thigh, shank, foot)."""
+    s = _side_sign(side)
+    h = height_m
+    thigh_s, shank_s, foot_s = seg["thigh"], seg["shank"], seg["foot"]
+    thigh = pelvis.add_body(name=f"thigh_{side}", pos=[0, s * hip_y, -pelvis_length_m])
+    _set_inertial(thigh, thigh_s.mass_kg, [0, 0, -thigh_s.com_from_proximal_m],
+                  _inertia_diag(thigh_s, 2))
+    r = thigh_s.capsule_radius_m
+    _capsule(thigh, f"thigh_{side}", (0, 0, -r * 0.6), (0, 0, -thigh_s.length_m + r * 0.3), r,
+             _CLOTH)
+    shank = thigh.add_body(name=f"shank_{side}", pos=[0, 0, -thigh_s.length_m])
+    _set_inertial(shank, shank_s.mass_kg, [0, 0, -shank_s.com_from_proximal_m],
+                  _inertia_diag(shank_s, 2))
+    r = shank_s.capsule_radius_m
+    _capsule(shank, f"shank_{side}", (0, 0, -r * 0.5), (0, 0, -shank_s.length_m + r * 0.5), r,
+             _CLOTH)
+    if f"leg_{side}" in cuff_limbs:
+        cuff_z = -LEG_CUFF_FRACTION * shank_s.length_m
+        shank.add_site(name=f"cuff_leg_{side}", pos=[0, 0, cuff_z],
+                       quat=list(_cuff_quat(s, "leg")), size=[0.015, 0, 0],
+                       rgba=(0.2, 0.8, 0.4, 1))
+    # Foot: ankle joint centre at the end of the shank; the foot points forward (+x) with
+    # its heel just behind the ankle.
+    foot = shank.add_body(name=f"foot_{side}", pos=[0, 0, -shank_s.length_m])
+    heel_x = -0.25 * foot_s.length_m
+    foot_h = 0.045 * h / 1.75
+    _set_inertial(foot, foot_s.mass_kg, [heel_x + foot_s.com_from_proximal_m, 0, -foot_h],
+                  _inertia_diag(foot_s, 0))
+    r = 0.35 * foot_h + 0.012
+    _capsule(foot, f"foot_{side}", (heel_x + r, 0, -foot_h),
+             (heel_x + foot_s.length_m - r, 0, -foot_h), r, (0.25, 0.25, 0.28, 1))
+
+
 @dataclass(frozen=True)
 class PatientGeometry:
     """Landmarks of the built body in the patient's root (torso) frame [m]."""
@@ -303,11 +341,13 @@ class PatientGeometry:
 
 
 def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientProfile,
-                pos, quat, cuff_limbs: tuple[str, ...]) -> PatientGeometry:
+                pos, quat, cuff_limbs: tuple[str, ...], legs: bool = True) -> PatientGeometry:
     """Add the patient under ``parent``; the torso is welded to it (no free joint).
 
     ``cuff_limbs`` (e.g. ``("arm_r",)``) get a ``cuff_<limb>`` site where the robot's cuff
     straps on: the hand's centre for an arm, just above the malleoli for a leg.
+    ``legs=False`` builds no legs (the body ends at the pelvis, where another model's legs
+    attach: :mod:`rehabbot.sim.myo_patient`).
     Joint stiffness, damping and spring references are set later by the scene, which knows the
     posture and which joints are exercised.
     """
@@ -362,35 +402,8 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
 
     for side in ("r", "l"):
         s = _side_sign(side)
-        # --- legs, hanging along -z from the hip joint centre.
-        thigh_s, shank_s, foot_s = seg["thigh"], seg["shank"], seg["foot"]
-        thigh = pelvis.add_body(name=f"thigh_{side}", pos=[0, s * hip_y, -lpt.length_m])
-        _set_inertial(thigh, thigh_s.mass_kg, [0, 0, -thigh_s.com_from_proximal_m],
-                      _inertia_diag(thigh_s, 2))
-        r = thigh_s.capsule_radius_m
-        _capsule(thigh, f"thigh_{side}", (0, 0, -r * 0.6), (0, 0, -thigh_s.length_m + r * 0.3), r,
-                 _CLOTH)
-        shank = thigh.add_body(name=f"shank_{side}", pos=[0, 0, -thigh_s.length_m])
-        _set_inertial(shank, shank_s.mass_kg, [0, 0, -shank_s.com_from_proximal_m],
-                      _inertia_diag(shank_s, 2))
-        r = shank_s.capsule_radius_m
-        _capsule(shank, f"shank_{side}", (0, 0, -r * 0.5), (0, 0, -shank_s.length_m + r * 0.5), r,
-                 _CLOTH)
-        if f"leg_{side}" in cuff_limbs:
-            cuff_z = -LEG_CUFF_FRACTION * shank_s.length_m
-            shank.add_site(name=f"cuff_leg_{side}", pos=[0, 0, cuff_z],
-                           quat=list(_cuff_quat(s, "leg")), size=[0.015, 0, 0],
-                           rgba=(0.2, 0.8, 0.4, 1))
-        # Foot: ankle joint centre at the end of the shank; the foot points forward (+x) with
-        # its heel just behind the ankle.
-        foot = shank.add_body(name=f"foot_{side}", pos=[0, 0, -shank_s.length_m])
-        heel_x = -0.25 * foot_s.length_m
-        foot_h = 0.045 * h / 1.75
-        _set_inertial(foot, foot_s.mass_kg, [heel_x + foot_s.com_from_proximal_m, 0, -foot_h],
-                      _inertia_diag(foot_s, 0))
-        r = 0.35 * foot_h + 0.012
-        _capsule(foot, f"foot_{side}", (heel_x + r, 0, -foot_h),
-                 (heel_x + foot_s.length_m - r, 0, -foot_h), r, (0.25, 0.25, 0.28, 1))
+        if legs:
+            _add_leg(pelvis, side, seg, lpt.length_m, hip_y, h, cuff_limbs)
 
         # --- arms, hanging along -z from the shoulder joint centre.
         ua_s, fa_s, hand_s = seg["upper_arm"], seg["forearm"], seg["hand"]
@@ -419,6 +432,8 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
                           rgba=(0.2, 0.8, 0.4, 1))
 
     for joint in JOINTS:
+        if not legs and joint.name in LEG_JOINT_NAMES:
+            continue
         body = spec.body(joint.body)
         added = body.add_joint(name=joint.name, type=mujoco.mjtJoint.mjJNT_HINGE,
                                axis=list(joint.axis), pos=[0, 0, 0],

@@ -41,6 +41,7 @@ from mujoco import mju_dot
 
 from rehabbot.common.arrays import as_index
 from rehabbot.sim.conditions import PatientCondition
+from rehabbot.sim.muscles import MuscleMeter, limb_muscles
 from rehabbot.sim.patient_drive import PatientDrive
 from rehabbot.sim.scene import Scene
 
@@ -198,9 +199,10 @@ class SafetyMonitor:
     def cuff_force_n(self, data: mujoco.MjData) -> float:
         """The largest cuff force [N] (the cuff's force, with one robot)."""
         if self._single_cuff:
-            if data.ne < 3:
+            if data.ne < self._cuff_rows_needed:
                 return 0.0
-            x, y, z = data.efc_force[:3].tolist()
+            row = self._cuff_rows[0]  # 0 unless the patient has equalities (MyoLeg's knee)
+            x, y, z = data.efc_force[row:row + 3].tolist()
             return math.sqrt(x * x + y * y + z * z)
         return float(self.cuff_forces_n(data).max())
 
@@ -342,6 +344,15 @@ class LimbPhysics:
             self.drive = PatientDrive(scene, condition, ranges_rad, frame_skip)
         self.torque_nm = self.drive.torque_nm if self.drive is not None else \
             np.zeros(len(scene.exercised_joints))
+        # MyoSuite's legs: the exercised leg's muscles (None for the rigid patient).
+        self.muscles = None
+        if len(scene.muscle_actuator_ids):
+            if self.drive is not None:
+                raise ValueError("a condition that applies torques is not modelled on a "
+                                 "musculoskeletal patient")
+            side = scene.exercised_joints[0].rsplit("_", 1)[1]
+            self.muscles = MuscleMeter(scene.model, limb_muscles(
+                scene.model, scene.muscle_actuator_ids, side))
 
     def bind(self, data: mujoco.MjData) -> None:
         """Cache views of ``data``'s arrays (again after a pickle round trip)."""
@@ -356,6 +367,8 @@ class LimbPhysics:
             meter.reset(data)
         if self.drive is not None:
             self.drive.reset(data, rng)
+        if self.muscles is not None:
+            self.muscles.reset(data)
 
     def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float] | None,
              rng: np.random.Generator) -> tuple[str | None, float]:
@@ -363,6 +376,12 @@ class LimbPhysics:
         the first safety rule that fires (or None) and the largest cuff force [N]."""
         if self.drive is not None:
             self.drive.run(model, data, goal_rad, rng, self.meter)
+        elif self.muscles is not None:
+            after_step, count_muscles = self.meter.after_step, self.muscles.after_step
+            for _ in range(self.frame_skip):
+                mujoco.mj_step(model, data)
+                after_step(data)
+                count_muscles(data)
         elif len(self.meters) == 1:
             after_step = self.meter.after_step
             for _ in range(self.frame_skip):
@@ -376,14 +395,18 @@ class LimbPhysics:
                     meter.after_step(data)
         return self.safety.check_step(data)
 
-    def info(self) -> dict:
+    def info(self, data: mujoco.MjData) -> dict:
         """The patient's entries of the env's ``info``: the patient's torques on the exercised
         joints, the work of the patient and of the robot(s) [J], and the assistance ratio (the
-        robots' share of the positive work; 1.0 until the patient does positive work)."""
+        robots' share of the positive work; 1.0 until the patient does positive work); with
+        muscles, their entries too (:data:`rehabbot.sim.muscles.INFO_KEYS`)."""
         if len(self.meters) == 1:
             meter = self.meter
-            return {"patient_torque_nm": self.torque_nm.copy(), "patient_work_j": meter.patient_j,
+            info = {"patient_torque_nm": self.torque_nm.copy(), "patient_work_j": meter.patient_j,
                     "robot_work_j": meter.robot_j, "assistance_ratio": meter.assistance_ratio}
+            if self.muscles is not None:
+                info.update(self.muscles.info(data))
+            return info
         meters = self.meters
         patient_positive = sum(m.patient_positive_j for m in meters)
         robot_positive = sum(m.robot_positive_j for m in meters)

@@ -34,6 +34,7 @@ from rehabbot.sim import patient as pt
 from rehabbot.sim import statics
 from rehabbot.sim.handles import RobotHandle
 from rehabbot.sim.ik import RobotIK, quat_from_mat
+from rehabbot.sim.myo_patient import PATIENT_MODELS
 from rehabbot.sim.robots import ROBOT_NAMES, ImpedanceGains, get_robot
 
 PRESETS: dict[str, str] = {
@@ -88,6 +89,10 @@ class SceneOptions:
     ``menagerie_dir``            optional local MuJoCo Menagerie checkout (``~`` expanded):
                                  draw the robots with its UR5e meshes (looks only;
                                  collisions stay on our capsules; nothing is downloaded)
+    ``patient_model``            ``"rigid"`` (default: rigid links, joint-level
+                                 conditions) or ``"myo"`` (MyoSuite's musculoskeletal
+                                 legs, :mod:`rehabbot.sim.myo_patient`; ``hip`` and
+                                 ``knee`` only, default profile only)
     ============================ =========================================================
     """
 
@@ -102,9 +107,11 @@ class SceneOptions:
     furniture_gap_m: float = 0.003
     initial_pose_deg: tuple[tuple[str, float], ...] = ()
     menagerie_dir: str | None = None
+    patient_model: str = "rigid"
 
     def __post_init__(self) -> None:
         check_choice("cuff", self.cuff, CUFF_TYPES)
+        check_choice("patient_model", self.patient_model, PATIENT_MODELS)
         check_choice("robot", self.robot, ROBOT_NAMES)
         if self.gains is not None:
             if not isinstance(self.gains, ImpedanceGains):
@@ -183,7 +190,22 @@ class Scene:
     furniture_geom_ids: np.ndarray
     weight_level: int = 0
     home_setpoints: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    # The patient's muscles (MyoSuite's, patient_model="myo"; none for the rigid patient).
+    muscle_actuator_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    # Joints that follow another through a polynomial joint equality (MyoLeg's knee).
+    coupled_joints: tuple[CoupledJoint, ...] = ()
     _scratch: mujoco.MjData | None = None
+
+    @property
+    def patient_model(self) -> str:
+        """``"rigid"`` or ``"myo"`` (:data:`rehabbot.sim.myo_patient.PATIENT_MODELS`)."""
+        return self.options.patient_model
+
+    def follow_coupled_joints(self, qpos: np.ndarray) -> None:
+        """Set, in ``qpos``, the joints that follow another (:attr:`coupled_joints`) from the
+        joint they follow; nothing for the rigid patient."""
+        for coupled in self.coupled_joints:
+            coupled.follow(qpos)
 
     @property
     def n_robot_joints(self) -> int:
@@ -256,8 +278,59 @@ class Scene:
 
 
 def set_pose(model: mujoco.MjModel, qpos: np.ndarray, pose_deg: dict) -> None:
+    """Write the joint angles ``pose_deg`` (name -> deg) into ``qpos``; the joints coupled to
+    them by joint equalities follow."""
     for name, value in pose_deg.items():
         qpos[model.joint(name).qposadr[0]] = math.radians(value)
+    for coupled in coupled_joints(model):
+        coupled.follow(qpos)
+
+
+@dataclass(frozen=True)
+class CoupledJoint:
+    """A joint that follows another through a MuJoCo joint equality:
+    ``q1 - q1_ref = c0 + c1 (q2 - q2_ref) + ... + c4 (q2 - q2_ref)^4`` (the refs: ``qpos0``)."""
+
+    qpos_adr: int
+    leader_qpos_adr: int
+    dof_adr: int
+    leader_dof_adr: int
+    coefficients: tuple[float, ...]
+    reference: float
+    leader_reference: float
+
+    def follow(self, qpos: np.ndarray) -> None:
+        """Set this joint in ``qpos`` from its leader's value there."""
+        x = float(qpos[self.leader_qpos_adr]) - self.leader_reference
+        value = 0.0
+        for c in reversed(self.coefficients):
+            value = value * x + c
+        qpos[self.qpos_adr] = self.reference + value
+
+    def slope(self, qpos: np.ndarray) -> float:
+        """d(this joint) / d(its leader) at ``qpos``."""
+        x = float(qpos[self.leader_qpos_adr]) - self.leader_reference
+        value = 0.0
+        for power in range(len(self.coefficients) - 1, 0, -1):
+            value = value * x + power * self.coefficients[power]
+        return value
+
+
+def coupled_joints(model: mujoco.MjModel) -> tuple[CoupledJoint, ...]:
+    """The active joint equalities of ``model`` that make one joint follow another (a joint
+    equality without a second joint holds its joint still and is left out)."""
+    found = []
+    for eq in range(model.neq):
+        if model.eq_type[eq] != mujoco.mjtEq.mjEQ_JOINT or not model.eq_active0[eq] \
+                or model.eq_obj2id[eq] < 0:
+            continue
+        joint, leader = int(model.eq_obj1id[eq]), int(model.eq_obj2id[eq])
+        adr, leader_adr = int(model.jnt_qposadr[joint]), int(model.jnt_qposadr[leader])
+        found.append(CoupledJoint(adr, leader_adr, int(model.jnt_dofadr[joint]),
+                                  int(model.jnt_dofadr[leader]),
+                                  tuple(float(c) for c in model.eq_data[eq, :5]),
+                                  float(model.qpos0[adr]), float(model.qpos0[leader_adr])))
+    return tuple(found)
 
 
 IK_TOLERANCE_M = 1e-4
@@ -318,6 +391,8 @@ def balance_home(scene: Scene) -> np.ndarray:
     posture = scene.posture_dof_adr
     stiffness = model.jnt_stiffness[model.dof_jntid[posture]]
     qadr = model.jnt_qposadr[model.dof_jntid[posture]]
-    model.qpos_spring[qadr] = scene.home_qpos[qadr] + (data.qfrc_bias[posture]
-                                                       - load[posture]) / stiffness
+    # Gravity, and the muscles' passive forces (none on the rigid patient), on each joint;
+    # a joint led by another (MyoLeg's knee) passes its share on to its leader.
+    held = statics.reduced(scene, data, data.qfrc_bias - data.qfrc_actuator)
+    model.qpos_spring[qadr] = scene.home_qpos[qadr] + (held[posture] - load[posture]) / stiffness
     return statics.servo_setpoints(scene, data, load)

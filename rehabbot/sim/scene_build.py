@@ -7,11 +7,13 @@ two robots placed from the patient's landmarks and strapped to a hand or shin.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from rehabbot.common.checks import check_choice
+from rehabbot.sim import myo_patient as myo
 from rehabbot.sim import patient as pt
 from rehabbot.sim.handles import RobotHandle
 from rehabbot.sim.robots import RobotBuildOptions, get_robot
@@ -25,6 +27,7 @@ from rehabbot.sim.scene import (
     Scene,
     SceneOptions,
     check_weight_level,
+    coupled_joints,
     set_pose,
     solve_robot_home,
 )
@@ -55,6 +58,12 @@ def _default_posture(preset: str) -> str:
     return "supine" if preset == "hip" else "seated"
 
 
+# MyoLeg's feet, seated: relaxed in 15 deg of plantarflexion. Its toes reach 7 cm further
+# forward than the rigid foot's; at the rigid foot's neutral ankle they came within 4 mm of the
+# robot's forearm at home and struck it as the knee extended.
+_MYO_SEATED_FEET = {"ankle_dorsiflexion_r": -15, "ankle_dorsiflexion_l": -15}
+
+
 def _home_pose_deg(posture: str, limbs: tuple[str, ...], options: SceneOptions) -> dict:
     pose = dict(_SEATED if posture == "seated" else _SUPINE)
     if posture == "seated":
@@ -62,6 +71,8 @@ def _home_pose_deg(posture: str, limbs: tuple[str, ...], options: SceneOptions) 
             arm = _ARM_CUFFED if f"arm_{s}" in limbs else _ARM_REST
             for joint, value in arm.items():
                 pose[f"{joint}_{s}"] = value
+        if options.patient_model == "myo":
+            pose.update(_MYO_SEATED_FEET)
     pose.update(dict(options.initial_pose_deg))
     return pose
 
@@ -151,6 +162,8 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
         raise ValueError(f"side={opts.side!r} applies to 'hip' and 'knee' only; for the arms "
                          "choose the preset upper_right, upper_left or upper_bilateral")
     limbs = _limbs_for(preset, opts.side)
+    if opts.patient_model == "myo":
+        _check_myo_scene(preset, profile)
     pose_deg = _home_pose_deg(posture, limbs, opts)
 
     spec = mujoco.MjSpec()
@@ -175,7 +188,15 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
         bed_top = 0.62
         torso_pos = np.array([0.0, 0.0, bed_top + 0.2])  # refined below
         torso_quat = np.array([math.cos(-math.pi / 4), 0.0, math.sin(-math.pi / 4), 0.0])
-    geometry = pt.add_patient(spec, spec.worldbody, profile, torso_pos, torso_quat, limbs)
+    geometry = pt.add_patient(spec, spec.worldbody, profile, torso_pos, torso_quat, limbs,
+                              legs=opts.patient_model == "rigid")
+    myo_legs = None
+    if opts.patient_model == "myo":
+        # The hips' midpoint in the pelvis frame (the pelvis hangs middle_trunk below XYPH).
+        hips = (geometry.hip_r + geometry.hip_l) / 2 + [0.0, 0.0, seg["middle_trunk"].length_m]
+        myo_legs = myo.add_myo_legs(spec, spec.body("pelvis"), hips, pt.CONTYPE_PATIENT,
+                                    pt.CONAFFINITY_PATIENT, limbs)
+    parts = _patient_parts(limbs, myo_legs)
     model0 = spec.compile()
     data0 = mujoco.MjData(model0)
     set_pose(model0, data0.qpos, pose_deg)
@@ -185,7 +206,7 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
                      if model0.geom_contype[g] == pt.CONTYPE_PATIENT]
 
     def lowest(names: tuple[str, ...]) -> float:
-        ids = [model0.geom(n).id for n in names]
+        ids = [model0.geom(g).id for n in names for g in parts.segment_geoms.get(n, (n,))]
         return min(_lowest_z(model0, data0, g) for g in ids)
 
     gap = opts.furniture_gap_m
@@ -222,7 +243,7 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
             from rehabbot.sim.robots.menagerie import add_menagerie_visuals
 
             add_menagerie_visuals(spec, prefix, opts.menagerie_dir)
-        cuffed = pt.LIMB_BODIES[limb][1:]  # forearm+hand, or shank+foot
+        cuffed = parts.cuffed_bodies[limb]  # forearm+hand, or shank+foot
         for link in robot.link_names[-robot.cuffed_links:]:  # the wrist, around the cuff
             for body in cuffed:
                 spec.add_exclude(bodyname1=f"{prefix}{link}", bodyname2=body)
@@ -250,12 +271,59 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
     if preset.startswith("upper"):
         focus = torso_pos + np.array([0.25, 0.0, -0.2])
     elif posture == "supine":
-        focus = data0.xpos[model0.body(f"thigh_{limbs[0][-1]}").id] + lift + [0.3, 0.0, 0.15]
+        focus = data0.xpos[model0.body(parts.body(f"thigh_{limbs[0][-1]}")).id] + lift \
+            + [0.3, 0.0, 0.15]
     else:
-        focus = data0.xpos[model0.body(f"shank_{limbs[0][-1]}").id] + lift + [0.1, 0.0, 0.1]
+        focus = data0.xpos[model0.body(parts.body(f"shank_{limbs[0][-1]}")).id] + lift \
+            + [0.1, 0.0, 0.1]
     _add_cameras(spec, focus, side)
     model = spec.compile()
-    return _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
+    return _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level, parts)
+
+
+@dataclass(frozen=True)
+class _PatientParts:
+    """The names a scene needs of its patient's body: the rigid patient's tables, or those of
+    the rigid upper body with MyoSuite's legs."""
+
+    joint_names: tuple[str, ...]
+    limb_bodies: dict[str, tuple[str, ...]]
+    cuffed_bodies: dict[str, tuple[str, ...]]
+    segment_geoms: dict[str, tuple[str, ...]]
+    segment_body: dict[str, str]
+    muscle_names: tuple[str, ...]
+
+    def body(self, segment: str) -> str:
+        """The body bearing the rigid patient's ``segment`` (``"shank_r"``)."""
+        return self.segment_body.get(segment, segment)
+
+
+def _patient_parts(limbs: tuple[str, ...], legs: myo.MyoLegs | None) -> _PatientParts:
+    if legs is None:
+        return _PatientParts(
+            joint_names=pt.JOINT_NAMES,
+            limb_bodies={limb: pt.LIMB_BODIES[limb] for limb in limbs},
+            cuffed_bodies={limb: pt.LIMB_BODIES[limb][1:] for limb in limbs},
+            segment_geoms={}, segment_body={}, muscle_names=())
+    rigid = tuple(n for n in pt.JOINT_NAMES if n not in pt.LEG_JOINT_NAMES)
+    return _PatientParts(
+        joint_names=rigid + legs.joint_names,
+        limb_bodies={limb: legs.limb_bodies[limb] for limb in limbs},
+        # Below the knee: the patella, tibia, talus, calcaneus and toes.
+        cuffed_bodies={limb: legs.limb_bodies[limb][1:] for limb in limbs},
+        segment_geoms=legs.segment_geoms, segment_body=legs.segment_body,
+        muscle_names=legs.muscle_names)
+
+
+def _check_myo_scene(preset: str, profile: pt.PatientProfile) -> None:
+    """MyoSuite's legs: the leg presets and the default profile only."""
+    if preset not in ("hip", "knee"):
+        raise ValueError(f"patient_model='myo' is built for the leg presets 'hip' and 'knee' "
+                         f"only, not {preset!r}: MyoSuite's arm is not seated in RehabBot's "
+                         f"scenes yet")
+    if profile != pt.PatientProfile():
+        raise ValueError(f"patient_model='myo': MyoSuite's legs are one adult size, so the "
+                         f"profile must be the default {pt.PatientProfile()}, got {profile}")
 
 
 # The lowest a robot's base may sit above the floor: the stand's foot and plate [m].
@@ -358,7 +426,8 @@ def _add_cameras(spec: mujoco.MjSpec, target: np.ndarray, side: float) -> None:
                                   xyaxes=[*x_axis, *y_axis], fovy=50.0)
 
 
-def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level) -> Scene:
+def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level,
+                  parts: _PatientParts) -> Scene:
     robot = get_robot(opts.robot)
     robots = []
     for k, limb in enumerate(limbs):
@@ -383,14 +452,15 @@ def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
                                if model.geom_bodyid[g] in robot_bodies]),
         ))
     exercised = tuple(j for limb in limbs for j in pt.LIMB_EXERCISE_JOINTS[limb])
-    patient_joints = [model.joint(n) for n in pt.JOINT_NAMES]
+    patient_joints = [model.joint(n) for n in parts.joint_names]
     compliant = tuple(j for j in exercised if j.rsplit("_", 1)[0]
                       not in _HELD_BY_PATIENT.get((preset, posture), ()))
     posture_dofs = np.array([j.dofadr[0] for j in patient_joints if j.name not in compliant])
-    limb_bodies = np.array([model.body(b).id for limb in limbs for b in pt.LIMB_BODIES[limb]])
+    limb_bodies = np.array([model.body(b).id for limb in limbs for b in parts.limb_bodies[limb]])
 
-    # Exercised joints: low-tone passive visco-elasticity about the home posture.
-    for name in compliant:
+    # Exercised joints: low-tone passive visco-elasticity about the home posture (MyoSuite's
+    # legs: their muscles' passive forces and their own joint damping instead).
+    for name in compliant if opts.patient_model == "rigid" else ():
         joint = model.joint(name)
         passive = pt.passive_for(name)
         model.jnt_stiffness[joint.id] = passive.stiffness_nm_per_rad
@@ -419,7 +489,7 @@ def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
         compliant_dof_adr=np.array([model.joint(n).dofadr[0] for n in compliant]),
         posture_dof_adr=posture_dofs,
         patient_qpos_adr=np.array([j.qposadr[0] for j in patient_joints]),
-        patient_joint_names=pt.JOINT_NAMES,
+        patient_joint_names=parts.joint_names,
         patient_actuator_ids=np.array([model.actuator(f"effort_{n}").id for n in exercised]),
         limb_body_ids=limb_bodies,
         nominal_body_mass=model.body_mass.copy(),
@@ -430,6 +500,9 @@ def _finish_scene(preset, profile, opts, posture, model, limbs, pose_deg, level)
                                    if model.geom_contype[g] == pt.CONTYPE_PATIENT]),
         furniture_geom_ids=np.array([g for g in range(model.ngeom)
                                      if model.geom_conaffinity[g] == CONAFFINITY_FURNITURE]),
+        muscle_actuator_ids=np.array([model.actuator(n).id for n in parts.muscle_names],
+                                     dtype=int),
+        coupled_joints=coupled_joints(model),
     )
     _set_posture_springs(scene, ik_data)
     scene.set_weight_level(level)

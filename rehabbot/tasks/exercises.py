@@ -143,17 +143,39 @@ EXERCISES: dict[str, tuple[Exercise, ...]] = {
 }
 
 
-def exercises_for(limb: str) -> tuple[Exercise, ...]:
-    """The built-in exercises of ``limb`` (``e = 0, 1, ...`` in this order)."""
+# The built-in exercises of MyoSuite's legs (patient_model="myo") where they differ. Seated
+# with the hip at 90 deg, MyoLeg's passive hamstrings resist knee extension with 22 N m at
+# 30 deg and 40 N m at full extension; held at 20 deg, the cuff carries 143 N at weight level
+# 4, beyond the lower leg's ISO/TS 15066 limit (130 N); at 35 deg, 108 N
+# (docs/results/myo-patient.md, from benchmarks/results/myo_patient.py). Its knee extension
+# ends at 35 deg.
+MYO_EXERCISES: dict[str, tuple[Exercise, ...]] = {
+    "knee": (
+        Exercise("knee_extension",
+                 "seated knee extension 90 -> 35 deg and back to 60 deg, hip held at 90 deg "
+                 "(as far as the hamstrings of MyoSuite's leg allow within the cuff's limit)",
+                 tuple({"knee_flexion": a} for a in (75, 65, 55, 45, 35, 60))),
+        EXERCISES["knee"][1],
+    ),
+}
+
+
+def exercises_for(limb: str, patient_model: str = "rigid") -> tuple[Exercise, ...]:
+    """The built-in exercises of ``limb`` (``e = 0, 1, ...`` in this order) for the patient
+    model (``"rigid"`` or ``"myo"``: :data:`MYO_EXERCISES` where they differ)."""
     check_choice("limb", limb, LIMBS)
+    if patient_model == "myo" and limb in MYO_EXERCISES:
+        return MYO_EXERCISES[limb]
     return EXERCISES[limb]
 
 
-def exercise_table(limb: str, exercises: Sequence[Any] | None) -> tuple[Exercise, ...]:
-    """The exercises an env of ``limb`` uses: the built-in ones, or ``exercises`` (Exercise
-    objects or dicts), checked against the limb and for unique names."""
+def exercise_table(limb: str, exercises: Sequence[Any] | None,
+                   patient_model: str = "rigid") -> tuple[Exercise, ...]:
+    """The exercises an env of ``limb`` uses: the built-in ones (of ``patient_model``), or
+    ``exercises`` (Exercise objects or dicts), checked against the limb and for unique
+    names."""
     if exercises is None:
-        return exercises_for(limb)
+        return exercises_for(limb, patient_model)
     if isinstance(exercises, (str, bytes, Mapping)) or not isinstance(exercises, Sequence) \
             or not exercises:
         raise ValueError(f"exercises must be a non-empty sequence of Exercise objects (or "

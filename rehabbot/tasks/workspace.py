@@ -118,6 +118,7 @@ def solve_workspace(scene: Scene, grid_deg: np.ndarray, max_jump_rad: float = 0.
     for row in grid_deg[order]:
         nearest = int(np.argmin(np.max(np.abs(np.array(solved_deg) - row), axis=1)))
         data.qpos[scene.exercised_qpos_adr] = np.radians(row)
+        scene.follow_coupled_joints(data.qpos)
         mujoco.mj_kinematics(model, data)
         q, err = ik.solve(data, handle, data.site_xpos[site].copy(),
                           quat_from_mat(data.site_xmat[site]), solved_q[nearest], posture=rest)
