@@ -61,6 +61,10 @@ images: $(STAMP)
 	  MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot snapshot $$preset --out docs/images/$$preset.png \
 	    --width 640 --height 480 || exit 1; \
 	done
+	for preset in hip knee; do \
+	  MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot snapshot $$preset --patient-model myo \
+	    --out docs/images/$$preset-myo.png --width 640 --height 480 || exit 1; \
+	done
 
 # Build outputs and caches; keeps the virtual environment and runs/ (experiment results).
 clean:

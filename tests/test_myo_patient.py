@@ -204,6 +204,29 @@ def test_the_evaluation_tabulates_the_muscles():
     assert "peak muscle force [N]" in table and "muscle work on the limb [J]" in table
 
 
+# --------------------------------------------------------------------------- contracture
+
+
+def test_a_contracture_scales_the_muscles_passive_force_and_narrows_the_range():
+    healthy = gym.make("rehabbot/rehab-knee-myo-v2").unwrapped.scene
+    contracted = gym.make("rehabbot/rehab-knee-myo-v2",
+                          condition={"stiffness_scale": 1.3, "rom_scale": 0.8}).unwrapped.scene
+    for angle in (20.0, 60.0, 110.0):
+        ratio = (_passive_knee_torque_nm(contracted, angle, 90)
+                 / _passive_knee_torque_nm(healthy, angle, 90))
+        assert abs(ratio - 1.3) < 1e-9, (angle, ratio)  # only the right leg's muscles cross it
+    knee = healthy.model.joint("knee_flexion_r").id
+    low, high = contracted.model.jnt_range[knee]
+    full_low, full_high = healthy.model.jnt_range[knee]
+    home = healthy.home_qpos[healthy.model.joint("knee_flexion_r").qposadr[0]]
+    assert math.isclose(low, home + 0.8 * (full_low - home))
+    assert math.isclose(high, home + 0.8 * (full_high - home))
+    # Three times the passive force: holding the knee extended needs more than the cuff's
+    # limit, refused when the env is built, naming the target and the force.
+    with pytest.raises(ValueError, match=r"infeasible.*knee_flexion_r \d+ deg.*needs \d+ N"):
+        gym.make("rehabbot/rehab-knee-myo-v2", condition={"stiffness_scale": 3.0})
+
+
 # --------------------------------------------------------------------------- refusals
 
 
@@ -212,7 +235,7 @@ def test_what_the_myo_patient_does_not_support_is_refused_naming_it():
         gym.make("rehabbot/rehab-reach-v2", patient_model="myo")
     with pytest.raises(ValueError, match=r"one adult size.*height_m=1.6"):
         gym.make("rehabbot/rehab-knee-myo-v2", profile={"height_m": 1.6})
-    with pytest.raises(ValueError, match="spasticity_mas"):
+    with pytest.raises(ValueError, match=r"contracture only.*spasticity_mas"):
         gym.make("rehabbot/rehab-knee-myo-v2", condition={"spasticity_mas": "2"})
     with pytest.raises(ValueError, match=r"patient_model.*.bones."):
         gym.make("rehabbot/rehab-knee-v2", patient_model="bones")
@@ -237,3 +260,25 @@ def test_without_myo_sim_the_error_names_the_extra(monkeypatch):
     finally:
         monkeypatch.undo()
         mp._legs_template.cache_clear()
+
+
+# --------------------------------------------------------------------------- the command line
+
+
+def test_snapshot_draws_the_myo_legs_and_refuses_them_on_an_arm(tmp_path, capsys):
+    imageio = pytest.importorskip("imageio.v2")
+    from rehabbot.cli import main
+
+    shots = {}
+    for model in ("rigid", "myo"):
+        out = tmp_path / f"{model}.png"
+        assert main(["snapshot", "knee", "--patient-model", model, "--out", str(out),
+                     "--width", "160", "--height", "120"]) == 0
+        shots[model] = imageio.imread(out)
+    assert np.any(shots["rigid"] != shots["myo"], axis=-1).mean() > 0.01
+    capsys.readouterr()
+    assert main(["snapshot", "upper_right", "--patient-model", "myo",
+                 "--out", str(tmp_path / "arm.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'hip' and 'knee' only" in err[0]
+    assert not (tmp_path / "arm.png").exists()

@@ -71,7 +71,11 @@ VALIDATION_PROFILES = {
     "m170": {"height_m": 1.70, "mass_kg": 68.0, "sex": "male"},
     "m180": {"height_m": 1.80, "mass_kg": 82.0, "sex": "male"},
 }
-PROFILE_SETS = {"test": PROFILES, "validation": VALIDATION_PROFILES}
+# MyoSuite's legs are one adult size (patient_model="myo" is built for the default profile
+# only): their runs are evaluated on the patient they trained on.
+TRAINED_PROFILES = {"m175": None}
+PROFILE_SETS = {"test": PROFILES, "validation": VALIDATION_PROFILES,
+                "trained": TRAINED_PROFILES}
 DEFAULT_SEED = 50_000
 TITLE = "Results on the -v2 ids: plain networks, held-out episodes"
 INTRO = """Every trained run's final model acts deterministically on held-out episodes that cover
@@ -88,6 +92,17 @@ woman and 1.70 m and 1.80 m men, seeds from 40 000) than these. The per-cell tab
 every seed of a row; a cell's stops name the safety rule that ended those episodes. Every
 episode is in the `data` of this page's JSON file, from which the command below renders this
 page again."""
+TRAINED_TITLE = "Results on the musculoskeletal patient: plain networks, the trained patient"
+TRAINED_INTRO = """Every trained run's final model acts deterministically on every exercise x
+weight level (0-4) of the patient it trained on (`m175`: MyoSuite's legs are one adult size, so
+no other patient can be seated; `--profiles trained`): {per_cell} episodes per cell, episode
+seeds from {seed}, far from every seed training used and the same for every run and for the
+scripted expert. The home state has no noise, so a deterministic policy plays the same episode
+in a cell whatever its seed: this page measures whether a policy finishes every exercise at
+every weight level on this patient, not how it carries over to other patients. "success IQM"
+is the interquartile mean of the seeds' success rates with a 95 % percentile-bootstrap
+interval over seeds (rliable). Every episode is in the `data` of this page's JSON file, from
+which the command below renders this page again."""
 SUMMARY_COLUMNS = ("env", "algo", "training (from the runs' manifests)", "seeds",
                    "success per seed", "success IQM [95 % CI]", "expert")
 HEADLINE_COLUMNS = ("env", "algo", "success IQM [95 % CI]", "expert")
@@ -386,9 +401,11 @@ def learning_document(results: dict[tuple[str, str], list[dict]], args: argparse
     data = {"per_cell": args.per_cell, "seed": args.seed, "profile_set": args.profiles,
             "profiles": profiles,
             "results": [{"env_id": k[0], "algo": k[1], "runs": v} for k, v in results.items()]}
+    trained = args.profiles == "trained"
     return make_document(
-        title=TITLE, intro=INTRO.format(per_cell=args.per_cell, seed=args.seed,
-                                        profiles=args.profiles),
+        title=TRAINED_TITLE if trained else TITLE,
+        intro=(TRAINED_INTRO if trained else INTRO).format(
+            per_cell=args.per_cell, seed=args.seed, profiles=args.profiles),
         command=command, generated_by=__file__, sweeps=list(sweeps),
         tables=[*summary_tables(results, tuple(profiles)), runs_table(results, sweeps)],
         seeds={"first_episode_seed": args.seed, "episodes_per_cell": args.per_cell,
@@ -408,7 +425,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--profiles", choices=tuple(PROFILE_SETS), default="test",
                         help="the patients: test (the training profile and two held out; "
                              "the published tables) or validation (three others, on which "
-                             "zoo agents are chosen)")
+                             "zoo agents are chosen) or trained (the training profile only: "
+                             "MyoSuite's legs, one adult size)")
     parser.add_argument("--json", type=Path, help="write every episode to this file")
     parser.add_argument("--skrl", type=Path, nargs="+", default=[], metavar="RESULT.json",
                         help="result.json files of examples/skrl_sac.py or skrl_ppo.py, shown "

@@ -47,7 +47,7 @@ def _load_scene(args: argparse.Namespace) -> Scene:
         )
     try:
         profile = _profile_from_args(args)
-        options = {"robot": args.robot}
+        options = {"robot": args.robot, "patient_model": args.patient_model}
         if getattr(args, "menagerie", None) is not None:
             options["menagerie_dir"] = args.menagerie
         return build_scene(args.scene, profile=profile, weight_level=args.weight_level,
@@ -202,6 +202,11 @@ def _add_scene_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--robot", default="ur5e", metavar="NAME",
         help="the robot on each cuff: ur5e (default, the paper's) or fr3 (Franka Research 3)",
+    )
+    parser.add_argument(
+        "--patient-model", choices=("rigid", "myo"), default="rigid",
+        help="the patient's body: rigid (default) or myo (MyoSuite's musculoskeletal legs; "
+             "hip and knee scenes, default profile; pip install \"rehabbot[myo]\")",
     )
     parser.add_argument(
         "--menagerie", metavar="DIR",

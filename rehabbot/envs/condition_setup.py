@@ -1,9 +1,11 @@
 """Fitting a scene and its exercises to a patient's condition, once, when an env is built.
 
 * **Contracture**: the compliant exercised joints' passive stiffness and damping are multiplied
-  by ``stiffness_scale``; their ranges shrink to ``rom_scale`` of their extent on either side
-  of the home posture, and so do the exercises' key poses (so every target stays inside the
-  patient's reduced range, and the range-of-motion rule checks the reduced range).
+  by ``stiffness_scale`` (on MyoSuite's legs: the exercised leg's muscles' passive
+  force-length curve, and the joints' damping); their ranges shrink to ``rom_scale`` of their
+  extent on either side of the home posture, and so do the exercises' key poses (so every
+  target stays inside the patient's reduced range, and the range-of-motion rule checks the
+  reduced range).
 * **Feasibility** (:func:`check_condition_forces`): at every target of every exercise, the cuff
   force that holds the limb against gravity, the scaled passive springs, the tremor's peak and
   a resistive patient's full push must stay within the cuff's force limit; otherwise the env is
@@ -22,6 +24,7 @@ import numpy as np
 
 from rehabbot.sim import statics
 from rehabbot.sim.conditions import PatientCondition, healthy_strength_nm
+from rehabbot.sim.muscles import limb_muscles, scale_passive_force
 from rehabbot.sim.patient_drive import TREMOR_MODULATION
 from rehabbot.sim.scene import Scene
 from rehabbot.tasks.exercises import Exercise
@@ -35,10 +38,18 @@ def compliant_joint_names(scene: Scene) -> tuple[str, ...]:
 
 
 def scale_passive(scene: Scene, condition: PatientCondition) -> None:
-    """Multiply the compliant joints' stiffness and damping by ``stiffness_scale``."""
+    """Multiply the compliant joints' stiffness and damping by ``stiffness_scale``; on
+    MyoSuite's legs, the exercised leg's muscles' passive force-length curve (their
+    ``fpmax``) and the compliant joints' damping."""
     if condition.stiffness_scale == 1.0:
         return
     model = scene.model
+    if len(scene.muscle_actuator_ids):
+        side = scene.exercised_joints[0].rsplit("_", 1)[1]
+        scale_passive_force(model, limb_muscles(model, scene.muscle_actuator_ids, side),
+                            condition.stiffness_scale)
+        model.dof_damping[scene.compliant_dof_adr] *= condition.stiffness_scale
+        return
     for dof in scene.compliant_dof_adr:
         model.jnt_stiffness[model.dof_jntid[dof]] *= condition.stiffness_scale
         model.dof_damping[dof] *= condition.stiffness_scale
@@ -140,8 +151,17 @@ def _holding_force_n(scene: Scene, data: mujoco.MjData, sequence: TargetSequence
     data.qvel[:] = 0.0
     mujoco.mj_forward(model, data)
     dofs = scene.compliant_dof_adr
-    jac = statics.cuff_jacobian(scene, data)[:, dofs].T
-    need = data.qfrc_bias[dofs] - data.qfrc_spring[dofs]
+    jac = statics.cuff_jacobian(scene, data)
+    if len(scene.muscle_actuator_ids) or scene.coupled_joints:
+        # Muscles' passive forces, and joints that follow another (MyoSuite's legs).
+        generalised = data.qfrc_bias - data.qfrc_spring - data.qfrc_actuator
+        coupling = statics.coupling_map(scene, data)
+        if coupling is not None:
+            jac, generalised = jac @ coupling, coupling.T @ generalised
+        need = generalised[dofs]
+    else:
+        need = data.qfrc_bias[dofs] - data.qfrc_spring[dofs]
+    jac = jac[:, dofs].T
     need = need + np.where(need >= 0.0, push_nm, -push_nm)
     force, *_ = np.linalg.lstsq(jac, need, rcond=None)
     return float(np.linalg.norm(force))

@@ -439,19 +439,25 @@ class RehabEnvConfig:
         return self.safety.thresholds()
 
 
+# The condition fields MyoSuite's legs model (a contracture: envs/condition_setup.py).
+MYO_CONDITION_FIELDS: tuple[str, ...] = ("stiffness_scale", "rom_scale")
+
+
 def check_myo_patient(patient: PatientConfig) -> None:
     """What MyoSuite's legs support today: the default profile (they are one adult size) and
-    the passive patient of relaxed muscles. ``ValueError`` naming what is not."""
+    a passive patient of relaxed muscles, contracted or not (:data:`MYO_CONDITION_FIELDS`).
+    ``ValueError`` naming what is not."""
     if patient.profile != PatientProfile():
         raise ValueError(f"patient_model='myo': MyoSuite's legs are one adult size, so the "
                          f"profile must be the default {PatientProfile()}, got "
                          f"{patient.profile}")
     changed = {name: value for name, value in patient.condition.to_dict().items()
-               if value != PatientCondition().to_dict()[name]}
+               if value != PatientCondition().to_dict()[name]
+               and name not in MYO_CONDITION_FIELDS}
     if changed:
-        raise ValueError(f"patient_model='myo' has no muscle model of a condition yet (its "
-                         f"muscles are passive); condition field(s) {changed} act on the rigid "
-                         f"patient only")
+        raise ValueError(f"patient_model='myo' models a contracture only (its muscles' passive "
+                         f"force, {list(MYO_CONDITION_FIELDS)}); condition field(s) {changed} "
+                         f"act on the rigid patient only, not yet on muscles")
 
 
 def kwarg_names(config_class: type = RehabEnvConfig) -> tuple[str, ...]:

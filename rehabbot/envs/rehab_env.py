@@ -108,6 +108,14 @@ joints), ``info["patient_work_j"]`` and ``info["robot_work_j"]`` (work on the li
 counted every physics step) and ``info["assistance_ratio"]`` (the robot's share of the positive
 work; 1.0 until the patient does positive work).
 
+``patient_model="myo"`` (the knee and hip ids; ``rehab-knee-myo-v2``, ``rehab-hip-myo-v2``)
+seats MyoSuite's musculoskeletal legs (:mod:`rehabbot.sim.myo_patient`, 80 passive muscles;
+``pip install "rehabbot[myo]"``; default profile only, no condition yet). Its ``info`` adds
+the exercised leg's muscles (:mod:`rehabbot.sim.muscles`): ``muscle_excitation`` and
+``muscle_activation`` (means, 0-1), ``muscle_force_n`` (their total pull), ``peak_muscle_force_n``
+(the largest pull of one muscle since reset) and ``muscle_work_j`` (their forces' work on the
+limb since reset; negative when they absorb the robot's work).
+
 ## Starting state
 The home posture of the scene (cuff satisfied, static equilibrium), no noise. The exercise and
 the weight level are drawn from ``np_random`` unless fixed by the constructor or by
@@ -151,6 +159,7 @@ applied on top; ``RehabEnv(config)`` takes a whole config instead.
 | ``base_reorientation_deg`` | scene | 0.0 | rotation of the robot base about its vertical axis, in [-180, 180] |
 | ``frame_skip`` | control | 10 | physics steps per decision |
 | ``timestep_s`` | scene | 0.002 | physics step in [1e-4, 0.005] s; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
+| ``patient_model`` | scene | ``"rigid"`` | the patient's body: ``"rigid"`` links, or ``"myo"``: MyoSuite's musculoskeletal legs (knee and hip only) |
 | ``target_tolerance_rad`` | task | 0.05 | epsilon of eq. (5) |
 | ``reward`` | reward | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
 | ``observation`` | task | ``"paper"`` | ``"paper"`` (the paper's 23 fields, -v0 and -v1) or ``"agent"`` (the -v2 ids; see Observation space) |

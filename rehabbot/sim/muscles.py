@@ -24,6 +24,20 @@ def limb_muscles(model: mujoco.MjModel, muscle_ids: np.ndarray, side: str) -> np
                     dtype=int)
 
 
+# MuJoCo's muscle parameters (gainprm and biasprm hold the same nine): index of ``fpmax``, the
+# passive force at ``lmax`` as a fraction of the peak isometric force.
+FPMAX_INDEX = 7
+
+
+def scale_passive_force(model: mujoco.MjModel, muscle_ids: np.ndarray, scale: float) -> None:
+    """Multiply the passive force-length curve of ``muscle_ids`` by ``scale`` (their
+    ``fpmax``): a contracture's stiffer muscles (``PatientCondition.stiffness_scale``)."""
+    if not scale > 0.0:
+        raise ValueError(f"scale={scale!r} must be > 0")
+    model.actuator_gainprm[muscle_ids, FPMAX_INDEX] *= scale
+    model.actuator_biasprm[muscle_ids, FPMAX_INDEX] *= scale
+
+
 class MuscleMeter:
     """Counts the muscles' work and peak force after every physics step (:meth:`after_step`)
     and reports them with their state (:meth:`info`, the env's ``info`` entries
