@@ -110,11 +110,12 @@ work; 1.0 until the patient does positive work).
 
 ``patient_model="myo"`` (the knee and hip ids; ``rehab-knee-myo-v2``, ``rehab-hip-myo-v2``)
 seats MyoSuite's musculoskeletal legs (:mod:`rehabbot.sim.myo_patient`, 80 passive muscles;
-``pip install "rehabbot[myo]"``; default profile only, no condition yet). Its ``info`` adds
-the exercised leg's muscles (:mod:`rehabbot.sim.muscles`): ``muscle_excitation`` and
-``muscle_activation`` (means, 0-1), ``muscle_force_n`` (their total pull), ``peak_muscle_force_n``
-(the largest pull of one muscle since reset) and ``muscle_work_j`` (their forces' work on the
-limb since reset; negative when they absorb the robot's work).
+``pip install "rehabbot[myo]"``; the default profile only; of the conditions, a contracture
+only). Its ``info`` adds the exercised leg's muscles (:mod:`rehabbot.sim.muscles`):
+``muscle_excitation`` and ``muscle_activation`` (means, 0-1), ``muscle_force_n`` (their total
+pull), ``peak_muscle_force_n`` (the largest pull of one muscle since reset) and
+``muscle_work_j`` (their forces' work on the limb since reset; negative when they absorb the
+robot's work).
 
 ## Starting state
 The home posture of the scene (cuff satisfied, static equilibrium), no noise. The exercise and
