@@ -34,6 +34,8 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"
 PAGES = sorted(RESULTS.glob("*.json"))
 LEARNING = RESULTS / "learning-v2.json"
+# The pages of trained runs' held-out episodes (benchmarks/results/stratified_results.py).
+LEARNING_PAGES = sorted(RESULTS.glob("learning-*.json"))
 
 
 def page_id(path: Path) -> str:
@@ -128,14 +130,15 @@ def test_a_changed_sweep_or_run_fails_the_comparison(tmp_path: Path) -> None:
     assert sorted(sweep_keys(sweep)) != sorted([(*rows[0][:3], 7, *rows[0][4:]), *rows[1:]])
 
 
-def test_the_learning_tables_are_what_its_episodes_give() -> None:
-    """The learning page's tables are computed again from the episodes in its JSON (no
+@pytest.mark.parametrize("path", LEARNING_PAGES, ids=page_id)
+def test_the_learning_tables_are_what_its_episodes_give(path: Path) -> None:
+    """A learning page's tables are computed again from the episodes in its JSON (no
     simulation) with its sweep files: none of its numbers was typed."""
     from benchmarks.results import stratified_results
 
-    document = load_document(LEARNING)
+    document = load_document(path)
     data = document["data"]
-    results, _ = stratified_results.load_results([LEARNING], data["per_cell"], data["seed"],
+    results, _ = stratified_results.load_results([path], data["per_cell"], data["seed"],
                                                  data["profile_set"])
     namespace = type("Args", (), {"per_cell": data["per_cell"], "seed": data["seed"],
                                   "profiles": data["profile_set"],

@@ -38,6 +38,10 @@ FAMILIES: tuple[tuple[str, str, str], ...] = (
     ("populations", "Patient populations",
      "A new patient (profile x condition) every episode, drawn from the `\"train\"` "
      "population; `patients=\"test\"` gives held-out patients."),
+    ("myo", "The musculoskeletal patient: the `-myo` ids",
+     "The base `-v2` knee and hip ids with MyoSuite's legs (`patient_model=\"myo\"`, 80 "
+     "muscles; `pip install \"rehabbot[myo]\"`; `docs/musculoskeletal-patient.md`). Same "
+     "spaces and reward as the base id; the muscles are in `info`."),
 )
 
 VERSIONS = {
@@ -54,6 +58,8 @@ def family_of(env_id: str, entry_point: str, kwargs: dict[str, Any]) -> str:
         return "populations"
     if entry_point.endswith(":BilateralEnv"):
         return "bilateral"
+    if kwargs.get("patient_model") == "myo":
+        return "myo"
     if "condition" in kwargs:
         return "conditions"
     return {"arm": "arm", "hip": "hip", "knee": "knee"}[kwargs.get("limb", "arm")]
