@@ -17,7 +17,7 @@ import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim import build_scene, statics
 from rehabbot.sim import myo_patient as mp
-from rehabbot.sim.muscles import INFO_KEYS
+from rehabbot.sim.muscles import INFO_KEYS, muscle_torque_nm
 
 pytest.importorskip("myo_sim", reason='patient_model="myo" needs pip install "rehabbot[myo]"')
 
@@ -30,17 +30,9 @@ def knee_scene():
 
 
 def _passive_knee_torque_nm(scene, knee_deg: float, hip_deg: float) -> float:
-    """The muscles' passive torque on the knee [N m] at a pose (their followers' share
-    included), zero excitation, from the scene's home state."""
-    model = scene.model
-    data = mujoco.MjData(model)
-    data.qpos[:] = scene.home_qpos
-    data.qpos[model.joint("hip_flexion_r").qposadr[0]] = math.radians(hip_deg)
-    data.qpos[model.joint("knee_flexion_r").qposadr[0]] = math.radians(knee_deg)
-    scene.follow_coupled_joints(data.qpos)
-    mujoco.mj_forward(model, data)
-    torque = statics.reduced(scene, data, data.qfrc_actuator)
-    return float(torque[model.joint("knee_flexion_r").dofadr[0]])
+    """The muscles' passive torque on the knee [N m] at a pose (zero excitation)."""
+    return muscle_torque_nm(scene, "knee_flexion_r",
+                            {"hip_flexion_r": hip_deg, "knee_flexion_r": knee_deg})
 
 
 # --------------------------------------------------------------------------- the scene

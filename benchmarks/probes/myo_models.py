@@ -24,15 +24,11 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
-import os
 import sys
-import tempfile
 import time
-import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -51,41 +47,14 @@ THROUGHPUT_MODELS = ("myoarm_r", "myolegs")
 RIGID_PRESETS = ("knee", "upper_right")
 
 
-# MuJoCo warns, in Python and on the C stderr, each time myo-sim attaches a part without a
-# name prefix (harmless here: the compiled model is never saved).
-EMPTY_PREFIX_WARNING = "Attaching a spec with an empty prefix"
-
-
-@contextlib.contextmanager
-def _without_empty_prefix_warnings() -> Iterator[None]:
-    """Drop MuJoCo's empty-prefix warning, from Python and from the C stderr; anything else
-    written to stderr is passed on."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile(mode="w+b") as captured, warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=EMPTY_PREFIX_WARNING)
-        os.dup2(captured.fileno(), 2)
-        try:
-            yield
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            captured.seek(0)
-            text = captured.read().decode(errors="replace")
-    rest = [line for line in text.splitlines() if line.strip() and EMPTY_PREFIX_WARNING not in line]
-    if rest:
-        print("\n".join(rest), file=sys.stderr)
-
-
 def build_myo_model(name: str) -> mujoco.MjModel:
-    """Compile myo-sim's ``name`` (a ``myo_sim.build.compose`` registry name)."""
+    """Compile myo-sim's ``name`` (a ``myo_sim.build.compose`` registry name), quietly."""
+    from rehabbot.sim.myo_patient import MyoModelMissingError, build_myo_spec
+
     try:
-        from myo_sim.build.compose import build_spec
-    except ImportError as err:
-        raise SystemExit("this probe needs MyoSuite's models: pip install myo-sim==0.2.3"
-                         ) from err
-    with _without_empty_prefix_warnings():
-        return build_spec(name).compile()
+        return build_myo_spec(name).compile()
+    except MyoModelMissingError as err:
+        raise SystemExit(str(err)) from err
 
 
 def _coupled_joints(model: mujoco.MjModel, joint_id: int) -> list[tuple[int, np.ndarray]]:

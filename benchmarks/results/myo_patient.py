@@ -34,6 +34,7 @@ from benchmarks.common.machine import describe_machine
 from rehabbot.envs.registration import MYO_VARIANTS
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim import build_scene, statics
+from rehabbot.sim.muscles import muscle_torque_nm
 
 INTRO = """MyoSuite's legs (`myo-sim` 0.2.3, 80 muscles, passive: zero excitation) seated and
 lying in RehabBot's scenes (`patient_model="myo"`, `rehabbot.sim.myo_patient`), measured
@@ -45,18 +46,6 @@ home setpoints (physics) and with zero actions (env steps), best of three, in th
 
 KNEE_ANGLES_DEG = tuple(range(0, 121, 15))
 HOLD_ANGLES_DEG = (90, 75, 60, 45, 35, 30, 25, 20)
-
-
-def passive_knee_torque_nm(scene, knee_deg: float, hip_deg: float) -> float:
-    model = scene.model
-    data = mujoco.MjData(model)
-    data.qpos[:] = scene.home_qpos
-    data.qpos[model.joint("hip_flexion_r").qposadr[0]] = math.radians(hip_deg)
-    data.qpos[model.joint("knee_flexion_r").qposadr[0]] = math.radians(knee_deg)
-    scene.follow_coupled_joints(data.qpos)
-    mujoco.mj_forward(model, data)
-    torque = statics.reduced(scene, data, data.qfrc_actuator + data.qfrc_passive)
-    return float(torque[model.joint("knee_flexion_r").dofadr[0]])
 
 
 def static_cuff_force_n(patient_model: str, level: int, knee_deg: float) -> float:
@@ -143,8 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     command = command_line(__file__, argv if argv is not None else sys.argv[1:])
     print(f"command: {command}", flush=True)
     scene = build_scene("knee", patient_model="myo")
-    curves = {f"hip_{hip}": [passive_knee_torque_nm(scene, a, hip) for a in KNEE_ANGLES_DEG]
-              for hip in (90, 0)}
+    curves = {f"hip_{hip}": [muscle_torque_nm(scene, "knee_flexion_r", {
+        "hip_flexion_r": hip, "knee_flexion_r": a}) for a in KNEE_ANGLES_DEG] for hip in (90, 0)}
     torque_table = make_table(
         "passive-torque", "MyoLeg's passive knee torque [N m] (positive: towards flexion, "
         "resisting extension), zero excitation",

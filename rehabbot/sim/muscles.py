@@ -14,6 +14,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from rehabbot.sim import statics
+from rehabbot.sim.scene import Scene, set_pose
+
 INFO_KEYS: tuple[str, ...] = ("muscle_excitation", "muscle_activation", "muscle_force_n",
                               "peak_muscle_force_n", "muscle_work_j")
 
@@ -22,6 +25,21 @@ def limb_muscles(model: mujoco.MjModel, muscle_ids: np.ndarray, side: str) -> np
     """The ids among ``muscle_ids`` whose name ends with ``_<side>`` (``"r"`` or ``"l"``)."""
     return np.array([i for i in muscle_ids if model.actuator(int(i)).name.endswith(f"_{side}")],
                     dtype=int)
+
+
+def muscle_torque_nm(scene: Scene, joint: str, pose_deg: dict[str, float]) -> float:
+    """The muscles' generalised force [N m] on ``joint`` of ``scene`` at a pose: the scene's
+    home state with the joints of ``pose_deg`` (name -> deg) moved there (the joints that
+    follow them too) and every velocity zero. With zero excitation it is the passive torque;
+    the share of the joints that follow ``joint`` (MyoLeg's knee) is included
+    (:func:`rehabbot.sim.statics.reduced`). Positive: towards the joint's positive angle."""
+    model = scene.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = scene.home_qpos
+    set_pose(model, data.qpos, pose_deg)
+    mujoco.mj_forward(model, data)
+    torque = statics.reduced(scene, data, data.qfrc_actuator)
+    return float(torque[model.joint(joint).dofadr[0]])
 
 
 # MuJoCo's muscle parameters (gainprm and biasprm hold the same nine): index of ``fpmax``, the

@@ -104,7 +104,10 @@ def _quiet_composition() -> Iterator[None]:
         print("\n".join(rest), file=sys.stderr)
 
 
-def _build_spec(name: str) -> mujoco.MjSpec:
+def build_myo_spec(name: str) -> mujoco.MjSpec:
+    """myo-sim's model ``name`` (a ``myo_sim.build.compose`` registry name: ``"myolegs"``,
+    ``"myoarm_r"``, ...) as an ``MjSpec``, built without MuJoCo's empty-prefix warnings.
+    Raises :class:`MyoModelMissingError` without myo-sim."""
     try:
         from myo_sim.build.compose import build_spec
     except ImportError as err:
@@ -117,7 +120,7 @@ def _build_spec(name: str) -> mujoco.MjSpec:
 @functools.lru_cache(maxsize=1)
 def _legs_template() -> mujoco.MjSpec:
     """MyoLeg as myo-sim builds it (1.3 s; built once per process, copied for each scene)."""
-    return _build_spec("myolegs")
+    return build_myo_spec("myolegs")
 
 
 def myo_available() -> bool:
