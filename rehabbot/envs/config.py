@@ -45,6 +45,7 @@ from typing import Any, ClassVar
 
 from rehabbot.common.checks import as_dataclass, check_choice, check_number
 from rehabbot.sim.conditions import PatientCondition, as_condition
+from rehabbot.sim.myo_patient import check_myo_profile
 from rehabbot.sim.patient import PatientProfile
 from rehabbot.sim.physics import ISO_TS_15066_QUASI_STATIC_N, SafetyThresholds
 from rehabbot.sim.robots import ROBOT_NAMES, get_robot
@@ -447,10 +448,7 @@ def check_myo_patient(patient: PatientConfig) -> None:
     """What MyoSuite's legs support today: the default profile (they are one adult size) and
     a passive patient of relaxed muscles, contracted or not (:data:`MYO_CONDITION_FIELDS`).
     ``ValueError`` naming what is not."""
-    if patient.profile != PatientProfile():
-        raise ValueError(f"patient_model='myo': MyoSuite's legs are one adult size, so the "
-                         f"profile must be the default {PatientProfile()}, got "
-                         f"{patient.profile}")
+    check_myo_profile(patient.profile)
     changed = {name: value for name, value in patient.condition.to_dict().items()
                if value != PatientCondition().to_dict()[name]
                and name not in MYO_CONDITION_FIELDS}

@@ -48,6 +48,7 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.extras import missing_module_message
+from rehabbot.sim.patient import PatientProfile
 
 PATIENT_MODELS: tuple[str, ...] = ("rigid", "myo")
 MYO_SIM_REQUIREMENT = "myo-sim==0.2.3"
@@ -76,6 +77,14 @@ LEG_CUFF_FRACTION = 0.75
 # MuJoCo warns, in Python and on the C stderr, each time myo-sim attaches one of its parts
 # without a name prefix while it composes a model.
 EMPTY_PREFIX_WARNING = "Attaching a spec with an empty prefix"
+
+
+def check_myo_profile(profile: PatientProfile) -> None:
+    """``ValueError`` unless ``profile`` is the default :class:`PatientProfile` (MyoLeg is one
+    adult size)."""
+    if profile != PatientProfile():
+        raise ValueError(f"patient_model='myo': MyoSuite's legs are one adult size, so the "
+                         f"profile must be the default {PatientProfile()}, got {profile}")
 
 
 class MyoModelMissingError(ImportError):

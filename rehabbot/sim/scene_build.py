@@ -321,9 +321,7 @@ def _check_myo_scene(preset: str, profile: pt.PatientProfile) -> None:
         raise ValueError(f"patient_model='myo' is built for the leg presets 'hip' and 'knee' "
                          f"only, not {preset!r}: MyoSuite's arm is not seated in RehabBot's "
                          f"scenes yet")
-    if profile != pt.PatientProfile():
-        raise ValueError(f"patient_model='myo': MyoSuite's legs are one adult size, so the "
-                         f"profile must be the default {pt.PatientProfile()}, got {profile}")
+    myo.check_myo_profile(profile)
 
 
 # The lowest a robot's base may sit above the floor: the stand's foot and plate [m].
