@@ -161,6 +161,26 @@ def test_info_reports_the_muscles_and_their_work_is_the_passive_torques_integral
         .observation_space.shape
 
 
+@pytest.mark.parametrize("myo_id", MYO_IDS)
+def test_a_myo_id_has_its_base_ids_spaces_at_every_weight_level_and_mode(myo_id):
+    from rehabbot.envs.registration import MYO_VARIANTS
+
+    def spaces(env_id, **kwargs):
+        env = gym.make(env_id, **kwargs)
+        obs, _info = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+        described = (repr(env.observation_space), repr(env.action_space),
+                     env.observation_space.low.tobytes(), env.observation_space.high.tobytes(),
+                     env.action_space.low.tobytes(), env.action_space.high.tobytes())
+        env.close()
+        return described
+
+    for mode in ("joint_delta", "joint_position"):
+        base = spaces(MYO_VARIANTS[myo_id], control_mode=mode)
+        for level in (0, 4):
+            assert spaces(myo_id, control_mode=mode, weight_level=level) == base, (mode, level)
+
+
 def test_the_rigid_patient_reports_no_muscles():
     env = gym.make("rehabbot/rehab-knee-v2")
     _obs, info = env.reset(seed=0)

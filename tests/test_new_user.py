@@ -17,7 +17,12 @@ import pytest
 
 import rehabbot
 from rehabbot.cli import main
-from rehabbot.envs.registration import CONDITION_VARIANTS, ENV_SPECS, POPULATION_VARIANTS
+from rehabbot.envs.registration import (
+    CONDITION_VARIANTS,
+    ENV_SPECS,
+    MYO_VARIANTS,
+    POPULATION_VARIANTS,
+)
 
 ENV = "rehab-reach-v0"
 FULL_ID = "rehabbot/rehab-reach-v0"
@@ -68,9 +73,11 @@ def test_a_bad_policy_fails_before_anything_is_written(trained_run, tmp_path, ca
                                     pytest.param(env_id, marks=pytest.mark.slow)
                                     for env_id in ENV_SPECS
                                     # (the variants share their base id's spaces: tested in
-                                    # test_conditions.py and test_population.py)
+                                    # test_conditions.py, test_population.py and, for MyoSuite's
+                                    # legs, which seat one profile, test_myo_patient.py)
                                     if env_id not in CONDITION_VARIANTS
-                                    and env_id not in POPULATION_VARIANTS])
+                                    and env_id not in POPULATION_VARIANTS
+                                    and env_id not in MYO_VARIANTS])
 def test_spaces_do_not_depend_on_the_patient_or_the_weight_level(env_id: str) -> None:
     for mode in ("joint_delta", "joint_position"):
         spaces = set()
