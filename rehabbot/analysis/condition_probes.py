@@ -4,7 +4,10 @@
   and Tardieu tests. The cuff is released, the robot stands aside, the limb's other compliant
   joints are held by stiff servos, and a velocity servo (the "dynamometer") moves one joint
   through part of its range at a constant speed. Returned per physics step: the angle, the
-  dynamometer's torque, the stretch-reflex torque and the passive joint torque.
+  dynamometer's torque, the stretch-reflex torque and the passive joint torque. On MyoSuite's
+  legs (``patient_model="myo"``) the reflex excites the stretched muscles
+  (:class:`~rehabbot.sim.muscle_drive.MuscleDrive`): its torque is their active force's, and the
+  passive torque includes their passive force.
 * :func:`tremor_spectrum`: the limb held still by the robot (zero actions) for some seconds;
   the power spectrum of one joint's angle (Hann window, linear trend removed) and its peak.
 
@@ -21,7 +24,10 @@ import mujoco
 import numpy as np
 
 from rehabbot.envs.rehab_env import RehabEnv
+from rehabbot.sim import statics
 from rehabbot.sim.conditions import PatientCondition, as_condition
+from rehabbot.sim.muscle_drive import MuscleDrive
+from rehabbot.sim.muscles import MuscleMeter, PassiveForce, moment_arms_m
 from rehabbot.sim.patient_drive import PatientDrive
 from rehabbot.sim.physics import WorkMeter
 
@@ -40,7 +46,7 @@ class StretchResult:
     velocity_deg_s: np.ndarray
     dynamometer_nm: np.ndarray  # torque the dynamometer applies to keep the speed
     reflex_nm: np.ndarray  # the stretch reflex's torque on the joint (opposes the motion)
-    passive_nm: np.ndarray  # the joint's passive spring and damper torque
+    passive_nm: np.ndarray  # the joint's passive spring and damper torque (and muscles')
     range_deg: tuple[float, float]  # the joint's range (reduced by rom_scale)
 
     @property
@@ -53,9 +59,10 @@ class StretchResult:
         return float(np.mean(self.resistance_nm > threshold_nm))
 
 
-def _probe_env(condition: PatientCondition, limb: str, side: str) -> RehabEnv:
+def _probe_env(condition: PatientCondition, limb: str, side: str,
+               patient_model: str = "rigid") -> RehabEnv:
     env = RehabEnv(limb=limb, side=side, condition=condition, weight_level=0,
-                   reward="progress", terminate_on_safety=False)
+                   reward="progress", terminate_on_safety=False, patient_model=patient_model)
     env.reset(seed=0)
     return env
 
@@ -72,14 +79,16 @@ def _make_servo(model: mujoco.MjModel, actuator: int, kp: float, kv: float) -> N
 
 def stretch_test(condition: PatientCondition | dict | None, joint: str = "elbow_flexion",
                  speed_deg_s: float = 100.0, limb: str = "arm", side: str = "right",
-                 sweep: tuple[float, float] = (0.05, 0.95)) -> StretchResult:
+                 sweep: tuple[float, float] = (0.05, 0.95),
+                 patient_model: str = "rigid") -> StretchResult:
     """Move ``joint`` (side-less name, a compliant joint of ``limb``) at ``speed_deg_s``
     (positive: the joint's positive direction) from ``sweep[0]`` to ``sweep[1]`` of its range
-    (fractions from the start of the stretch) with the cuff released."""
+    (fractions from the start of the stretch) with the cuff released; ``patient_model="myo"``
+    stretches MyoSuite's leg (``limb="knee"`` or ``"hip"``)."""
     condition = as_condition(condition)
     if not math.isfinite(speed_deg_s) or speed_deg_s == 0.0:
         raise ValueError(f"speed_deg_s={speed_deg_s!r} must be a finite, non-zero speed")
-    env = _probe_env(condition, limb, side)
+    env = _probe_env(condition, limb, side, patient_model)
     try:
         scene, model, data = env.scene, env.model, env.data
         names = [model.joint(int(model.dof_jntid[d])).name for d in scene.compliant_dof_adr]
@@ -105,9 +114,22 @@ def stretch_test(condition: PatientCondition | dict | None, joint: str = "elbow_
             elif name in names:
                 _make_servo(model, actuator, HOLD_KP_NM_PER_RAD, HOLD_KD_NMS_PER_RAD)
                 data.ctrl[actuator] = data.qpos[qadr]
+        scene.follow_coupled_joints(data.qpos)
         mujoco.mj_forward(model, data)
+        coupling = statics.coupling_map(scene, data)
+        if coupling is not None:  # the joints that follow the knee move with it from the start
+            data.qvel[:] = coupling @ data.qvel
+            mujoco.mj_forward(model, data)
         meter = WorkMeter(scene.robots[0].patient_cuff_site_id, env.safety.cuff_rows[0])
-        drive = PatientDrive(scene, condition, ranges, frame_skip=1)
+        muscles = None
+        if len(scene.muscle_actuator_ids):
+            drive: PatientDrive | MuscleDrive = MuscleDrive(scene, condition, ranges,
+                                                            frame_skip=1)
+            muscles = MuscleMeter(model, drive.muscle_ids, count_active=True)
+            muscles.reset(data)
+            passive = PassiveForce(model, drive.muscle_ids)
+        else:
+            drive = PatientDrive(scene, condition, ranges, frame_skip=1)
         drive.reset(data, env.np_random)
         meter.reset(data)
         j = names.index(full)
@@ -118,9 +140,18 @@ def stretch_test(condition: PatientCondition | dict | None, joint: str = "elbow_
         rows = []
         steps = int(abs(q_end - q_start) / abs(math.radians(speed_deg_s)) / model.opt.timestep)
         for _ in range(steps):
-            drive.run(model, data, goal, env.np_random, meter)
+            passive_nm = 0.0
+            if muscles is not None:
+                drive.run(model, data, goal, env.np_random, meter, muscles)
+                ids = drive.muscle_ids
+                pull = moment_arms_m(model, data, ids).T @ passive.force_n(
+                    data.actuator_length[ids])
+                passive_nm = float(statics.reduced(scene, data, pull)[dof])
+            else:
+                drive.run(model, data, goal, env.np_random, meter)
             rows.append((data.qpos[qadr], data.qvel[dof], data.actuator_force[actuator],
-                         drive.torque_nm[exercised.index(full)], data.qfrc_passive[dof]))
+                         drive.torque_nm[exercised.index(full)],
+                         data.qfrc_passive[dof] + passive_nm))
     finally:
         env.close()
     table = np.array(rows, dtype=float)

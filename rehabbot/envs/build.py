@@ -123,6 +123,7 @@ def build_parts(config: RehabEnvConfig) -> EnvParts:
     limit_robot_joints(scene, handle, joint_low, joint_high)
     condition = config.condition
     condition_setup.scale_passive(scene, condition)
+    condition_setup.scale_strength(scene, condition)
     exercises = condition_setup.scaled_exercises(scene, config.exercise_table, condition)
 
     targets = tuple(

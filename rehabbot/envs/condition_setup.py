@@ -6,6 +6,10 @@
   extent on either side of the home posture, and so do the exercises' key poses (so every
   target stays inside the patient's reduced range, and the range-of-motion rule checks the
   reduced range).
+* **Weakness on muscles** (MyoSuite's legs): the exercised leg's muscles' peak active force is
+  multiplied by ``strength_fraction`` (their passive curve keeps its scale). On the rigid
+  patient, weakness scales the voluntary torque instead
+  (:class:`~rehabbot.sim.patient_drive.PatientDrive`).
 * **Feasibility** (:func:`check_condition_forces`): at every target of every exercise, the cuff
   force that holds the limb against gravity, the scaled passive springs, the tremor's peak and
   a resistive patient's full push must stay within the cuff's force limit; otherwise the env is
@@ -24,7 +28,7 @@ import numpy as np
 
 from rehabbot.sim import statics
 from rehabbot.sim.conditions import PatientCondition, healthy_strength_nm
-from rehabbot.sim.muscles import limb_muscles, scale_passive_force
+from rehabbot.sim.muscles import limb_muscles, scale_active_force, scale_passive_force
 from rehabbot.sim.patient_drive import TREMOR_MODULATION
 from rehabbot.sim.scene import Scene
 from rehabbot.tasks.exercises import Exercise
@@ -53,6 +57,17 @@ def scale_passive(scene: Scene, condition: PatientCondition) -> None:
     for dof in scene.compliant_dof_adr:
         model.jnt_stiffness[model.dof_jntid[dof]] *= condition.stiffness_scale
         model.dof_damping[dof] *= condition.stiffness_scale
+
+
+def scale_strength(scene: Scene, condition: PatientCondition) -> None:
+    """On MyoSuite's legs, multiply the exercised leg's muscles' peak active force by
+    ``strength_fraction`` (weakness); nothing on the rigid patient, whose weakness scales its
+    voluntary torque."""
+    if condition.strength_fraction == 1.0 or not len(scene.muscle_actuator_ids):
+        return
+    side = scene.exercised_joints[0].rsplit("_", 1)[1]
+    scale_active_force(scene.model, limb_muscles(scene.model, scene.muscle_actuator_ids, side),
+                       condition.strength_fraction)
 
 
 def reduced_ranges_rad(scene: Scene, condition: PatientCondition) -> np.ndarray:

@@ -373,6 +373,11 @@ class RehabEnvConfig:
                      get_robot(self.scene.robot).max_speed_rad_s)
         if self.scene.patient_model == "myo":
             check_myo_patient(self.patient)
+        elif self.patient.condition.fatigue_scale > 0.0:
+            raise ValueError(f"PatientCondition.fatigue_scale="
+                             f"{self.patient.condition.fatigue_scale!r}: fatigue is modelled on "
+                             "muscles only (the 3CC-r model of their motor units); give "
+                             "patient_model='myo' (knee and hip ids), or leave it out")
 
     # -- flat keywords ---------------------------------------------------------------------
     @classmethod
@@ -440,22 +445,22 @@ class RehabEnvConfig:
         return self.safety.thresholds()
 
 
-# The condition fields MyoSuite's legs model (a contracture: envs/condition_setup.py).
-MYO_CONDITION_FIELDS: tuple[str, ...] = ("stiffness_scale", "rom_scale")
+# The condition fields MyoSuite's legs do not model yet (tremor: envs/condition_setup.py and
+# sim/muscle_drive.py model the rest on muscles).
+MYO_UNMODELLED_CONDITION_FIELDS: tuple[str, ...] = ("tremor_hz", "tremor_amplitude_nm")
 
 
 def check_myo_patient(patient: PatientConfig) -> None:
     """What MyoSuite's legs support today: the default profile (they are one adult size) and
-    a passive patient of relaxed muscles, contracted or not (:data:`MYO_CONDITION_FIELDS`).
-    ``ValueError`` naming what is not."""
+    every condition but tremor (:data:`MYO_UNMODELLED_CONDITION_FIELDS`). ``ValueError``
+    naming what is not."""
     check_myo_profile(patient.profile)
+    default = PatientCondition().to_dict()
     changed = {name: value for name, value in patient.condition.to_dict().items()
-               if value != PatientCondition().to_dict()[name]
-               and name not in MYO_CONDITION_FIELDS}
+               if value != default[name] and name in MYO_UNMODELLED_CONDITION_FIELDS}
     if changed:
-        raise ValueError(f"patient_model='myo' models a contracture only (its muscles' passive "
-                         f"force, {list(MYO_CONDITION_FIELDS)}); condition field(s) {changed} "
-                         f"act on the rigid patient only, not yet on muscles")
+        raise ValueError(f"patient_model='myo' does not model tremor on muscles yet; condition "
+                         f"field(s) {changed} act on the rigid patient only")
 
 
 def kwarg_names(config_class: type = RehabEnvConfig) -> tuple[str, ...]:

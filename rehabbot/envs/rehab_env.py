@@ -102,20 +102,22 @@ when the env is built (:mod:`rehabbot.tasks.feasibility`, :mod:`rehabbot.envs.co
 
 ## The patient
 ``condition`` (:class:`rehabbot.sim.conditions.PatientCondition`, ``docs/conditions.md``) adds
-spasticity, contracture, weakness, tremor and effort; the default is a healthy, passive limb.
+spasticity, contracture, weakness, tremor, effort and (on muscles) fatigue; the default is a healthy, passive limb.
 Every id reports ``info["patient_torque_nm"]`` (the patient's muscle torques on the exercised
 joints), ``info["patient_work_j"]`` and ``info["robot_work_j"]`` (work on the limb since reset,
 counted every physics step) and ``info["assistance_ratio"]`` (the robot's share of the positive
 work; 1.0 until the patient does positive work).
 
 ``patient_model="myo"`` (the knee and hip ids; ``rehab-knee-myo-v2``, ``rehab-hip-myo-v2``)
-seats MyoSuite's musculoskeletal legs (:mod:`rehabbot.sim.myo_patient`, 80 passive muscles;
-``pip install "rehabbot[myo]"``; the default profile only; of the conditions, a contracture
-only). Its ``info`` adds the exercised leg's muscles (:mod:`rehabbot.sim.muscles`):
+seats MyoSuite's musculoskeletal legs (:mod:`rehabbot.sim.myo_patient`, 80 muscles, relaxed
+unless a condition excites them; ``pip install "rehabbot[myo]"``; the default profile only;
+every condition but tremor, acting on the muscles: :mod:`rehabbot.sim.muscle_drive`). Its
+``info`` adds the exercised leg's muscles (:mod:`rehabbot.sim.muscles`):
 ``muscle_excitation`` and ``muscle_activation`` (means, 0-1), ``muscle_force_n`` (their total
 pull), ``peak_muscle_force_n`` (the largest pull of one muscle since reset) and
 ``muscle_work_j`` (their forces' work on the limb since reset; negative when they absorb the
-robot's work).
+robot's work); with ``fatigue_scale > 0``, ``muscle_fatigue`` (the most fatigued
+muscle's fatigued fraction, 3CC-r).
 
 ## Starting state
 The home posture of the scene (cuff satisfied, static equilibrium), no noise. The exercise and

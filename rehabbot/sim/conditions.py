@@ -1,4 +1,5 @@
-"""Clinical conditions of the patient: spasticity, contracture, weakness, tremor and effort.
+"""Clinical conditions of the patient: spasticity, contracture, weakness, tremor, effort and
+fatigue.
 
 A :class:`PatientCondition` describes what is wrong with the exercised limb, in clinical or SI
 units. The default is today's patient: healthy, relaxed, passive; an env built with it is
@@ -33,6 +34,7 @@ CONDITION_RANGES: dict[str, tuple[float, float]] = {
     "tremor_amplitude_nm": (0.0, 10.0),
     "effort_fraction": (0.0, 1.0),
     "reaction_delay_s": (0.0, 0.5),
+    "fatigue_scale": (0.0, 100.0),
 }
 
 
@@ -124,6 +126,9 @@ class PatientCondition:
                                     active or resistive [0, 1]
     ``reaction_delay_s``    0.15    the active patient's delay in noticing a new target [s]
                                     [0, 0.5]
+    ``fatigue_scale``       0.0     muscle fatigue (3CC-r, :mod:`rehabbot.sim.fatigue`): its
+                                    published fatigue and recovery rates x this; 0: none
+                                    [0, 100]. Muscles only (``patient_model="myo"``)
     ======================= ======= ===========================================================
     """
 
@@ -136,6 +141,7 @@ class PatientCondition:
     effort: str = "passive"
     effort_fraction: float = 0.3
     reaction_delay_s: float = 0.15
+    fatigue_scale: float = 0.0
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -222,6 +228,11 @@ def check_fields_act(condition: PatientCondition) -> None:
                 f"PatientCondition.reaction_delay_s={condition.reaction_delay_s!r} cannot "
                 "act on a resistive patient (only an active_assisted patient follows the "
                 "targets); give effort='active_assisted' for it to act, or leave it out")
+    if condition.fatigue_scale > 0.0 and condition.reflex is None and effort == "passive":
+        raise ValueError(f"PatientCondition.fatigue_scale={condition.fatigue_scale!r} cannot "
+                         "act on relaxed muscles (fatigue builds up in excited muscles only); "
+                         "give effort='active_assisted' or 'resistive', or a spasticity_mas "
+                         "above '0', for it to act, or leave it out")
     if condition.tremor_hz > 0.0 and condition.tremor_amplitude_nm == 0.0:
         raise ValueError(f"PatientCondition.tremor_hz={condition.tremor_hz!r} needs a "
                          "tremor_amplitude_nm > 0 (in (0, 10] N·m) to act; give one, or "

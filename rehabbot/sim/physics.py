@@ -1,6 +1,7 @@
 """One control step of the simulated scene and the rules it must keep: ``frame_skip`` MuJoCo
 steps (with the patient's muscle torques when a condition applies them,
-:mod:`rehabbot.sim.patient_drive`), the mechanical work done on the limb, and the safety rules
+:mod:`rehabbot.sim.patient_drive`, or, on MyoSuite's legs, the muscles' excitations,
+:mod:`rehabbot.sim.muscle_drive`), the mechanical work done on the limb, and the safety rules
 checked on the new state (:class:`LimbPhysics`, the env's physics step).
 
 :class:`WorkMeter` integrates the mechanical work on the limb: the patient's (torque x joint
@@ -41,6 +42,7 @@ from mujoco import mju_dot
 
 from rehabbot.common.arrays import as_index
 from rehabbot.sim.conditions import PatientCondition
+from rehabbot.sim.muscle_drive import MuscleDrive
 from rehabbot.sim.muscles import MuscleMeter, limb_muscles
 from rehabbot.sim.patient_drive import PatientDrive
 from rehabbot.sim.scene import Scene
@@ -326,8 +328,9 @@ class WorkMeter:
 class LimbPhysics:
     """One control step of the physics (:meth:`step`): ``frame_skip`` physics steps, the
     condition's torques when it applies any (:class:`~rehabbot.sim.patient_drive.PatientDrive`,
-    one-arm scenes), the work on the limb counted after every physics step (one
-    :class:`WorkMeter` per cuff), then the safety rules on the new state."""
+    one-arm scenes; on MyoSuite's legs the muscles' excitations,
+    :class:`~rehabbot.sim.muscle_drive.MuscleDrive`), the work on the limb counted after every
+    physics step (one :class:`WorkMeter` per cuff), then the safety rules on the new state."""
 
     def __init__(self, scene: Scene, condition: PatientCondition, safety: SafetyMonitor,
                  ranges_rad: np.ndarray | None, frame_skip: int) -> None:
@@ -336,23 +339,23 @@ class LimbPhysics:
                             for handle, row in zip(scene.robots, safety.cuff_rows, strict=True))
         self.meter = self.meters[0]
         self.frame_skip = frame_skip
-        self.drive = None
-        if condition.acts:
-            if len(self.meters) != 1:
-                raise ValueError("a patient condition that applies torques needs a one-arm "
-                                 "scene")
+        self.drive: PatientDrive | MuscleDrive | None = None
+        # MyoSuite's legs: the exercised leg's muscles (None for the rigid patient).
+        self.muscles = None
+        if condition.acts and len(self.meters) != 1:
+            raise ValueError("a patient condition that applies torques needs a one-arm scene")
+        if len(scene.muscle_actuator_ids):
+            side = scene.exercised_joints[0].rsplit("_", 1)[1]
+            self.muscles = MuscleMeter(scene.model, limb_muscles(
+                scene.model, scene.muscle_actuator_ids, side), count_active=condition.acts)
+            if condition.acts:
+                if condition.has_tremor:
+                    raise ValueError("tremor is not modelled on a musculoskeletal patient")
+                self.drive = MuscleDrive(scene, condition, ranges_rad, frame_skip)
+        elif condition.acts:
             self.drive = PatientDrive(scene, condition, ranges_rad, frame_skip)
         self.torque_nm = self.drive.torque_nm if self.drive is not None else \
             np.zeros(len(scene.exercised_joints))
-        # MyoSuite's legs: the exercised leg's muscles (None for the rigid patient).
-        self.muscles = None
-        if len(scene.muscle_actuator_ids):
-            if self.drive is not None:
-                raise ValueError("a condition that applies torques is not modelled on a "
-                                 "musculoskeletal patient")
-            side = scene.exercised_joints[0].rsplit("_", 1)[1]
-            self.muscles = MuscleMeter(scene.model, limb_muscles(
-                scene.model, scene.muscle_actuator_ids, side))
 
     def bind(self, data: mujoco.MjData) -> None:
         """Cache views of ``data``'s arrays (again after a pickle round trip)."""
@@ -374,7 +377,9 @@ class LimbPhysics:
              rng: np.random.Generator) -> tuple[str | None, float]:
         """Advance one control step (``goal_rad``: what an active patient aims for) and return
         the first safety rule that fires (or None) and the largest cuff force [N]."""
-        if self.drive is not None:
+        if isinstance(self.drive, MuscleDrive):
+            self.drive.run(model, data, goal_rad, rng, self.meter, self.muscles)
+        elif self.drive is not None:
             self.drive.run(model, data, goal_rad, rng, self.meter)
         elif self.muscles is not None:
             after_step, count_muscles = self.meter.after_step, self.muscles.after_step
@@ -406,6 +411,9 @@ class LimbPhysics:
                     "robot_work_j": meter.robot_j, "assistance_ratio": meter.assistance_ratio}
             if self.muscles is not None:
                 info.update(self.muscles.info(data))
+                fatigue = getattr(self.drive, "fatigue", None)
+                if fatigue is not None:  # the most fatigued muscle's fatigued fraction (MF)
+                    info["muscle_fatigue"] = float(np.max(fatigue.fatigued))
             return info
         meters = self.meters
         patient_positive = sum(m.patient_positive_j for m in meters)

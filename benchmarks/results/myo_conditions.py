@@ -1,0 +1,183 @@
+"""The patient's conditions on MyoSuite's muscles (``patient_model="myo"``), beside the rigid
+patient's in the same run: isokinetic knee stretches for every Modified Ashworth grade (the
+stretch reflex on the muscles' excitation against the rigid patient's joint reflex), and the
+scripted expert on every exercise of the knee ids with each condition (success, forces, the
+work of the robot, of the patient and of the muscles, fatigue).
+
+    python benchmarks/results/myo_conditions.py [--seed 0] [--levels 0 2 4]
+        [--page docs/results/myo-conditions]
+
+Needs ``pip install "rehabbot[myo]"``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.documents import (
+    command_line,
+    make_document,
+    make_table,
+    table_markdown,
+    write_page,
+)
+from benchmarks.common.machine import describe_machine
+from rehabbot.analysis.condition_probes import stretch_test
+from rehabbot.rl.experts import ScriptedExpert
+from rehabbot.sim.conditions import MAS_GRADES, PatientCondition
+
+INTRO = """MyoSuite's legs (`myo-sim` 0.2.3) with the conditions of `PatientCondition` acting on
+their muscles (`rehabbot.sim.muscle_drive`), measured beside the rigid patient in this run.
+The isokinetic stretches release the cuff and move the seated knee with a velocity servo
+through 5-99 % of its range (`rehabbot.analysis.condition_probes.stretch_test`); the
+resistance is the reflex's torque against the motion (the muscles' active torque on the
+myo knee). The expert rows run the scripted expert on every exercise of `rehab-knee-v2` and
+`rehab-knee-myo-v2` at the listed weight levels (means over the episodes). Fatigue acts on
+muscles only, so it has no rigid row."""
+
+SPEEDS_DEG_S = (5.0, 100.0)
+SWEEPS = {5.0: (0.3, 0.7), 100.0: (0.05, 0.99)}
+# name -> condition; every one is feasible on both knees.
+CONDITIONS: dict[str, dict] = {
+    "healthy, passive": {},
+    "MAS 2": {"spasticity_mas": "2"},
+    "MAS 4": {"spasticity_mas": "4"},
+    "contracture (stiffness x1.3, ROM x0.8)": {"stiffness_scale": 1.3, "rom_scale": 0.8},
+    "active, 30 % strength": {"effort": "active_assisted", "strength_fraction": 0.3},
+    "active, full strength": {"effort": "active_assisted"},
+    "resistive, 3 % effort": {"effort": "resistive", "effort_fraction": 0.03},
+    "active 50 %, fatigue x50": {"effort": "active_assisted", "effort_fraction": 0.5,
+                                 "fatigue_scale": 50.0},
+}
+
+
+def stretch_rows() -> list[dict]:
+    rows = []
+    for model in ("rigid", "myo"):
+        for grade in MAS_GRADES:
+            for speed in SPEEDS_DEG_S:
+                result = stretch_test({"spasticity_mas": grade}, joint="knee_flexion",
+                                      limb="knee", speed_deg_s=speed, sweep=SWEEPS[speed],
+                                      patient_model=model)
+                resistance = result.resistance_nm
+                rows.append({"patient_model": model, "mas": grade, "speed_deg_s": speed,
+                             "sweep": list(SWEEPS[speed]),
+                             "peak_nm": float(resistance.max()),
+                             "mean_nm": float(resistance.mean()),
+                             "resisted_fraction": result.resisted_fraction(),
+                             "dynamometer_mean_nm": float(result.dynamometer_nm.mean()),
+                             "speed_mean_deg_s": float(result.velocity_deg_s.mean())})
+                print(rows[-1], flush=True)
+    return rows
+
+
+def expert_rows(seed: int, levels: list[int]) -> list[dict]:
+    rows = []
+    for name, condition in CONDITIONS.items():
+        for model, env_id in (("rigid", "rehabbot/rehab-knee-v2"),
+                              ("myo", "rehabbot/rehab-knee-myo-v2")):
+            if model == "rigid" and PatientCondition(**condition).fatigue_scale > 0.0:
+                continue
+            env = gym.make(env_id, condition=condition)
+            expert = ScriptedExpert(env)
+            episodes = []
+            for exercise in range(len(env.unwrapped.config.exercise_table)):
+                for level in levels:
+                    obs, info = env.reset(seed=seed, options={"exercise": exercise,
+                                                              "weight_level": level})
+                    peak = 0.0
+                    while True:
+                        obs, _reward, terminated, truncated, info = env.step(expert(obs))
+                        peak = max(peak, info["interaction_force_n"])
+                        if terminated or truncated:
+                            break
+                    episodes.append({
+                        "exercise": exercise, "weight_level": level,
+                        "success": bool(info["is_success"]),
+                        "stop": info.get("safety_violation"), "peak_force_n": peak,
+                        "robot_work_j": info["robot_work_j"],
+                        "patient_work_j": info["patient_work_j"],
+                        "assistance_ratio": info["assistance_ratio"],
+                        "peak_muscle_force_n": info.get("peak_muscle_force_n"),
+                        "muscle_work_j": info.get("muscle_work_j"),
+                        "muscle_fatigue": info.get("muscle_fatigue")})
+            env.close()
+            rows.append({"condition": name, "fields": condition, "patient_model": model,
+                         "seed": seed, "episodes": episodes})
+            print(name, model, [(e["success"], round(e["peak_force_n"])) for e in episodes],
+                  flush=True)
+    return rows
+
+
+def _mean(episodes: list[dict], key: str) -> float | None:
+    values = [e[key] for e in episodes if e[key] is not None]
+    return sum(values) / len(values) if values else None
+
+
+def _cell(value: float | None, digits: int) -> str:
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--levels", type=int, nargs="+", default=[0, 2, 4],
+                        help="weight levels of the expert episodes")
+    parser.add_argument("--page", type=Path, metavar="STEM",
+                        help="write STEM.json and its page STEM.md (docs/results/myo-conditions)")
+    args = parser.parse_args(argv)
+    bad = [level for level in args.levels if level not in range(5)]
+    if bad:
+        parser.error(f"--levels must be weight levels 0-4, got {bad}")
+    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    print(f"command: {command}", flush=True)
+    stretches = stretch_rows()
+    stretch_table = make_table(
+        "stretches", "Isokinetic knee stretches, seated (cuff released; resistance = the "
+        "reflex's torque against the motion)",
+        ["patient", "MAS", "speed [deg/s]", "peak [N·m]", "mean [N·m]",
+         "share of sweep resisted", "dynamometer mean [N·m]"],
+        [[r["patient_model"], r["mas"], f"{r['speed_deg_s']:.0f}", f"{r['peak_nm']:.2f}",
+          f"{r['mean_nm']:.2f}", f"{100 * r['resisted_fraction']:.0f} %",
+          f"{r['dynamometer_mean_nm']:.2f}"] for r in stretches])
+    experts = expert_rows(args.seed, args.levels)
+    expert_table = make_table(
+        "expert", f"The scripted expert on every knee exercise at weight levels {args.levels}, "
+        f"seed {args.seed} (means over the episodes)",
+        ["condition", "patient", "success", "stops", "peak cuff force [N]", "robot work [J]",
+         "patient work [J]", "assistance ratio", "peak muscle force [N]", "muscle work [J]",
+         "most fatigued muscle at the end"],
+        [[r["condition"], r["patient_model"],
+          f"{100 * _mean(r['episodes'], 'success'):.0f} %",
+          ", ".join(sorted({e["stop"] for e in r["episodes"] if e["stop"]})) or "-",
+          f"{max(e['peak_force_n'] for e in r['episodes']):.0f}",
+          _cell(_mean(r["episodes"], "robot_work_j"), 2),
+          _cell(_mean(r["episodes"], "patient_work_j"), 2),
+          _cell(_mean(r["episodes"], "assistance_ratio"), 2),
+          _cell(_mean(r["episodes"], "peak_muscle_force_n"), 0),
+          _cell(_mean(r["episodes"], "muscle_work_j"), 2),
+          _cell(_mean(r["episodes"], "muscle_fatigue"), 3)] for r in experts])
+    tables = [stretch_table, expert_table]
+    for table in tables:
+        print(table_markdown(table), flush=True)
+    if args.page is not None:
+        write_page(make_document(
+            title="Conditions on the musculoskeletal patient's muscles", intro=INTRO,
+            command=command, generated_by=__file__, tables=tables,
+            machine=describe_machine(), seeds={"episodes": args.seed},
+            settings={"levels": args.levels, "speeds_deg_s": list(SPEEDS_DEG_S),
+                      "sweeps": {str(k): list(v) for k, v in SWEEPS.items()},
+                      "conditions": CONDITIONS},
+            data={"stretches": stretches, "expert": experts}), args.page)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
