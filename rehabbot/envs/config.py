@@ -145,9 +145,10 @@ class SceneConfig:
         check_choice("side", self.side, SIDES)
         check_choice("robot", self.robot, ROBOT_NAMES)
         SceneOptions(**self.scene_options())  # ValueError naming a bad scene option
-        if self.patient_model == "myo" and self.limb == "arm":
-            raise ValueError("patient_model='myo' is built for limb='knee' and limb='hip' "
-                             "only: MyoSuite's arm is not seated in RehabBot's scenes yet")
+        if self.patient_model == "myo" and self.limb == "arm" and self.side != "right":
+            raise ValueError(f"patient_model='myo' on limb='arm' is built for side='right' "
+                             f"only, not side={self.side!r}: MyoSuite's arm model is a right "
+                             f"arm (myoarm_r)")
 
     @property
     def preset(self) -> str:
