@@ -441,13 +441,14 @@ class RehabEnvConfig:
         return self.safety.thresholds()
 
 
-# The condition fields MyoSuite's legs model (a contracture: envs/condition_setup.py).
+# The condition fields MyoSuite's legs and arm model (a contracture: envs/condition_setup.py).
 MYO_CONDITION_FIELDS: tuple[str, ...] = ("stiffness_scale", "rom_scale")
 
 
 def check_myo_patient(patient: PatientConfig) -> None:
-    """What MyoSuite's legs support today: the default profile (they are one adult size) and
-    a passive patient of relaxed muscles, contracted or not (:data:`MYO_CONDITION_FIELDS`).
+    """What MyoSuite's legs and arm support today: the default profile (they are one adult
+    size) and a passive patient of relaxed muscles, contracted or not
+    (:data:`MYO_CONDITION_FIELDS`).
     ``ValueError`` naming what is not."""
     check_myo_profile(patient.profile)
     changed = {name: value for name, value in patient.condition.to_dict().items()

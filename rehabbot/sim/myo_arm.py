@@ -49,16 +49,17 @@ from rehabbot.sim import patient as pt
 SIDE = "r"
 # MyoArm's elevation plane that makes its elevation a flexion (sagittal plane) [rad].
 SAGITTAL_ELEVATION_PLANE_RAD = math.pi / 2
-# MyoArm joint -> our name (the prefix is dropped) or a prefixed name (posture joints).
+# MyoArm's joints that become exercised joints of ours (their names without the prefix).
 ARM_JOINTS: dict[str, str] = {
     "shoulder_elv_r": "shoulder_flexion_r",
     "elbow_flexion_r": "elbow_flexion_r",
 }
+# MyoArm's joints kept as posture joints (held by the scene's posture springs), prefixed.
 POSTURE_JOINTS: tuple[str, ...] = ("shoulder_rot_r", "pro_sup_r")
 ABDUCTION_JOINT = "shoulder_abduction_r"
-# The bodies of the arm proper (weight levels scale these; the cuffed ones from ulna on).
+# The arm proper is the humerus and every body below it (weight levels scale these; the
+# robot's wrist does not collide with those below the humerus, around the cuff).
 UPPER_ARM_BODY = "humerus_r"
-FOREARM_BODIES: tuple[str, ...] = ("ulna_r", "radius_r")
 # The hand's root after its wrist is frozen; the cuff site sits on it.
 HAND_ROOT = "lunate_r"
 # The first body of the shoulder girdle: the scaffold is what is not below it.
