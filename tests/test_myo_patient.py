@@ -243,8 +243,9 @@ def test_a_contracture_scales_the_muscles_passive_force_and_narrows_the_range():
 
 
 def test_what_the_myo_patient_does_not_support_is_refused_naming_it():
-    with pytest.raises(ValueError, match=r"patient_model=.myo.*limb=.knee.*arm"):
-        gym.make("rehabbot/rehab-reach-v2", patient_model="myo")
+    # MyoSuite's arm is a right arm (tests/test_myo_arm.py): the left arm is refused.
+    with pytest.raises(ValueError, match=r"patient_model=.myo.*limb=.arm.*side=.right"):
+        gym.make("rehabbot/rehab-reach-l-v2", patient_model="myo")
     with pytest.raises(ValueError, match=r"one adult size.*height_m=1.6"):
         gym.make("rehabbot/rehab-knee-myo-v2", profile={"height_m": 1.6})
     with pytest.raises(ValueError, match=r"tremor on muscles.*tremor_hz"):
@@ -252,8 +253,8 @@ def test_what_the_myo_patient_does_not_support_is_refused_naming_it():
                  condition={"tremor_hz": 5.0, "tremor_amplitude_nm": 1.0})
     with pytest.raises(ValueError, match=r"patient_model.*.bones."):
         gym.make("rehabbot/rehab-knee-v2", patient_model="bones")
-    with pytest.raises(ValueError, match="'hip' and 'knee' only"):
-        build_scene("upper_right", patient_model="myo")
+    with pytest.raises(ValueError, match=r"presets \['hip', 'knee', 'upper_right'\] only"):
+        build_scene("upper_bilateral", patient_model="myo")
 
 
 def test_without_myo_sim_the_error_names_the_extra(monkeypatch):
@@ -278,7 +279,7 @@ def test_without_myo_sim_the_error_names_the_extra(monkeypatch):
 # --------------------------------------------------------------------------- the command line
 
 
-def test_snapshot_draws_the_myo_legs_and_refuses_them_on_an_arm(tmp_path, capsys):
+def test_snapshot_draws_the_myo_legs_and_refuses_the_left_arm(tmp_path, capsys):
     imageio = pytest.importorskip("imageio.v2")
     from rehabbot.cli import main
 
@@ -290,8 +291,8 @@ def test_snapshot_draws_the_myo_legs_and_refuses_them_on_an_arm(tmp_path, capsys
         shots[model] = imageio.imread(out)
     assert np.any(shots["rigid"] != shots["myo"], axis=-1).mean() > 0.01
     capsys.readouterr()
-    assert main(["snapshot", "upper_right", "--patient-model", "myo",
+    assert main(["snapshot", "upper_left", "--patient-model", "myo",
                  "--out", str(tmp_path / "arm.png")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "'hip' and 'knee' only" in err[0]
+    assert len(err) == 1 and "not 'upper_left'" in err[0]
     assert not (tmp_path / "arm.png").exists()

@@ -145,9 +145,10 @@ class SceneConfig:
         check_choice("side", self.side, SIDES)
         check_choice("robot", self.robot, ROBOT_NAMES)
         SceneOptions(**self.scene_options())  # ValueError naming a bad scene option
-        if self.patient_model == "myo" and self.limb == "arm":
-            raise ValueError("patient_model='myo' is built for limb='knee' and limb='hip' "
-                             "only: MyoSuite's arm is not seated in RehabBot's scenes yet")
+        if self.patient_model == "myo" and self.limb == "arm" and self.side != "right":
+            raise ValueError(f"patient_model='myo' on limb='arm' is built for side='right' "
+                             f"only, not side={self.side!r}: MyoSuite's arm model is a right "
+                             f"arm (myoarm_r)")
 
     @property
     def preset(self) -> str:
@@ -445,15 +446,15 @@ class RehabEnvConfig:
         return self.safety.thresholds()
 
 
-# The condition fields MyoSuite's legs do not model yet (tremor: envs/condition_setup.py and
-# sim/muscle_drive.py model the rest on muscles).
+# The condition fields MyoSuite's legs and arm do not model yet (tremor: envs/condition_setup.py
+# and sim/muscle_drive.py model the rest on muscles).
 MYO_UNMODELLED_CONDITION_FIELDS: tuple[str, ...] = ("tremor_hz", "tremor_amplitude_nm")
 
 
 def check_myo_patient(patient: PatientConfig) -> None:
-    """What MyoSuite's legs support today: the default profile (they are one adult size) and
-    every condition but tremor (:data:`MYO_UNMODELLED_CONDITION_FIELDS`). ``ValueError``
-    naming what is not."""
+    """What MyoSuite's legs and arm support today: the default profile (they are one adult
+    size) and every condition but tremor (:data:`MYO_UNMODELLED_CONDITION_FIELDS`).
+    ``ValueError`` naming what is not."""
     check_myo_profile(patient.profile)
     default = PatientCondition().to_dict()
     changed = {name: value for name, value in patient.condition.to_dict().items()

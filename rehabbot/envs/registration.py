@@ -139,16 +139,21 @@ for _v1_id in V1_IDS:
     if _v1_id in POPULATION_VARIANTS:
         POPULATION_VARIANTS[_v2_id] = POPULATION_VARIANTS[_v1_id].replace("-v1", "-v2")
 
-# MyoSuite's musculoskeletal legs (rehabbot.sim.myo_patient; pip install "rehabbot[myo]"): the
-# -v2 task of the base id on patient_model="myo", the same observation and actions.
+# MyoSuite's musculoskeletal legs (rehabbot.sim.myo_patient) and right arm
+# (rehabbot.sim.myo_arm; pip install "rehabbot[myo]"): the -v2 task of the base id on
+# patient_model="myo", the same observation and actions.
 MYO_VARIANTS: dict[str, str] = {
     "rehabbot/rehab-knee-myo-v2": "rehabbot/rehab-knee-v2",
     "rehabbot/rehab-hip-myo-v2": "rehabbot/rehab-hip-v2",
+    "rehabbot/rehab-reach-myo-v2": "rehabbot/rehab-reach-v2",
 }
+_MYO_MODEL_TEXT = {"arm": "MyoSuite's musculoskeletal right arm (63 passive muscles)"}
 for _id, _base_id in MYO_VARIANTS.items():
+    _limb = ENV_SPECS[_base_id][0].get("limb")
     ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], "patient_model": "myo"},
-                      f"{ENV_SPECS[_base_id][1]}; MyoSuite's musculoskeletal legs (80 passive "
-                      "muscles)")
+                      f"{ENV_SPECS[_base_id][1]}; "
+                      + _MYO_MODEL_TEXT.get(_limb, "MyoSuite's musculoskeletal legs (80 passive "
+                                                   "muscles)"))
 V2_IDS: tuple[str, ...] = tuple(i.replace("-v1", "-v2") for i in V1_IDS)
 
 

@@ -109,10 +109,12 @@ counted every physics step) and ``info["assistance_ratio"]`` (the robot's share 
 work; 1.0 until the patient does positive work).
 
 ``patient_model="myo"`` (the knee and hip ids; ``rehab-knee-myo-v2``, ``rehab-hip-myo-v2``)
-seats MyoSuite's musculoskeletal legs (:mod:`rehabbot.sim.myo_patient`, 80 muscles, relaxed
-unless a condition excites them; ``pip install "rehabbot[myo]"``; the default profile only;
-every condition but tremor, acting on the muscles: :mod:`rehabbot.sim.muscle_drive`). Its
-``info`` adds the exercised leg's muscles (:mod:`rehabbot.sim.muscles`):
+seats MyoSuite's musculoskeletal legs (:mod:`rehabbot.sim.myo_patient`, 80 muscles); on the
+right-arm ids (``rehab-reach-myo-v2``) MyoSuite's right arm (:mod:`rehabbot.sim.myo_arm`, 63
+muscles; the left arm is refused). The muscles are relaxed unless a condition excites them
+(every condition but tremor acts on them: :mod:`rehabbot.sim.muscle_drive`);
+``pip install "rehabbot[myo]"``; the default profile only. Its ``info`` adds the exercised
+limb's muscles (:mod:`rehabbot.sim.muscles`):
 ``muscle_excitation`` and ``muscle_activation`` (means, 0-1), ``muscle_force_n`` (their total
 pull), ``peak_muscle_force_n`` (the largest pull of one muscle since reset) and
 ``muscle_work_j`` (their forces' work on the limb since reset; negative when they absorb the
@@ -162,7 +164,7 @@ applied on top; ``RehabEnv(config)`` takes a whole config instead.
 | ``base_reorientation_deg`` | scene | 0.0 | rotation of the robot base about its vertical axis, in [-180, 180] |
 | ``frame_skip`` | control | 10 | physics steps per decision |
 | ``timestep_s`` | scene | 0.002 | physics step in [1e-4, 0.005] s; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
-| ``patient_model`` | scene | ``"rigid"`` | the patient's body: ``"rigid"`` links, or ``"myo"``: MyoSuite's musculoskeletal legs (knee and hip only) |
+| ``patient_model`` | scene | ``"rigid"`` | the patient's body: ``"rigid"`` links, or ``"myo"``: MyoSuite's musculoskeletal legs (knee and hip) or right arm (reach, right side) |
 | ``target_tolerance_rad`` | task | 0.05 | epsilon of eq. (5) |
 | ``reward`` | reward | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
 | ``observation`` | task | ``"paper"`` | ``"paper"`` (the paper's 23 fields, -v0 and -v1) or ``"agent"`` (the -v2 ids; see Observation space) |

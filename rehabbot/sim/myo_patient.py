@@ -80,10 +80,10 @@ EMPTY_PREFIX_WARNING = "Attaching a spec with an empty prefix"
 
 
 def check_myo_profile(profile: PatientProfile) -> None:
-    """``ValueError`` unless ``profile`` is the default :class:`PatientProfile` (MyoLeg is one
-    adult size)."""
+    """``ValueError`` unless ``profile`` is the default :class:`PatientProfile` (MyoLeg and
+    MyoArm are one adult size each)."""
     if profile != PatientProfile():
-        raise ValueError(f"patient_model='myo': MyoSuite's legs are one adult size, so the "
+        raise ValueError(f"patient_model='myo': MyoSuite's legs and arm are one adult size, so the "
                          f"profile must be the default {PatientProfile()}, got {profile}")
 
 

@@ -188,6 +188,9 @@ JOINT_BY_NAME: dict[str, PatientJoint] = {j.name: j for j in JOINTS}
 # The hinges of the legs (hip, knee, ankle of both sides).
 LEG_JOINT_NAMES: tuple[str, ...] = tuple(j.name for j in JOINTS
                                          if j.body.rsplit("_", 1)[0] in ("thigh", "shank", "foot"))
+# The hinges of the arms (shoulder and elbow of both sides).
+ARM_JOINT_NAMES: tuple[str, ...] = tuple(j.name for j in JOINTS
+                                         if j.body.rsplit("_", 1)[0] in ("upper_arm", "forearm"))
 
 # Segments of each limb, proximal to distal (weight levels scale these).
 LIMB_BODIES: dict[str, tuple[str, ...]] = {
@@ -341,13 +344,15 @@ class PatientGeometry:
 
 
 def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientProfile,
-                pos, quat, cuff_limbs: tuple[str, ...], legs: bool = True) -> PatientGeometry:
+                pos, quat, cuff_limbs: tuple[str, ...], legs: bool = True,
+                arms: tuple[str, ...] = ("r", "l")) -> PatientGeometry:
     """Add the patient under ``parent``; the torso is welded to it (no free joint).
 
     ``cuff_limbs`` (e.g. ``("arm_r",)``) get a ``cuff_<limb>`` site where the robot's cuff
     straps on: the hand's centre for an arm, just above the malleoli for a leg.
     ``legs=False`` builds no legs (the body ends at the pelvis, where another model's legs
-    attach: :mod:`rehabbot.sim.myo_patient`).
+    attach: :mod:`rehabbot.sim.myo_patient`); ``arms`` names the sides whose arms are built
+    (another model's arm attaches at the other shoulder: :mod:`rehabbot.sim.myo_arm`).
     Joint stiffness, damping and spring references are set later by the scene, which knows the
     posture and which joints are exercised.
     """
@@ -405,6 +410,8 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
         if legs:
             _add_leg(pelvis, side, seg, lpt.length_m, hip_y, h, cuff_limbs)
 
+        if side not in arms:
+            continue
         # --- arms, hanging along -z from the shoulder joint centre.
         ua_s, fa_s, hand_s = seg["upper_arm"], seg["forearm"], seg["hand"]
         upper = torso.add_body(name=f"upper_arm_{side}", pos=[0, s * shoulder_y,
@@ -433,6 +440,8 @@ def add_patient(spec: mujoco.MjSpec, parent: mujoco.MjsBody, profile: PatientPro
 
     for joint in JOINTS:
         if not legs and joint.name in LEG_JOINT_NAMES:
+            continue
+        if joint.name in ARM_JOINT_NAMES and joint.name[-1] not in arms:
             continue
         body = spec.body(joint.body)
         added = body.add_joint(name=joint.name, type=mujoco.mjtJoint.mjJNT_HINGE,

@@ -13,6 +13,7 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.checks import check_choice
+from rehabbot.sim import myo_arm
 from rehabbot.sim import myo_patient as myo
 from rehabbot.sim import patient as pt
 from rehabbot.sim.handles import RobotHandle
@@ -71,7 +72,7 @@ def _home_pose_deg(posture: str, limbs: tuple[str, ...], options: SceneOptions) 
             arm = _ARM_CUFFED if f"arm_{s}" in limbs else _ARM_REST
             for joint, value in arm.items():
                 pose[f"{joint}_{s}"] = value
-        if options.patient_model == "myo":
+        if options.patient_model == "myo" and _myo_limb(limbs) == "legs":
             pose.update(_MYO_SEATED_FEET)
     pose.update(dict(options.initial_pose_deg))
     return pose
@@ -188,15 +189,21 @@ def build_scene(preset: str, profile: pt.PatientProfile | None = None, weight_le
         bed_top = 0.62
         torso_pos = np.array([0.0, 0.0, bed_top + 0.2])  # refined below
         torso_quat = np.array([math.cos(-math.pi / 4), 0.0, math.sin(-math.pi / 4), 0.0])
+    myo_part = _myo_limb(limbs) if opts.patient_model == "myo" else None
     geometry = pt.add_patient(spec, spec.worldbody, profile, torso_pos, torso_quat, limbs,
-                              legs=opts.patient_model == "rigid")
-    myo_legs = None
-    if opts.patient_model == "myo":
+                              legs=myo_part != "legs",
+                              arms=("l",) if myo_part == "arm_r" else ("r", "l"))
+    myo_legs = myo_right_arm = None
+    if myo_part == "legs":
         # The hips' midpoint in the pelvis frame (the pelvis hangs middle_trunk below XYPH).
         hips = (geometry.hip_r + geometry.hip_l) / 2 + [0.0, 0.0, seg["middle_trunk"].length_m]
         myo_legs = myo.add_myo_legs(spec, spec.body("pelvis"), hips, pt.CONTYPE_PATIENT,
                                     pt.CONAFFINITY_PATIENT, limbs)
-    parts = _patient_parts(limbs, myo_legs)
+    elif myo_part == "arm_r":
+        myo_right_arm = myo_arm.add_myo_arm(spec, spec.body("torso"), geometry.shoulder_r,
+                                            pt.CONTYPE_PATIENT, pt.CONAFFINITY_PATIENT)
+    parts = (_myo_arm_parts(limbs, myo_right_arm) if myo_right_arm is not None
+             else _patient_parts(limbs, myo_legs))
     model0 = spec.compile()
     data0 = mujoco.MjData(model0)
     set_pose(model0, data0.qpos, pose_deg)
@@ -315,12 +322,33 @@ def _patient_parts(limbs: tuple[str, ...], legs: myo.MyoLegs | None) -> _Patient
         muscle_names=legs.muscle_names)
 
 
+def _myo_arm_parts(limbs: tuple[str, ...], arm: myo_arm.MyoArm) -> _PatientParts:
+    """The rigid patient without its right arm, and MyoSuite's right arm."""
+    rigid = tuple(n for n in pt.JOINT_NAMES
+                  if not (n in pt.ARM_JOINT_NAMES and n.endswith("_r")))
+    return _PatientParts(
+        joint_names=rigid + arm.joint_names,
+        limb_bodies={limb: arm.limb_bodies for limb in limbs},
+        cuffed_bodies={limb: arm.cuffed_bodies for limb in limbs},
+        segment_geoms={}, segment_body=arm.segment_body, muscle_names=arm.muscle_names)
+
+
+# The presets a musculoskeletal patient is built for, and which of MyoSuite's models it seats.
+MYO_PRESETS: dict[str, str] = {"hip": "legs", "knee": "legs", "upper_right": "arm_r"}
+
+
+def _myo_limb(limbs: tuple[str, ...]) -> str:
+    """Which of MyoSuite's models seats ``limbs``: ``"legs"`` or ``"arm_r"``."""
+    return "arm_r" if limbs == ("arm_r",) else "legs"
+
+
 def _check_myo_scene(preset: str, profile: pt.PatientProfile) -> None:
-    """MyoSuite's legs: the leg presets and the default profile only."""
-    if preset not in ("hip", "knee"):
-        raise ValueError(f"patient_model='myo' is built for the leg presets 'hip' and 'knee' "
-                         f"only, not {preset!r}: MyoSuite's arm is not seated in RehabBot's "
-                         f"scenes yet")
+    """MyoSuite's legs (the leg presets) and right arm (upper_right); the default profile
+    only."""
+    if preset not in MYO_PRESETS:
+        raise ValueError(f"patient_model='myo' is built for the presets {list(MYO_PRESETS)} "
+                         f"only, not {preset!r}: MyoSuite's arm model is a right arm "
+                         f"(myoarm_r), so the left and bilateral arm scenes are rigid only")
     myo.check_myo_profile(profile)
 
 
