@@ -61,7 +61,7 @@ images: $(STAMP)
 	  MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot snapshot $$preset --out docs/images/$$preset.png \
 	    --width 640 --height 480 || exit 1; \
 	done
-	for preset in hip knee; do \
+	for preset in hip knee upper_right; do \
 	  MUJOCO_GL=$(MUJOCO_GL) $(VENV)/bin/rehabbot snapshot $$preset --patient-model myo \
 	    --out docs/images/$$preset-myo.png --width 640 --height 480 || exit 1; \
 	done

@@ -169,8 +169,8 @@ def test_what_the_myo_arm_does_not_support_is_refused_naming_it():
         build_scene("upper_bilateral", patient_model="myo")
     with pytest.raises(ValueError, match=r"one adult size.*height_m=1.6"):
         gym.make(MYO_REACH_ID, profile={"height_m": 1.6})
-    with pytest.raises(ValueError, match=r"contracture only.*spasticity_mas"):
-        gym.make(MYO_REACH_ID, condition={"spasticity_mas": "2"})
+    with pytest.raises(ValueError, match=r"tremor on muscles.*tremor_hz"):
+        gym.make(MYO_REACH_ID, condition={"tremor_hz": 5.0, "tremor_amplitude_nm": 1.0})
 
 
 def test_without_myo_sim_the_arm_names_the_extra(monkeypatch):

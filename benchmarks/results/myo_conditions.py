@@ -1,8 +1,9 @@
 """The patient's conditions on MyoSuite's muscles (``patient_model="myo"``), beside the rigid
-patient's in the same run: isokinetic knee stretches for every Modified Ashworth grade (the
-stretch reflex on the muscles' excitation against the rigid patient's joint reflex), and the
-scripted expert on every exercise of the knee ids with each condition (success, forces, the
-work of the robot, of the patient and of the muscles, fatigue).
+patient's in the same run: isokinetic knee and elbow stretches for every Modified Ashworth
+grade (the stretch reflex on the muscles' excitation against the rigid patient's joint
+reflex), and the scripted expert on every exercise of the knee and reach ids with each
+condition (success, forces, the work of the robot, of the patient and of the muscles,
+fatigue).
 
     python benchmarks/results/myo_conditions.py [--seed 0] [--levels 0 2 4]
         [--page docs/results/myo-conditions]
@@ -13,6 +14,7 @@ Needs ``pip install "rehabbot[myo]"``.
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 from pathlib import Path
 
@@ -33,14 +35,16 @@ from rehabbot.analysis.condition_probes import stretch_test
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim.conditions import MAS_GRADES, PatientCondition
 
-INTRO = """MyoSuite's legs (`myo-sim` 0.2.3) with the conditions of `PatientCondition` acting on
-their muscles (`rehabbot.sim.muscle_drive`), measured beside the rigid patient in this run.
-The isokinetic stretches release the cuff and move the seated knee with a velocity servo
-through 5-99 % of its range (`rehabbot.analysis.condition_probes.stretch_test`); the
-resistance is the reflex's torque against the motion (the muscles' active torque on the
-myo knee). The expert rows run the scripted expert on every exercise of `rehab-knee-v2` and
-`rehab-knee-myo-v2` at the listed weight levels (means over the episodes). Fatigue acts on
-muscles only, so it has no rigid row."""
+INTRO = """MyoSuite's legs and right arm (`myo-sim` 0.2.3) with the conditions of
+`PatientCondition` acting on their muscles (`rehabbot.sim.muscle_drive`), measured beside the
+rigid patient in this run. The isokinetic stretches release the cuff and move the seated knee
+or elbow with a velocity servo through 5-99 % of its range at 100 deg/s, 30-70 % at 5 deg/s
+(`rehabbot.analysis.condition_probes.stretch_test`); the resistance is the reflex's torque
+against the motion (on the myo patient, the muscles' active torque). The reflex's one
+constant was calibrated on the knee; the elbow rows check it. The expert rows run the
+scripted expert on every exercise of the rigid and myo knee and reach ids at the listed
+weight levels (means over the episodes). Fatigue acts on muscles only, so it has no rigid
+row."""
 
 SPEEDS_DEG_S = (5.0, 100.0)
 SWEEPS = {5.0: (0.3, 0.7), 100.0: (0.05, 0.99)}
@@ -53,36 +57,42 @@ CONDITIONS: dict[str, dict] = {
     "active, 30 % strength": {"effort": "active_assisted", "strength_fraction": 0.3},
     "active, full strength": {"effort": "active_assisted"},
     "resistive, 3 % effort": {"effort": "resistive", "effort_fraction": 0.03},
+    "weak (30 %), resistive 10 %": {"effort": "resistive", "effort_fraction": 0.1,
+                                    "strength_fraction": 0.3},
     "active 50 %, fatigue x50": {"effort": "active_assisted", "effort_fraction": 0.5,
                                  "fatigue_scale": 50.0},
 }
 
 
+STRETCHED = (("knee_flexion", "knee"), ("elbow_flexion", "arm"))
+KNEE_AND_REACH = ("rehab-knee", "rehab-reach")
+
+
 def stretch_rows() -> list[dict]:
     rows = []
-    for model in ("rigid", "myo"):
-        for grade in MAS_GRADES:
-            for speed in SPEEDS_DEG_S:
-                result = stretch_test({"spasticity_mas": grade}, joint="knee_flexion",
-                                      limb="knee", speed_deg_s=speed, sweep=SWEEPS[speed],
-                                      patient_model=model)
-                resistance = result.resistance_nm
-                rows.append({"patient_model": model, "mas": grade, "speed_deg_s": speed,
-                             "sweep": list(SWEEPS[speed]),
-                             "peak_nm": float(resistance.max()),
-                             "mean_nm": float(resistance.mean()),
-                             "resisted_fraction": result.resisted_fraction(),
-                             "dynamometer_mean_nm": float(result.dynamometer_nm.mean()),
-                             "speed_mean_deg_s": float(result.velocity_deg_s.mean())})
-                print(rows[-1], flush=True)
+    for (joint, limb), model, grade, speed in itertools.product(
+            STRETCHED, ("rigid", "myo"), MAS_GRADES, SPEEDS_DEG_S):
+        result = stretch_test({"spasticity_mas": grade}, joint=joint,
+                              limb=limb, speed_deg_s=speed, sweep=SWEEPS[speed],
+                              patient_model=model)
+        resistance = result.resistance_nm
+        rows.append({"joint": joint, "patient_model": model, "mas": grade,
+                     "speed_deg_s": speed,
+                     "sweep": list(SWEEPS[speed]),
+                     "peak_nm": float(resistance.max()),
+                     "mean_nm": float(resistance.mean()),
+                     "resisted_fraction": result.resisted_fraction(),
+                     "dynamometer_mean_nm": float(result.dynamometer_nm.mean()),
+                     "speed_mean_deg_s": float(result.velocity_deg_s.mean())})
+        print(rows[-1], flush=True)
     return rows
 
 
 def expert_rows(seed: int, levels: list[int]) -> list[dict]:
     rows = []
-    for name, condition in CONDITIONS.items():
-        for model, env_id in (("rigid", "rehabbot/rehab-knee-v2"),
-                              ("myo", "rehabbot/rehab-knee-myo-v2")):
+    for base, (name, condition) in itertools.product(KNEE_AND_REACH, CONDITIONS.items()):
+        for model, env_id in (("rigid", f"rehabbot/{base}-v2"),
+                              ("myo", f"rehabbot/{base}-myo-v2")):
             if model == "rigid" and PatientCondition(**condition).fatigue_scale > 0.0:
                 continue
             env = gym.make(env_id, condition=condition)
@@ -109,8 +119,8 @@ def expert_rows(seed: int, levels: list[int]) -> list[dict]:
                         "muscle_work_j": info.get("muscle_work_j"),
                         "muscle_fatigue": info.get("muscle_fatigue")})
             env.close()
-            rows.append({"condition": name, "fields": condition, "patient_model": model,
-                         "seed": seed, "episodes": episodes})
+            rows.append({"id": env_id.split("/")[1], "condition": name, "fields": condition,
+                         "patient_model": model, "seed": seed, "episodes": episodes})
             print(name, model, [(e["success"], round(e["peak_force_n"])) for e in episodes],
                   flush=True)
     return rows
@@ -140,21 +150,21 @@ def main(argv: list[str] | None = None) -> int:
     print(f"command: {command}", flush=True)
     stretches = stretch_rows()
     stretch_table = make_table(
-        "stretches", "Isokinetic knee stretches, seated (cuff released; resistance = the "
-        "reflex's torque against the motion)",
-        ["patient", "MAS", "speed [deg/s]", "peak [N·m]", "mean [N·m]",
+        "stretches", "Isokinetic stretches of the seated knee and elbow (cuff released; "
+        "resistance = the reflex's torque against the motion)",
+        ["joint", "patient", "MAS", "speed [deg/s]", "peak [N·m]", "mean [N·m]",
          "share of sweep resisted", "dynamometer mean [N·m]"],
-        [[r["patient_model"], r["mas"], f"{r['speed_deg_s']:.0f}", f"{r['peak_nm']:.2f}",
-          f"{r['mean_nm']:.2f}", f"{100 * r['resisted_fraction']:.0f} %",
+        [[r["joint"], r["patient_model"], r["mas"], f"{r['speed_deg_s']:.0f}",
+          f"{r['peak_nm']:.2f}", f"{r['mean_nm']:.2f}", f"{100 * r['resisted_fraction']:.0f} %",
           f"{r['dynamometer_mean_nm']:.2f}"] for r in stretches])
     experts = expert_rows(args.seed, args.levels)
     expert_table = make_table(
-        "expert", f"The scripted expert on every knee exercise at weight levels {args.levels}, "
+        "expert", f"The scripted expert on every exercise at weight levels {args.levels}, "
         f"seed {args.seed} (means over the episodes)",
-        ["condition", "patient", "success", "stops", "peak cuff force [N]", "robot work [J]",
+        ["id", "condition", "success", "stops", "peak cuff force [N]", "robot work [J]",
          "patient work [J]", "assistance ratio", "peak muscle force [N]", "muscle work [J]",
          "most fatigued muscle at the end"],
-        [[r["condition"], r["patient_model"],
+        [[r["id"], r["condition"],
           f"{100 * _mean(r['episodes'], 'success'):.0f} %",
           ", ".join(sorted({e["stop"] for e in r["episodes"] if e["stop"]})) or "-",
           f"{max(e['peak_force_n'] for e in r['episodes']):.0f}",

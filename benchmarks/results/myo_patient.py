@@ -1,6 +1,7 @@
-"""The musculoskeletal patient (MyoSuite's legs, ``patient_model="myo"``) against the rigid one:
-passive knee torque against angle, the static cuff force along the seated knee extension, the
-scripted expert on every exercise of the myo ids, and the throughput of both in the same run.
+"""The musculoskeletal patient (MyoSuite's legs and right arm, ``patient_model="myo"``) against
+the rigid one: passive knee and elbow torque against angle, the static cuff force along the
+seated knee extension, the scripted expert on every exercise of the myo ids, and the
+throughput of both in the same run.
 
     python benchmarks/results/myo_patient.py [--seed 0] [--steps 2000]
         [--page docs/results/myo-patient]
@@ -36,15 +37,18 @@ from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim import build_scene, statics
 from rehabbot.sim.muscles import muscle_torque_nm
 
-INTRO = """MyoSuite's legs (`myo-sim` 0.2.3, 80 muscles, passive: zero excitation) seated and
-lying in RehabBot's scenes (`patient_model="myo"`, `rehabbot.sim.myo_patient`), measured
+INTRO = """MyoSuite's legs (`myo-sim` 0.2.3, 80 muscles) seated and lying in RehabBot's scenes,
+and its right arm (63 muscles) seated in the reach scene (`patient_model="myo"`,
+`rehabbot.sim.myo_patient`, `rehabbot.sim.myo_arm`), passive (zero excitation), measured
 beside the rigid patient of the same ids. The passive torque is the muscles' generalised force
-on the knee (the knee's coupled joints' share included), gravity on but not counted. The static
+on the knee or elbow (the coupled joints' share included), gravity on but not counted; the
+rest of the limb at its home pose. The static
 cuff force is what the strap carries when the robot holds the leg still at a knee angle, from
 the scene's home balance at that pose. Throughput is measured with the robot holding its
 home setpoints (physics) and with zero actions (env steps), best of three, in this run."""
 
 KNEE_ANGLES_DEG = tuple(range(0, 121, 15))
+ELBOW_ANGLES_DEG = (0, 15, 30, 45, 60, 75, 90, 105, 120, 130)
 HOLD_ANGLES_DEG = (90, 75, 60, 45, 35, 30, 25, 20)
 
 
@@ -140,6 +144,14 @@ def main(argv: list[str] | None = None) -> int:
         ["knee flexion [deg]", "hip flexed 90 deg (seated)", "hip extended (0 deg)"],
         [[a, f"{s:.1f}", f"{e:.1f}"] for a, s, e in zip(KNEE_ANGLES_DEG, curves["hip_90"],
                                                           curves["hip_0"], strict=True)])
+    arm = build_scene("upper_right", patient_model="myo")
+    elbow = [muscle_torque_nm(arm, "elbow_flexion_r", {"elbow_flexion_r": a})
+             for a in ELBOW_ANGLES_DEG]
+    elbow_table = make_table(
+        "passive-elbow-torque", "MyoArm's passive elbow torque [N m] (positive: towards "
+        "flexion), zero excitation, the shoulder at the reach scene's home",
+        ["elbow flexion [deg]", "torque [N m]"],
+        [[a, f"{t:.2f}"] for a, t in zip(ELBOW_ANGLES_DEG, elbow, strict=True)])
     holds = {model: {level: [static_cuff_force_n(model, level, a) for a in HOLD_ANGLES_DEG]
                      for level in (0, 4)} for model in ("rigid", "myo")}
     hold_table = make_table(
@@ -170,17 +182,19 @@ def main(argv: list[str] | None = None) -> int:
           f"{r['env_steps_per_s']:.0f}",
           *(f"{r[k] / rigid_rate[MYO_VARIANTS.get(r['id'], r['id'])][k]:.2f}"
             for k in ("physics_steps_per_s", "env_steps_per_s"))] for r in speed])
-    tables = [torque_table, hold_table, expert_table, speed_table]
+    tables = [torque_table, elbow_table, hold_table, expert_table, speed_table]
     for table in tables:
         print(table_markdown(table), flush=True)
     if args.page is not None:
         write_page(make_document(
-            title="The musculoskeletal patient (MyoSuite's legs)", intro=INTRO,
+            title="The musculoskeletal patient (MyoSuite's legs and arm)", intro=INTRO,
             command=command, generated_by=__file__, tables=tables,
             machine=describe_machine(), seeds={"episodes": args.seed},
             settings={"knee_angles_deg": list(KNEE_ANGLES_DEG),
+                      "elbow_angles_deg": list(ELBOW_ANGLES_DEG),
                       "hold_angles_deg": list(HOLD_ANGLES_DEG), "steps": args.steps},
-            data={"passive_torque_nm": curves, "static_cuff_force_n": holds,
+            data={"passive_torque_nm": curves, "passive_elbow_torque_nm": elbow,
+                  "static_cuff_force_n": holds,
                   "expert": rows, "throughput": speed}), args.page)
     return 0
 

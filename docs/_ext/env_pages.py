@@ -39,9 +39,10 @@ FAMILIES: tuple[tuple[str, str, str], ...] = (
      "A new patient (profile x condition) every episode, drawn from the `\"train\"` "
      "population; `patients=\"test\"` gives held-out patients."),
     ("myo", "The musculoskeletal patient: the `-myo` ids",
-     "The base `-v2` knee and hip ids with MyoSuite's legs (`patient_model=\"myo\"`, 80 "
-     "muscles; `pip install \"rehabbot[myo]\"`; `docs/musculoskeletal-patient.md`). Same "
-     "spaces and reward as the base id; the muscles are in `info`."),
+     "The base `-v2` knee, hip and right-arm reach ids with MyoSuite's legs (80 muscles) or "
+     "right arm (63) (`patient_model=\"myo\"`; `pip install \"rehabbot[myo]\"`; "
+     "`docs/musculoskeletal-patient.md`). Same spaces and reward as the base id; the muscles "
+     "are in `info`, and the patient's conditions act on them."),
 )
 
 VERSIONS = {

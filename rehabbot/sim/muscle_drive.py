@@ -14,10 +14,14 @@ muscles' excitations (``data.ctrl``) before each physics step, and MuJoCo's musc
   table of its length over that range, built once), its stretch speed that joint's speed
   towards lengthening it (not the tendon's own speed, which carries the jitter of MyoLeg's soft
   patella coupling). The threshold, the speed-dependent catch and the release are then the
-  rigid patient's, and the excitation is ``gain_scale x REFLEX_EXCITATION_PER_RAD_S x`` the
-  speed above the threshold, at most 1. So a slow stretch never fires, and the grades catch
-  where the rigid patient's catch (``docs/musculoskeletal-patient.md`` has the calibration;
-  ``docs/results/myo-conditions.md`` the isokinetic table).
+  rigid patient's. The excitation is the share of the stretched muscles' strength that the
+  rigid patient's reflex torque of that joint would take: ``REFLEX_FORCE_FACTOR x gain_scale x
+  G_joint x`` (the speed above the threshold) ``/`` (the sum, over the reflex muscles that this
+  motion of the joint stretches, of their healthy peak isometric force times their mean moment
+  arm on it), at most 1, with ``G_joint`` the rigid patient's reference reflex gain
+  (:data:`~rehabbot.sim.conditions.REFLEX_GAIN_NMS_PER_RAD`). So a slow stretch never fires,
+  and the grades catch where the rigid patient's catch (``docs/musculoskeletal-patient.md``
+  has the calibration; ``docs/results/myo-conditions.md`` the isokinetic table).
 * **Voluntary effort**: the rigid patient's law gives the joint torque the patient wants (an
   ``"active_assisted"`` patient carries the limb and pulls towards the target it noticed
   ``reaction_delay_s`` ago; a ``"resistive"`` one pushes against the motion), saturated at the
@@ -45,6 +49,7 @@ from rehabbot.sim import statics
 from rehabbot.sim.conditions import (
     CATCH_RAMP,
     CATCH_SHIFT_PER_RAD_S,
+    REFLEX_GAIN_NMS_PER_RAD,
     REFLEX_LATENCY_S,
     RELEASE_WIDTH,
     PatientCondition,
@@ -59,10 +64,12 @@ from rehabbot.sim.patient_drive import (
 )
 from rehabbot.sim.scene import Scene
 
-# Excitation per rad/s of stretch speed above the threshold, before the grade's gain_scale:
-# calibrated on the seated myo knee so that the reflex's resistance at 100 deg/s is of the
-# rigid patient's size at grades 2 to 4 (docs/musculoskeletal-patient.md, Spasticity).
-REFLEX_EXCITATION_PER_RAD_S = 0.0065
+# The reflex's excitation is this multiple of the share of the stretched muscles' isometric
+# strength that the rigid patient's reflex torque would take: calibrated on the seated knee
+# (its mean resistance at 100 deg/s matches the rigid knee's at grades 2 to 4) and checked on
+# the elbow (docs/musculoskeletal-patient.md, Spasticity). Above 1 because the muscles do not
+# all pull at their optimal length, and activation lags the excitation.
+REFLEX_FORCE_FACTOR = 1.1
 # A muscle joins the reflex when a compliant joint's range changes its length by this much.
 REFLEX_MIN_EXCURSION_M = 0.02
 REFLEX_TABLE_POINTS = 25  # the samples of a muscle's length along its joint's range
@@ -101,6 +108,7 @@ class MuscleDrive:
         self._dofs = dofs
         self._qadr = [int(model.jnt_qposadr[model.dof_jntid[d]]) for d in dofs]
         names = [model.joint(int(model.dof_jntid[d])).name for d in dofs]
+        self._joint_names = names
         exercised = list(scene.exercised_joints)
         self.exercised_index = [exercised.index(n) for n in names]
         self._exercised_dofs = [int(model.joint(n).dofadr[0]) for n in exercised]
@@ -159,6 +167,22 @@ class MuscleDrive:
         self._table = table
         self._stretch_dof = np.array([self._dofs[strongest[i]] for i in reflex], dtype=int)
         self._stretch_sign = np.array(signs)
+        # Each reflex muscle's excitation per rad/s above the threshold: the rigid reflex
+        # torque's share of the healthy strength of the muscles that the same motion stretches.
+        self._reflex_gain = np.zeros(len(reflex))
+        condition = self.condition
+        if condition.reflex is not None:
+            healthy_force = self._peak_force[reflex] / condition.strength_fraction
+            arm = (table[:, -1] - table[:, 0]) / np.array(
+                [ranges_rad[strongest[i]][1] - ranges_rad[strongest[i]][0] for i in reflex])
+            strength = healthy_force * arm
+            for row, i in enumerate(reflex):
+                joint = strongest[i]
+                base = self._joint_names[joint].rsplit("_", 1)[0]
+                same = (strongest[reflex] == joint) & (self._stretch_sign == signs[row])
+                self._reflex_gain[row] = (REFLEX_FORCE_FACTOR * condition.reflex.gain_scale
+                                          * REFLEX_GAIN_NMS_PER_RAD[base]
+                                          / float(strength[same].sum()))
 
     def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
         """Start an episode: clear the delays and the excitations; fresh muscles."""
@@ -231,7 +255,7 @@ class MuscleDrive:
         build_up = np.clip(past / CATCH_RAMP, 0.0, 1.0)
         release = reflex.release_to + (1.0 - reflex.release_to) * np.exp(
             -np.maximum(past - CATCH_RAMP, 0.0) / RELEASE_WIDTH)
-        fired = reflex.gain_scale * REFLEX_EXCITATION_PER_RAD_S * np.maximum(excess, 0.0)
+        fired = self._reflex_gain * np.maximum(excess, 0.0)
         excitation[self.reflex_rows] = fired * build_up * release
         return excitation
 
