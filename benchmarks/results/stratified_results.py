@@ -71,7 +71,7 @@ VALIDATION_PROFILES = {
     "m170": {"height_m": 1.70, "mass_kg": 68.0, "sex": "male"},
     "m180": {"height_m": 1.80, "mass_kg": 82.0, "sex": "male"},
 }
-# MyoSuite's legs are one adult size (patient_model="myo" is built for the default profile
+# MyoSuite's legs and arm are one adult size (patient_model="myo" is built for the default profile
 # only): their runs are evaluated on the patient they trained on.
 TRAINED_PROFILES = {"m175": None}
 PROFILE_SETS = {"test": PROFILES, "validation": VALIDATION_PROFILES,
@@ -94,7 +94,7 @@ episode is in the `data` of this page's JSON file, from which the command below 
 page again."""
 TRAINED_TITLE = "Results on the musculoskeletal patient: plain networks, the trained patient"
 TRAINED_INTRO = """Every trained run's final model acts deterministically on every exercise x
-weight level (0-4) of the patient it trained on (`m175`: MyoSuite's legs are one adult size, so
+weight level (0-4) of the patient it trained on (`m175`: MyoSuite's models are one adult size, so
 no other patient can be seated; `--profiles trained`): {per_cell} episodes per cell, episode
 seeds from {seed}, far from every seed training used and the same for every run and for the
 scripted expert. The home state has no noise, so a deterministic policy plays the same episode
