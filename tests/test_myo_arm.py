@@ -5,8 +5,6 @@ id's spaces, the expert on every exercise, and what is refused."""
 
 from __future__ import annotations
 
-import builtins
-
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -14,7 +12,7 @@ import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.rl.experts import ScriptedExpert
-from rehabbot.sim import build_scene, myo_arm
+from rehabbot.sim import build_scene
 from rehabbot.sim import myo_patient as mp
 from rehabbot.sim.muscles import INFO_KEYS, limb_muscles, muscle_torque_nm
 from rehabbot.sim.scene import set_pose
@@ -171,22 +169,3 @@ def test_what_the_myo_arm_does_not_support_is_refused_naming_it():
         gym.make(MYO_REACH_ID, profile={"height_m": 1.6})
     with pytest.raises(ValueError, match=r"tremor on muscles.*tremor_hz"):
         gym.make(MYO_REACH_ID, condition={"tremor_hz": 5.0, "tremor_amplitude_nm": 1.0})
-
-
-def test_without_myo_sim_the_arm_names_the_extra(monkeypatch):
-    real_import = builtins.__import__
-
-    def no_myo_sim(name, *args, **kwargs):
-        if name.startswith("myo_sim"):
-            raise ImportError(f"No module named {name!r}")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_myo_sim)
-    myo_arm._arm_template.cache_clear()
-    try:
-        with pytest.raises(mp.MyoModelMissingError,
-                           match=r'myo-sim: pip install "rehabbot\[myo\]"'):
-            build_scene("upper_right", patient_model="myo")
-    finally:
-        monkeypatch.undo()
-        myo_arm._arm_template.cache_clear()

@@ -15,7 +15,7 @@ import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
 from rehabbot.rl.experts import ScriptedExpert
-from rehabbot.sim import build_scene, statics
+from rehabbot.sim import build_scene, myo_arm, statics
 from rehabbot.sim import myo_patient as mp
 from rehabbot.sim.muscles import INFO_KEYS, muscle_torque_nm
 
@@ -257,7 +257,9 @@ def test_what_the_myo_patient_does_not_support_is_refused_naming_it():
         build_scene("upper_bilateral", patient_model="myo")
 
 
-def test_without_myo_sim_the_error_names_the_extra(monkeypatch):
+@pytest.mark.parametrize(("preset", "template"), [
+    ("knee", mp._legs_template), ("upper_right", myo_arm._arm_template)])
+def test_without_myo_sim_the_error_names_the_extra(monkeypatch, preset, template):
     real_import = builtins.__import__
 
     def no_myo_sim(name, *args, **kwargs):
@@ -266,14 +268,14 @@ def test_without_myo_sim_the_error_names_the_extra(monkeypatch):
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_myo_sim)
-    mp._legs_template.cache_clear()
+    template.cache_clear()
     try:
         with pytest.raises(mp.MyoModelMissingError,
                            match=r'myo-sim: pip install "rehabbot\[myo\]"'):
-            build_scene("knee", patient_model="myo")
+            build_scene(preset, patient_model="myo")
     finally:
         monkeypatch.undo()
-        mp._legs_template.cache_clear()
+        template.cache_clear()
 
 
 # --------------------------------------------------------------------------- the command line

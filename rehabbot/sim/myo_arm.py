@@ -138,14 +138,7 @@ def _strip_scaffold(arm: mujoco.MjSpec) -> None:
         body.inertia = [0.0, 0.0, 0.0]
         body.ipos = [0.0, 0.0, 0.0]
     arm.body("Full Body").pos = [0.0, 0.0, 0.0]
-    used = {geom.material for geom in arm.geoms if geom.material}
-    for material in list(arm.materials):
-        if material.name not in used:
-            arm.delete(material)
-    used_textures = {name for material in arm.materials for name in material.textures if name}
-    for texture in list(arm.textures):
-        if texture.name not in used_textures:
-            arm.delete(texture)
+    myo.delete_unused_assets(arm)
 
 
 def _fix_elevation_plane(arm: mujoco.MjSpec) -> None:

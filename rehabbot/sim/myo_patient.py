@@ -172,14 +172,19 @@ def _strip_scaffold(legs: mujoco.MjSpec) -> None:
     legs.body("Full Body").pos = [0.0, 0.0, 0.0]  # was its standing height; attached instead
     for item in [*legs.worldbody.geoms, *legs.worldbody.lights, *legs.worldbody.cameras]:
         legs.delete(item)
-    used = {geom.material for geom in legs.geoms if geom.material}
-    for material in list(legs.materials):
+    delete_unused_assets(legs)
+
+
+def delete_unused_assets(spec: mujoco.MjSpec) -> None:
+    """Delete the materials no geom of ``spec`` uses, then the textures no material uses."""
+    used = {geom.material for geom in spec.geoms if geom.material}
+    for material in list(spec.materials):
         if material.name not in used:
-            legs.delete(material)
-    used_textures = {name for material in legs.materials for name in material.textures if name}
-    for texture in list(legs.textures):
+            spec.delete(material)
+    used_textures = {name for material in spec.materials for name in material.textures if name}
+    for texture in list(spec.textures):
         if texture.name not in used_textures:
-            legs.delete(texture)
+            spec.delete(texture)
 
 
 def _cuff_frame(knee_to_ankle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
