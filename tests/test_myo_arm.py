@@ -167,5 +167,3 @@ def test_what_the_myo_arm_does_not_support_is_refused_naming_it():
         build_scene("upper_bilateral", patient_model="myo")
     with pytest.raises(ValueError, match=r"one adult size.*height_m=1.6"):
         gym.make(MYO_REACH_ID, profile={"height_m": 1.6})
-    with pytest.raises(ValueError, match=r"tremor on muscles.*tremor_hz"):
-        gym.make(MYO_REACH_ID, condition={"tremor_hz": 5.0, "tremor_amplitude_nm": 1.0})

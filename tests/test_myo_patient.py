@@ -248,9 +248,6 @@ def test_what_the_myo_patient_does_not_support_is_refused_naming_it():
         gym.make("rehabbot/rehab-reach-l-v2", patient_model="myo")
     with pytest.raises(ValueError, match=r"one adult size.*height_m=1.6"):
         gym.make("rehabbot/rehab-knee-myo-v2", profile={"height_m": 1.6})
-    with pytest.raises(ValueError, match=r"tremor on muscles.*tremor_hz"):
-        gym.make("rehabbot/rehab-knee-myo-v2",
-                 condition={"tremor_hz": 5.0, "tremor_amplitude_nm": 1.0})
     with pytest.raises(ValueError, match=r"patient_model.*.bones."):
         gym.make("rehabbot/rehab-knee-v2", patient_model="bones")
     with pytest.raises(ValueError, match=r"presets \['hip', 'knee', 'upper_right'\] only"):

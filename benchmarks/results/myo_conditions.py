@@ -1,9 +1,9 @@
 """The patient's conditions on MyoSuite's muscles (``patient_model="myo"``), beside the rigid
 patient's in the same run: isokinetic knee and elbow stretches for every Modified Ashworth
 grade (the stretch reflex on the muscles' excitation against the rigid patient's joint
-reflex), and the scripted expert on every exercise of the knee and reach ids with each
-condition (success, forces, the work of the robot, of the patient and of the muscles,
-fatigue).
+reflex), the held elbow's tremor spectrum, and the scripted expert on every exercise of the
+knee and reach ids with each condition (success, forces, the work of the robot, of the
+patient and of the muscles, fatigue).
 
     python benchmarks/results/myo_conditions.py [--seed 0] [--levels 0 2 4]
         [--page docs/results/myo-conditions]
@@ -31,7 +31,7 @@ from benchmarks.common.documents import (
     write_page,
 )
 from benchmarks.common.machine import describe_machine
-from rehabbot.analysis.condition_probes import stretch_test
+from rehabbot.analysis.condition_probes import stretch_test, tremor_spectrum
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim.conditions import MAS_GRADES, PatientCondition
 
@@ -41,7 +41,8 @@ rigid patient in this run. The isokinetic stretches release the cuff and move th
 or elbow with a velocity servo through 5-99 % of its range at 100 deg/s, 30-70 % at 5 deg/s
 (`rehabbot.analysis.condition_probes.stretch_test`); the resistance is the reflex's torque
 against the motion (on the myo patient, the muscles' active torque). The reflex's one
-constant was calibrated on the knee; the elbow rows check it. The expert rows run the
+constant was calibrated on the knee; the elbow rows check it. The tremor rows hold the elbow
+still and give the spectral peak of its angle. The expert rows run the
 scripted expert on every exercise of the rigid and myo knee and reach ids at the listed
 weight levels (means over the episodes). Fatigue acts on muscles only, so it has no rigid
 row."""
@@ -61,7 +62,11 @@ CONDITIONS: dict[str, dict] = {
                                     "strength_fraction": 0.3},
     "active 50 %, fatigue x50": {"effort": "active_assisted", "effort_fraction": 0.5,
                                  "fatigue_scale": 50.0},
+    "tremor 5 Hz, 2 N·m": {"tremor_hz": 5.0, "tremor_amplitude_nm": 2.0},
 }
+TREMOR_HZ = (3.0, 5.0, 8.0, 12.0)
+TREMOR_NM = 2.0
+TREMOR_SECONDS = 10.0
 
 
 STRETCHED = (("knee_flexion", "knee"), ("elbow_flexion", "arm"))
@@ -84,6 +89,20 @@ def stretch_rows() -> list[dict]:
                      "resisted_fraction": result.resisted_fraction(),
                      "dynamometer_mean_nm": float(result.dynamometer_nm.mean()),
                      "speed_mean_deg_s": float(result.velocity_deg_s.mean())})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def tremor_rows(seed: int) -> list[dict]:
+    rows = []
+    for model, frequency in itertools.product(("rigid", "myo"), (*TREMOR_HZ, None)):
+        condition = None if frequency is None else {"tremor_hz": frequency,
+                                                    "tremor_amplitude_nm": TREMOR_NM}
+        spectrum = tremor_spectrum(condition, seconds=TREMOR_SECONDS, seed=seed,
+                                   patient_model=model)
+        rows.append({"patient_model": model, "tremor_hz": frequency,
+                     "amplitude_nm": None if frequency is None else TREMOR_NM, "seed": seed,
+                     "peak_hz": spectrum.peak_hz, "rms_deg": spectrum.rms_deg})
         print(rows[-1], flush=True)
     return rows
 
@@ -157,6 +176,13 @@ def main(argv: list[str] | None = None) -> int:
         [[r["joint"], r["patient_model"], r["mas"], f"{r['speed_deg_s']:.0f}",
           f"{r['peak_nm']:.2f}", f"{r['mean_nm']:.2f}", f"{100 * r['resisted_fraction']:.0f} %",
           f"{r['dynamometer_mean_nm']:.2f}"] for r in stretches])
+    tremors = tremor_rows(args.seed)
+    tremor_table = make_table(
+        "tremor", f"Tremor ({TREMOR_NM:g} N·m), the elbow held by the robot for "
+        f"{TREMOR_SECONDS:g} s (zero actions), seed {args.seed}",
+        ["patient", "tremor_hz", "spectral peak [Hz]", "RMS about the trend [deg]"],
+        [[r["patient_model"], "none" if r["tremor_hz"] is None else f"{r['tremor_hz']:g}",
+          f"{r['peak_hz']:.2f}", f"{r['rms_deg']:.4f}"] for r in tremors])
     experts = expert_rows(args.seed, args.levels)
     expert_table = make_table(
         "expert", f"The scripted expert on every exercise at weight levels {args.levels}, "
@@ -174,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
           _cell(_mean(r["episodes"], "peak_muscle_force_n"), 0),
           _cell(_mean(r["episodes"], "muscle_work_j"), 2),
           _cell(_mean(r["episodes"], "muscle_fatigue"), 3)] for r in experts])
-    tables = [stretch_table, expert_table]
+    tables = [stretch_table, tremor_table, expert_table]
     for table in tables:
         print(table_markdown(table), flush=True)
     if args.page is not None:
@@ -185,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
             settings={"levels": args.levels, "speeds_deg_s": list(SPEEDS_DEG_S),
                       "sweeps": {str(k): list(v) for k, v in SWEEPS.items()},
                       "conditions": CONDITIONS},
-            data={"stretches": stretches, "expert": experts}), args.page)
+            data={"stretches": stretches, "tremor": tremors, "expert": experts}), args.page)
     return 0
 
 

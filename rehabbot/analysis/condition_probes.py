@@ -175,13 +175,15 @@ class TremorSpectrum:
 
 def tremor_spectrum(condition: PatientCondition | dict | None, joint: str = "elbow_flexion",
                     limb: str = "arm", side: str = "right", seconds: float = 10.0,
-                    seed: int = 0, band_hz: tuple[float, float] = (1.0, 20.0)) -> TremorSpectrum:
+                    seed: int = 0, band_hz: tuple[float, float] = (1.0, 20.0),
+                    patient_model: str = "rigid") -> TremorSpectrum:
     """Hold the limb still (zero actions) for ``seconds`` after ``reset(seed=seed)`` and
     return the spectrum of ``joint``'s angle, sampled every physics step, and its peak within
-    ``band_hz``."""
+    ``band_hz``; ``patient_model="myo"`` holds MyoSuite's limb, its muscles trembling."""
     condition = as_condition(condition)
     env = RehabEnv(limb=limb, side=side, condition=condition, weight_level=0,
-                   reward="progress", frame_skip=1, max_episode_steps=10**6)
+                   reward="progress", frame_skip=1, max_episode_steps=10**6,
+                   patient_model=patient_model)
     try:
         env.reset(seed=seed)
         qadr = env.model.joint(f"{joint}_{side[0]}").qposadr[0]

@@ -29,8 +29,8 @@ import numpy as np
 from rehabbot.sim import statics
 from rehabbot.sim.conditions import PatientCondition, healthy_strength_nm
 from rehabbot.sim.muscles import limb_muscles, scale_active_force, scale_passive_force
-from rehabbot.sim.patient_drive import TREMOR_MODULATION
 from rehabbot.sim.scene import Scene
+from rehabbot.sim.tremor import TREMOR_MODULATION
 from rehabbot.tasks.exercises import Exercise
 from rehabbot.tasks.targets import TargetSequence
 

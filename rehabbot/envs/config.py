@@ -446,22 +446,11 @@ class RehabEnvConfig:
         return self.safety.thresholds()
 
 
-# The condition fields MyoSuite's legs and arm do not model yet (tremor: envs/condition_setup.py
-# and sim/muscle_drive.py model the rest on muscles).
-MYO_UNMODELLED_CONDITION_FIELDS: tuple[str, ...] = ("tremor_hz", "tremor_amplitude_nm")
-
-
 def check_myo_patient(patient: PatientConfig) -> None:
-    """What MyoSuite's legs and arm support today: the default profile (they are one adult
-    size) and every condition but tremor (:data:`MYO_UNMODELLED_CONDITION_FIELDS`).
-    ``ValueError`` naming what is not."""
+    """What MyoSuite's legs and arm support: the default profile (they are one adult size);
+    every condition acts on their muscles (:mod:`rehabbot.sim.muscle_drive`). ``ValueError``
+    naming the profile otherwise."""
     check_myo_profile(patient.profile)
-    default = PatientCondition().to_dict()
-    changed = {name: value for name, value in patient.condition.to_dict().items()
-               if value != default[name] and name in MYO_UNMODELLED_CONDITION_FIELDS}
-    if changed:
-        raise ValueError(f"patient_model='myo' does not model tremor on muscles yet; condition "
-                         f"field(s) {changed} act on the rigid patient only")
 
 
 def kwarg_names(config_class: type = RehabEnvConfig) -> tuple[str, ...]:

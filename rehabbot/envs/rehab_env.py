@@ -102,7 +102,8 @@ when the env is built (:mod:`rehabbot.tasks.feasibility`, :mod:`rehabbot.envs.co
 
 ## The patient
 ``condition`` (:class:`rehabbot.sim.conditions.PatientCondition`, ``docs/conditions.md``) adds
-spasticity, contracture, weakness, tremor, effort and (on muscles) fatigue; the default is a healthy, passive limb.
+spasticity, contracture, weakness, tremor, effort and (on muscles) fatigue; the default is a
+healthy, passive limb.
 Every id reports ``info["patient_torque_nm"]`` (the patient's muscle torques on the exercised
 joints), ``info["patient_work_j"]`` and ``info["robot_work_j"]`` (work on the limb since reset,
 counted every physics step) and ``info["assistance_ratio"]`` (the robot's share of the positive
@@ -112,7 +113,7 @@ work; 1.0 until the patient does positive work).
 seats MyoSuite's musculoskeletal legs (:mod:`rehabbot.sim.myo_patient`, 80 muscles); on the
 right-arm ids (``rehab-reach-myo-v2``) MyoSuite's right arm (:mod:`rehabbot.sim.myo_arm`, 63
 muscles; the left arm is refused). The muscles are relaxed unless a condition excites them
-(every condition but tremor acts on them: :mod:`rehabbot.sim.muscle_drive`);
+(every condition acts on them: :mod:`rehabbot.sim.muscle_drive`);
 ``pip install "rehabbot[myo]"``; the default profile only. Its ``info`` adds the exercised
 limb's muscles (:mod:`rehabbot.sim.muscles`):
 ``muscle_excitation`` and ``muscle_activation`` (means, 0-1), ``muscle_force_n`` (their total
@@ -155,7 +156,7 @@ applied on top; ``RehabEnv(config)`` takes a whole config instead.
 | ``task_type`` | task | ``"reaching"`` | ``"reaching"`` (the key poses) or ``"trajectory"`` (dense min-jerk waypoints) |
 | ``control_mode`` | control | ``"joint_delta"`` | see Action space |
 | ``profile`` | patient | ``None`` | :class:`~rehabbot.sim.patient.PatientProfile` or a dict of its fields (default 1.75 m, 75 kg, male) |
-| ``condition`` | patient | ``None`` | :class:`~rehabbot.sim.conditions.PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``); ``None`` = healthy, passive. A condition variant id (``rehab-reach-spastic-v1``, ...) refuses a ``condition=`` that would replace its own: use the base id |
+| ``condition`` | patient | ``None`` | :class:`~rehabbot.sim.conditions.PatientCondition` or a dict of its fields (``spasticity_mas``, ``stiffness_scale``, ``rom_scale``, ``strength_fraction``, ``tremor_hz``, ``tremor_amplitude_nm``, ``effort``, ``effort_fraction``, ``reaction_delay_s``, ``fatigue_scale``); ``None`` = healthy, passive. A condition variant id (``rehab-reach-spastic-v1``, ...) refuses a ``condition=`` that would replace its own: use the base id |
 | ``weight_level`` | patient | ``None`` | fix the weight level 0..4 (limb mass x1.0 .. x2.0); ``None`` draws it |
 | ``exercise`` | task | ``None`` | fix the exercise (an index into the table); ``None`` draws it |
 | ``exercises`` | task | ``None`` | the exercise table: :class:`~rehabbot.tasks.exercises.Exercise` objects or dicts of their fields; ``None`` = the limb's built-in two |

@@ -27,6 +27,9 @@ muscles' excitations (``data.ctrl``) before each physics step, and MuJoCo's musc
   ``reaction_delay_s`` ago; a ``"resistive"`` one pushes against the motion), saturated at the
   same available strength; it is shared out as one excitation over the muscles that pull the
   joint that way (their moment arms now), scaled by their peak isometric force.
+* **Tremor** (:class:`~rehabbot.sim.tremor.Tremor`): the rigid patient's tremor torque on
+  each compliant joint, drawn from the env's ``np_random`` in the same order, added to the
+  patient's wish and shared out the same way, so the muscles that pull each way take turns.
 * **Weakness** lowers the muscles' peak active force (``condition_setup``), so the same wish
   needs more excitation, and the reflex pulls less.
 * **Fatigue** (``fatigue_scale > 0``): the excitations pass through the 3CC-r model
@@ -63,6 +66,7 @@ from rehabbot.sim.patient_drive import (
     RESIST_VELOCITY_RAD_S,
 )
 from rehabbot.sim.scene import Scene
+from rehabbot.sim.tremor import Tremor
 
 # The reflex's excitation is this multiple of the share of the stretched muscles' isometric
 # strength that the rigid patient's reflex torque would take: calibrated on the seated knee
@@ -124,6 +128,10 @@ class MuscleDrive:
         self.available_nm = [(share * pos, share * neg) for pos, neg in strength]
         self._mode = condition.effort if share > 0 else "passive"
         self._kp = [max(pos, neg) / ACTIVE_SATURATION_RAD for pos, neg in self.available_nm]
+        self._tremor = Tremor(condition.tremor_hz, condition.tremor_amplitude_nm, len(dofs),
+                              self.dt_s) if condition.has_tremor else None
+        # Whether the patient wishes joint torques (effort, tremor) that muscles must give.
+        self._wishes = self._mode != "passive" or self._tremor is not None
         self._goal_lag = round(condition.reaction_delay_s / (frame_skip * self.dt_s))
         self._goals: list[list[float]] = []
         self._arms = np.zeros((len(ids), len(dofs)))  # effective moment arms [m], per step
@@ -185,8 +193,8 @@ class MuscleDrive:
                                           / float(strength[same].sum()))
 
     def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
-        """Start an episode: clear the delays and the excitations; fresh muscles."""
-        del rng  # the muscles' drive draws nothing
+        """Start an episode: clear the delays and the excitations; fresh muscles; the tremor's
+        phases drawn from ``rng``."""
         self._speed_history[:] = 0.0
         self._goals.clear()
         self._step_index = 0
@@ -194,6 +202,8 @@ class MuscleDrive:
         data.ctrl[self.muscle_ids] = 0.0
         if self.fatigue is not None:
             self.fatigue.reset()
+        if self._tremor is not None:
+            self._tremor.reset(rng)
         self.torque_nm[:] = 0.0
 
     def run(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float],
@@ -203,19 +213,20 @@ class MuscleDrive:
         muscles' by ``muscles`` (a :class:`~rehabbot.sim.muscles.MuscleMeter` counting their
         active work, which is the patient's). ``goal_rad``: the compliant joints' angles at the
         active target."""
-        del rng
         self._goals.append(goal_rad)
         if len(self._goals) > self._goal_lag + 1:
             del self._goals[0]
         goal = self._goals[0]
-        voluntary = self._mode != "passive"
-        if voluntary:
+        if self._tremor is not None:
+            self._tremor.advance(rng, self.frame_skip * self.dt_s)
+        wishes = self._wishes
+        if wishes:
             self._update_moment_arms(model, data)
         ids = self.muscle_ids
         for _ in range(self.frame_skip):
             excitation = self._reflex_excitation(data)
-            if voluntary:
-                excitation += self._voluntary_excitation(data, goal)
+            if wishes:
+                excitation += self._wished_excitation(data, goal)
             np.clip(excitation, 0.0, 1.0, out=excitation)
             if self.fatigue is not None:
                 excitation = self.fatigue.step(excitation)
@@ -268,26 +279,39 @@ class MuscleDrive:
             dense = dense @ coupling
         self._arms[:] = dense[:, self._dofs]
 
-    def _voluntary_excitation(self, data: mujoco.MjData, goal: list[float]) -> np.ndarray:
-        """The excitation that gives the torque the patient wants on each compliant joint,
-        shared over the muscles that pull that way (a muscle pulls a joint positive when it
-        shortens as the joint's angle grows: its moment arm is negative)."""
+    def _wished_torques_nm(self, data: mujoco.MjData, goal: list[float]) -> list[float]:
+        """The torque the patient wishes on each compliant joint: the rigid patient's effort
+        law (an active patient pulls towards ``goal``, a resistive one pushes against the
+        motion, saturated at the available strength), plus the tremor's."""
         qpos, qvel, bias = data.qpos, data.qvel, data.qfrc_bias
+        wishes = [0.0] * len(self._dofs)
+        if self._mode != "passive":
+            for j, (adr, dof) in enumerate(zip(self._qadr, self._dofs, strict=True)):
+                q, v = qpos[adr], qvel[dof]
+                pos, neg = self.available_nm[j]
+                if self._mode == "active_assisted":
+                    kp = self._kp[j]
+                    wish = bias[dof] + kp * (goal[j] - q) - ACTIVE_DAMPING_S * kp * v
+                    wishes[j] = min(max(wish, -neg), pos)
+                else:
+                    push = math.tanh(v / RESIST_VELOCITY_RAD_S)
+                    wishes[j] = -push * (neg if push > 0 else pos)
+        if self._tremor is not None:
+            self._tremor.add_torques(wishes)
+        return wishes
+
+    def _wished_excitation(self, data: mujoco.MjData, goal: list[float]) -> np.ndarray:
+        """The excitation that gives the wished torque on each compliant joint, shared over
+        the muscles that pull that way (a muscle pulls a joint positive when it shortens as
+        the joint's angle grows: its moment arm is negative)."""
         excitation = np.zeros(len(self.muscle_ids))
-        for j, (adr, dof) in enumerate(zip(self._qadr, self._dofs, strict=True)):
-            q, v = qpos[adr], qvel[dof]
-            pos, neg = self.available_nm[j]
-            if self._mode == "active_assisted":
-                kp = self._kp[j]
-                wish = bias[dof] + kp * (goal[j] - q) - ACTIVE_DAMPING_S * kp * v
-                wish = min(max(wish, -neg), pos)
-            else:
-                push = math.tanh(v / RESIST_VELOCITY_RAD_S)
-                wish = -push * (neg if push > 0 else pos)
+        for j, wish in enumerate(self._wished_torques_nm(data, goal)):
+            if wish == 0.0:
+                continue
             arms = self._arms[:, j]
             pulling = np.where(wish > 0.0, -arms, arms)  # > 0: the muscle pulls that way
             capacity = float(np.sum(np.maximum(pulling, 0.0) * self._peak_force))
-            if capacity > 0.0 and wish != 0.0:
+            if capacity > 0.0:
                 excitation += np.where(pulling > 0.0, abs(wish) / capacity, 0.0)
         return excitation
 

@@ -6,10 +6,8 @@ patient's torques on the compliant exercised joints into ``data.qfrc_applied``:
 
 * the **stretch reflex** of spasticity (:func:`rehabbot.sim.conditions.reflex_torque_nm`), fed
   by the joint velocity of ``REFLEX_LATENCY_S`` ago;
-* **tremor**: ``A (1 + 0.25 m(t)) sin(phase_j(t))`` with the phase advancing at
-  ``tremor_hz + df(t)``; ``df`` (0.2 Hz standard deviation) and ``m`` (clipped to +-1) are
-  Ornstein-Uhlenbeck processes with a 2 s time constant, drawn from the env's ``np_random``
-  at each control step; each joint starts at a random phase;
+* **tremor** (:class:`rehabbot.sim.tremor.Tremor`): ``A (1 + 0.25 m(t)) sin(phase_j(t))``,
+  its frequency and amplitude drifting, drawn from the env's ``np_random``;
 * **voluntary effort**: ``"active_assisted"``: the patient carries the limb's own weight and
   pulls towards the target it noticed ``reaction_delay_s`` ago (a PD law), ``"resistive"``: it
   pushes against the motion, ``-S tanh(v / 0.1 rad/s)``; both saturated at the available
@@ -42,10 +40,8 @@ from rehabbot.sim.conditions import (
     reflex_torque_nm,
 )
 from rehabbot.sim.scene import Scene
+from rehabbot.sim.tremor import Tremor
 
-TREMOR_DRIFT_HZ = 0.2  # standard deviation of the tremor frequency's drift
-TREMOR_MODULATION = 0.25  # amplitude modulation depth
-TREMOR_CORRELATION_S = 2.0  # time constant of the drift and modulation
 RESIST_VELOCITY_RAD_S = 0.1  # the resistive patient reaches full push at this speed
 ACTIVE_SATURATION_RAD = 0.35  # the active patient pulls with full strength beyond this error
 ACTIVE_DAMPING_S = 0.3  # Kd = this x Kp
@@ -84,10 +80,8 @@ class PatientDrive:
         self._velocity_history = [[0.0] * len(dofs) for _ in range(self._lag)]
         self._goal_lag = round(condition.reaction_delay_s / (frame_skip * self.dt_s))
         self._goals: list[list[float]] = []
-        self._tremor = condition.has_tremor
-        self._phase = [0.0] * len(dofs)
-        self._drift_hz = 0.0
-        self._modulation = 0.0
+        self._tremor = Tremor(condition.tremor_hz, condition.tremor_amplitude_nm, len(dofs),
+                              self.dt_s) if condition.has_tremor else None
         self._step_index = 0
         self.torque_nm = np.zeros(len(exercised))  # the last physics step's, exercised joints
 
@@ -97,10 +91,8 @@ class PatientDrive:
             row[:] = [0.0] * len(row)
         self._goals.clear()
         self._step_index = 0
-        if self._tremor:
-            self._phase = rng.uniform(0.0, 2.0 * math.pi, len(self._dofs)).tolist()
-            self._drift_hz = float(rng.normal(0.0, TREMOR_DRIFT_HZ))
-            self._modulation = float(np.clip(rng.normal(0.0, 1.0), -1.0, 1.0))
+        if self._tremor is not None:
+            self._tremor.reset(rng)
         self.torque_nm[:] = 0.0
         data.qfrc_applied[self._dofs] = 0.0
 
@@ -113,8 +105,8 @@ class PatientDrive:
         if len(self._goals) > self._goal_lag + 1:
             del self._goals[0]
         goal = self._goals[0]
-        if self._tremor:
-            self._advance_tremor_processes(rng)
+        if self._tremor is not None:
+            self._tremor.advance(rng, self.frame_skip * self.dt_s)
         qpos, qvel, applied, bias = data.qpos, data.qvel, data.qfrc_applied, data.qfrc_bias
         dofs, qadr = self._dofs, self._qadr
         for _ in range(self.frame_skip):
@@ -157,26 +149,10 @@ class PatientDrive:
                 push = math.tanh(v[j] / RESIST_VELOCITY_RAD_S)
                 t -= push * (neg if push > 0 else pos)
             torque[j] = t
-        if self._tremor:
-            condition = self.condition
-            amplitude = condition.tremor_amplitude_nm * (1.0 + TREMOR_MODULATION
-                                                         * self._modulation)
-            step = 2.0 * math.pi * (condition.tremor_hz + self._drift_hz) * self.dt_s
-            phase = self._phase
-            for j in range(len(q)):
-                torque[j] += amplitude * math.sin(phase[j])
-                phase[j] += step
+        if self._tremor is not None:
+            self._tremor.add_torques(torque)
         peak = self.peak_nm
         for j in range(len(q)):
             pos, neg = peak[j]
             torque[j] = min(max(torque[j], -neg), pos)
         return torque
-
-    def _advance_tremor_processes(self, rng: np.random.Generator) -> None:
-        """One control step of the drift and modulation (exact Ornstein-Uhlenbeck update)."""
-        dt = self.frame_skip * self.dt_s
-        decay = math.exp(-dt / TREMOR_CORRELATION_S)
-        noise = math.sqrt(1.0 - decay * decay)
-        z_drift, z_mod = rng.normal(0.0, 1.0, 2).tolist()
-        self._drift_hz = decay * self._drift_hz + noise * TREMOR_DRIFT_HZ * z_drift
-        self._modulation = min(max(decay * self._modulation + noise * z_mod, -1.0), 1.0)

@@ -349,8 +349,6 @@ class LimbPhysics:
             self.muscles = MuscleMeter(scene.model, limb_muscles(
                 scene.model, scene.muscle_actuator_ids, side), count_active=condition.acts)
             if condition.acts:
-                if condition.has_tremor:
-                    raise ValueError("tremor is not modelled on a musculoskeletal patient")
                 self.drive = MuscleDrive(scene, condition, ranges_rad, frame_skip)
         elif condition.acts:
             self.drive = PatientDrive(scene, condition, ranges_rad, frame_skip)
