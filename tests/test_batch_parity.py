@@ -1,0 +1,142 @@
+"""The batched env (rehabbot.batch, MuJoCo Warp's CPU device) against the CPU env: the scripted
+expert's episode replayed with the same target switches, termination step and return, every
+observation within a float32 bound, and safety stops on the same step with the same rule.
+
+Slow (``pytest --full``): Warp compiles its kernels once (about 40-80 s, cached in
+``~/.cache/warp``), then steps one world in about 15 ms on the CPU.
+
+Tolerances, and why they do not depend on the machine:
+
+* Observation: every entry of the ``-v2`` observation lies in [-2, 2]; the most sensitive
+  entries are ``tanh`` of a joint error over 0.05 rad (20 per rad), of a velocity over
+  0.5 rad/s (2 per rad/s) and the cuff force over its limit (1/130 per N). A bound of
+  ``OBS_TOL = 1e-3`` is 5e-5 rad of joint angle (1/1000 of the 0.05 rad target tolerance),
+  5e-4 rad/s of joint speed and 0.13 N of cuff force: far below anything the task can see,
+  and far above float32's rounding of the physics (the study measured 3.5e-6 rad of qpos after
+  1000 steps; the replays here stay below 1e-4 in every entry).
+* Return: the progress terms add up to ``10 / rad x`` the path travelled, so a relative
+  ``RETURN_RTOL = 1e-4`` of a return of about 175 (0.018) is 1.8e-3 rad of path in a whole
+  episode, again far below the 0.05 rad tolerance; float32 rewards differ by about 1e-5 a
+  step.
+* Target switches, the termination step and the safety rule must match exactly: they are
+  the task's discrete outcomes.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+jax = pytest.importorskip("jax")
+pytest.importorskip("warp")
+pytest.importorskip("mujoco.mjx")
+
+import jax.numpy as jp  # noqa: E402
+
+import rehabbot.batch as batch  # noqa: E402
+from rehabbot.rl.experts import ScriptedExpert  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+OBS_TOL = 1e-3
+RETURN_RTOL = 1e-4
+START = {"exercise": 0, "weight_level": 0}
+
+
+def cpu_episode(env_id: str, actions: np.ndarray | None = None, **kwargs) -> dict:
+    """One CPU episode from ``reset(seed=0, options=START)``: the scripted expert's
+    (``actions`` None) or a constant action's, to its end."""
+    env = gym.make(env_id, **kwargs).unwrapped
+    obs, info = env.reset(seed=0, options=START)
+    expert = ScriptedExpert(env) if actions is None else None
+    out = {"actions": [], "obs": [obs], "rewards": [], "index": [0], "violation": None}
+    for _ in range(env.max_episode_steps):
+        action = np.asarray(expert.predict(obs)[0] if expert else actions, np.float32)
+        obs, reward, terminated, _truncated, info = env.step(action)
+        out["actions"].append(action)
+        out["obs"].append(obs)
+        out["rewards"].append(reward)
+        out["index"].append(info["target_index"])
+        if terminated:
+            out["violation"] = info["safety_violation"]
+            break
+    return {k: np.asarray(v) if isinstance(v, list) else v for k, v in out.items()}
+
+
+def batched_rollout(env_id: str, actions: np.ndarray, **kwargs) -> dict:
+    """Every world's observations, rewards, dones, target indices and safety rules for the
+    actions ``(steps, worlds, n)``, from the same start as :func:`cpu_episode`."""
+    worlds = actions.shape[1]
+    env = batch.make(env_id, naconmax=16 * worlds, **START, **kwargs)
+
+    def run(state, action_seq):
+        def body(state, action):
+            state = jax.vmap(env.step)(state, action)
+            m = state.metrics
+            return state, (state.obs, state.reward, state.done, m["target_index"],
+                           m["safety_violation"])
+        return jax.lax.scan(body, state, action_seq)
+
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
+    _, out = jax.jit(run)(state, jp.asarray(actions))
+    names = ("obs", "rewards", "done", "index", "violation")
+    return {"reset_obs": np.asarray(state.obs),
+            **{k: np.asarray(v) for k, v in zip(names, out, strict=True)}}
+
+
+def switches(index: np.ndarray) -> list[int]:
+    """The steps (0-based) after which the target index moved on."""
+    return np.flatnonzero(np.diff(index)).tolist()
+
+
+@pytest.mark.parametrize("env_id", ["rehabbot/rehab-reach-v2"])
+def test_expert_episode_replays_on_warp(env_id):
+    cpu = cpu_episode(env_id)
+    steps = len(cpu["actions"])
+    # world 0 replays the expert; world 1 acts otherwise (its contacts and constraints must
+    # not reach world 0).
+    actions = np.repeat(cpu["actions"][:, None], 2, axis=1)
+    actions[:, 1] = np.clip(actions[:, 1] + 0.3, -1, 1)
+    out = batched_rollout(env_id, actions)
+    assert np.abs(out["reset_obs"][0] - cpu["obs"][0]).max() < OBS_TOL
+    obs_error = np.abs(out["obs"][:, 0] - cpu["obs"][1:]).max()
+    assert obs_error < OBS_TOL, obs_error
+    assert switches(np.r_[0, out["index"][:, 0]]) == switches(cpu["index"])
+    done = np.flatnonzero(out["done"][:, 0])
+    assert done.size and done[0] == steps - 1, (done[:3], steps - 1)
+    assert out["violation"][:, 0].max() == 0
+    batched_return = float(out["rewards"][:, 0].sum())
+    cpu_return = float(cpu["rewards"].sum())
+    assert abs(batched_return - cpu_return) <= RETURN_RTOL * abs(cpu_return), \
+        (batched_return, cpu_return)
+
+
+def first_stop(done: np.ndarray) -> int:
+    stops = np.flatnonzero(done)
+    assert stops.size, "the batched world never stopped"
+    return int(stops[0])
+
+
+@pytest.mark.parametrize(("kwargs", "unit_actions"), [
+    # the cuff-force rule, pulling on the shoulder joint both ways
+    ({}, ([1, 0, 0, 0, 0, 0], [-1, 0, 0, 0, 0, 0])),
+    # with the highest cuff limit (880 N): unintended contact in world 0, range of motion in
+    # world 1 (which stops first and keeps moving: its contacts share MuJoCo Warp's array)
+    ({"cuff_force_limit_n": 880.0}, ([1, 0, 0, -1, -1, -1], [1, 0, -1, 1, 1, -1])),
+])
+def test_safety_stops_match(kwargs, unit_actions):
+    env_id = "rehabbot/rehab-reach-v2"
+    cpus = [cpu_episode(env_id, np.asarray(a, np.float32), **kwargs) for a in unit_actions]
+    steps = max(len(c["actions"]) for c in cpus) + 5
+    actions = np.repeat(np.asarray(unit_actions, np.float32)[None], steps, axis=0)
+    out = batched_rollout(env_id, actions, **kwargs)
+    for world, cpu in enumerate(cpus):
+        assert cpu["violation"] is not None, f"world {world}: the CPU episode did not stop"
+        stop = first_stop(out["done"][:, world])
+        assert stop == len(cpu["actions"]) - 1, (world, stop, len(cpu["actions"]) - 1)
+        assert out["violation"][stop, world] == batch.RULE_CODES[cpu["violation"]]
+        rewards = out["rewards"][:stop + 1, world]
+        assert abs(rewards[-1] - cpu["rewards"][-1]) <= RETURN_RTOL * abs(cpu["rewards"][-1])
+        assert abs(rewards.sum() - cpu["rewards"].sum()) <= \
+            RETURN_RTOL * abs(cpu["rewards"].sum())
