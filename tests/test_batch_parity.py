@@ -90,7 +90,7 @@ def switches(index: np.ndarray) -> list[int]:
     return np.flatnonzero(np.diff(index)).tolist()
 
 
-@pytest.mark.parametrize("env_id", ["rehabbot/rehab-reach-v2"])
+@pytest.mark.parametrize("env_id", batch.SUPPORTED_IDS)
 def test_expert_episode_replays_on_warp(env_id):
     cpu = cpu_episode(env_id)
     steps = len(cpu["actions"])

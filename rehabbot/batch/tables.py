@@ -126,6 +126,13 @@ def check_supported(env_id: str, env: Any) -> None:
                          "(spasticity, tremor, effort, weakness) are not batched yet")
     if len(env.handles) != 1:
         raise ValueError(f"{len(env.handles)} robots: only one-arm scenes are batched yet")
+    # The contact rule reads the contacts through their constraint rows, which MuJoCo Warp
+    # makes for contacts closer than margin - gap: every contact deeper than the tolerance
+    # has rows when no geom has a gap.
+    gaps = np.flatnonzero(env.model.geom_gap > 0)
+    if gaps.size:
+        raise ValueError(f"geoms {gaps.tolist()} have a contact gap (geom_gap > 0), which the "
+                         "batched contact rule does not read yet")
 
 
 def _rotation_t(frame: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:

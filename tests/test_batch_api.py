@@ -1,0 +1,59 @@
+"""rehabbot.batch's interface: what it refuses (by name), that ``import rehabbot`` does not
+load it, and a jitted, vmapped reset and step with exercises drawn per world."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+jax = pytest.importorskip("jax")
+pytest.importorskip("warp")
+pytest.importorskip("mujoco.mjx")
+
+import rehabbot.batch as batch  # noqa: E402
+
+
+def test_import_rehabbot_loads_neither_batch_nor_jax():
+    code = ("import sys, gymnasium as gym, rehabbot; gym.make('rehabbot/rehab-reach-v2'); "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'warp', 'flax') "
+            "or m.startswith('rehabbot.batch') or m.startswith('mujoco.mjx')))")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=120, check=True)
+    assert result.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize(("env_id", "kwargs", "named"), [
+    ("rehabbot/rehab-bilateral-v2", {}, "rehab-bilateral-v2"),
+    ("rehabbot/rehab-reach-v1", {}, "rehab-reach-v1"),
+    ("rehabbot/rehab-reach-spastic-v2", {}, "rehab-reach-spastic-v2"),
+    ("rehabbot/rehab-reach-population-v2", {}, "rehab-reach-population-v2"),
+    ("rehabbot/rehab-reach-v2", {"control_mode": "torque"}, "control_mode='torque'"),
+    ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "2"}}, "spasticity_mas"),
+    ("rehabbot/rehab-reach-v2", {"reward": {"design": "progress", "effort_weight": 0.1}},
+     "effort_weight=0.1"),
+    ("rehabbot/rehab-reach-v2", {"naconmax": 0}, "naconmax=0"),
+])
+def test_refuses_what_is_not_built_yet(env_id, kwargs, named):
+    with pytest.raises(ValueError, match=named.replace("(", r"\(").replace(")", r"\)")):
+        batch.make(env_id, **kwargs)
+
+
+@pytest.mark.slow
+def test_jit_vmap_reset_and_step_draw_exercises_per_world():
+    env = batch.make("rehabbot/rehab-knee-v2", naconmax=64)
+    worlds = 4
+    reset, step = jax.jit(jax.vmap(env.reset)), jax.jit(jax.vmap(env.step))
+    state = reset(jax.random.split(jax.random.key(3), worlds))
+    exercises = np.asarray(state.info["exercise"])
+    assert exercises.shape == (worlds,)
+    assert set(exercises.tolist()) <= set(range(len(env.cpu_env.targets)))
+    assert state.obs.shape == (worlds, env.observation_size)
+    one_hot = np.asarray(state.obs)[:, env.tables.exercise_start:][:, :len(env.cpu_env.targets)]
+    assert (one_hot.argmax(axis=1) == exercises).all()
+    state = step(state, np.zeros((worlds, env.action_size), np.float32))
+    assert np.isfinite(np.asarray(state.obs)).all()
+    assert (np.asarray(state.done) == 0).all()
+    assert np.allclose(np.asarray(state.reward), -env.tables.time_cost, atol=0.05)
