@@ -140,3 +140,38 @@ def test_safety_stops_match(kwargs, unit_actions):
         assert abs(rewards[-1] - cpu["rewards"][-1]) <= RETURN_RTOL * abs(cpu["rewards"][-1])
         assert abs(rewards.sum() - cpu["rewards"].sum()) <= \
             RETURN_RTOL * abs(cpu["rewards"].sum())
+
+
+def test_auto_reset_starts_the_next_episode_and_leaves_running_worlds_alone():
+    """World 0 stops on the cuff force, restarts at home and stops again on the same step of
+    its second episode; world 1 holds still throughout, as on the CPU (the forward of the
+    auto-reset does not disturb a running world)."""
+    env_id = "rehabbot/rehab-reach-v2"
+    pull = np.asarray([-1, 0, 0, 0, 0, 0], np.float32)
+    cpu_pull = cpu_episode(env_id, pull)
+    length = len(cpu_pull["actions"])
+    cpu_hold = cpu_episode(env_id, np.zeros(6, np.float32))
+    steps = 2 * length + 3
+    actions = np.zeros((steps, 2, 6), np.float32)
+    actions[:, 0] = pull
+    env = batch.make(env_id, naconmax=32, **START)
+
+    def run(state, action_seq):
+        def body(state, action):
+            state = jax.vmap(env.step_auto_reset)(state, action)
+            return state, (state.obs, state.reward, state.done,
+                           state.metrics["safety_violation"])
+        return jax.lax.scan(body, state, action_seq)
+
+    start = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), 2))
+    _, (obs, rewards, done, violation) = jax.jit(run)(start, jp.asarray(actions))
+    obs, rewards, done, violation = map(np.asarray, (obs, rewards, done, violation))
+    assert np.flatnonzero(done[:, 0]).tolist() == [length - 1, 2 * length - 1]
+    assert (violation[[length - 1, 2 * length - 1], 0] == batch.RULE_CODES["cuff_force"]).all()
+    # the step that stopped shows the next episode's first observation
+    assert np.abs(obs[length - 1, 0] - np.asarray(start.obs[0])).max() < OBS_TOL
+    first, second = rewards[:length, 0], rewards[length:2 * length, 0]
+    assert np.abs(first - cpu_pull["rewards"]).max() <= RETURN_RTOL * abs(cpu_pull["rewards"]).max()
+    assert abs(second.sum() - first.sum()) <= RETURN_RTOL * abs(first.sum())
+    assert not done[:, 1].any()
+    assert np.abs(obs[:, 1] - cpu_hold["obs"][1:steps + 1]).max() < OBS_TOL

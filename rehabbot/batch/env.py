@@ -159,18 +159,17 @@ class BatchedRehabEnv:
         return v.at[t.progress_index].set(progress).astype(jp.float32)
 
     # -- API ---------------------------------------------------------------------------------
-    def reset(self, rng: jax.Array) -> State:
-        """A new episode at home: the exercise is the config's, or drawn from ``rng``."""
-        t = self.tables
+    def _draw_exercise(self, rng: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """The episode's exercise (the config's, or drawn) and the key for the next draw."""
         rng, key = jax.random.split(rng)
-        if t.exercise is None:
-            exercise = jax.random.randint(key, (), 0, self._targets.shape[0], jp.int32)
-        else:
-            exercise = jp.int32(t.exercise)
-        data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.naconmax,
-                             njmax=self.njmax)
-        data = data.replace(qpos=self._home_qpos, ctrl=self._home_ctrl)
-        data = mjx.forward(self.mjx_model, data)
+        if self.tables.exercise is not None:
+            return jp.int32(self.tables.exercise), rng
+        return jax.random.randint(key, (), 0, self._targets.shape[0], jp.int32), rng
+
+    def _start(self, data: Any, exercise: jax.Array, rng: jax.Array) -> State:
+        """The state of an episode of ``exercise`` starting at ``data`` (the home state, after
+        ``mjx.forward``)."""
+        t = self.tables
         theta, dynamic = self._dynamic(data)
         setpoint = self._home_ctrl[self._servo]
         index = jp.int32(0)
@@ -183,7 +182,7 @@ class BatchedRehabEnv:
             "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
             "path_left": jp.linalg.norm(theta - self._targets[exercise, 0])
             + self._rests[exercise, 0],
-            "hold_gap": t.max_episode_steps * t.time_cost
+            "hold_gap": jp.float32(t.max_episode_steps * t.time_cost)
             + t.progress_weight * jp.linalg.norm(setpoint - theta),
             "rng": rng, "truncation": zero,
         }
@@ -192,6 +191,45 @@ class BatchedRehabEnv:
                    "target_index": index, "action_clipped": jp.int32(0),
                    **dict.fromkeys(REWARD_TERMS, zero)}
         return State(data, obs, zero, zero, metrics, info)
+
+    def reset(self, rng: jax.Array) -> State:
+        """A new episode at home: the exercise is the config's, or drawn from ``rng``."""
+        exercise, rng = self._draw_exercise(rng)
+        data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.naconmax,
+                             njmax=self.njmax)
+        data = data.replace(qpos=self._home_qpos, ctrl=self._home_ctrl)
+        return self._start(mjx.forward(self.mjx_model, data), exercise, rng)
+
+    def restart_done(self, state: State) -> State:
+        """Auto-reset: a world whose episode ended (``state.done``) starts a new one (a new
+        exercise drawn from its key); the state keeps the ending step's ``reward``, ``done``
+        and ``metrics``, and ``info["truncation"]``. Only the inputs of the physics are put
+        back home (qpos, qvel, ctrl, the warm start, applied forces, time), then every world
+        is forwarded: MuJoCo Warp's shared contact array is never mixed between worlds, and
+        a forward leaves a running world's next step unchanged (it only recomputes derived
+        quantities; the warm start is written by a step)."""
+        done = state.done > 0
+        data = state.data
+
+        def home(value: jax.Array, start: jax.Array | float) -> jax.Array:
+            return jp.where(done, jp.broadcast_to(start, value.shape).astype(value.dtype), value)
+
+        data = data.replace(qpos=home(data.qpos, self._home_qpos), qvel=home(data.qvel, 0.0),
+                            ctrl=home(data.ctrl, self._home_ctrl),
+                            qacc_warmstart=home(data.qacc_warmstart, 0.0),
+                            qfrc_applied=home(data.qfrc_applied, 0.0),
+                            time=home(data.time, 0.0))
+        data = mjx.forward(self.mjx_model, data)
+        exercise, rng = self._draw_exercise(state.info["rng"])
+        fresh = self._start(data, exercise, rng)
+        info = jax.tree.map(lambda new, old: jp.where(done, new, old), fresh.info, state.info)
+        info["truncation"] = state.info["truncation"]
+        return State(data, jp.where(done, fresh.obs, state.obs), state.reward, state.done,
+                     state.metrics, info)
+
+    def step_auto_reset(self, state: State, action: jax.Array) -> State:
+        """:meth:`step`, then :meth:`restart_done`."""
+        return self.restart_done(self.step(state, action))
 
     def step(self, state: State, action: jax.Array) -> State:
         """One decision (module docstring). Non-finite action entries act as 0 and, like
