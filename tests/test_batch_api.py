@@ -57,3 +57,32 @@ def test_jit_vmap_reset_and_step_draw_exercises_per_world():
     assert np.isfinite(np.asarray(state.obs)).all()
     assert (np.asarray(state.done) == 0).all()
     assert np.allclose(np.asarray(state.reward), -env.tables.time_cost, atol=0.05)
+
+
+@pytest.mark.slow
+def test_gymnasium_vector_door():
+    import gymnasium as gym
+
+    env_id = "rehabbot/rehab-hip-v2"
+    before = gym.registry[env_id].vector_entry_point
+    batch.register_vector_entry_points()
+    try:
+        vec = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point",
+                           exercise=0, weight_level=0)
+    finally:
+        gym.registry[env_id].vector_entry_point = before
+    assert isinstance(vec, batch.BatchedVectorEnv)
+    obs, info = vec.reset(seed=0)
+    assert obs in vec.observation_space
+    cpu_obs, _ = gym.make(env_id).reset(seed=0, options={"exercise": 0, "weight_level": 0})
+    assert np.abs(obs - cpu_obs).max() < 1e-3
+    for _ in range(2):
+        obs, reward, terminated, truncated, info = vec.step(np.zeros((2, 6), np.float32))
+    assert obs.shape == (2, vec.single_observation_space.shape[0])
+    assert reward.shape == terminated.shape == truncated.shape == (2,)
+    assert not terminated.any() and not truncated.any()
+    assert info["safety_violation"].tolist() == [0, 0]
+    with pytest.raises(ValueError, match=r"shape \(6,\)"):
+        vec.step(np.zeros(6, np.float32))
+    with pytest.raises(ValueError, match="options"):
+        vec.reset(options={"exercise": 1})

@@ -22,6 +22,7 @@ from typing import Any
 from rehabbot.batch.env import BatchedRehabEnv
 from rehabbot.batch.state import State
 from rehabbot.batch.tables import RULE_CODES, SUPPORTED_IDS
+from rehabbot.batch.vector import BatchedVectorEnv, make_vec, register_vector_entry_points
 
 
 def make(env_id: str, **kwargs: Any) -> BatchedRehabEnv:
@@ -34,4 +35,5 @@ def make(env_id: str, **kwargs: Any) -> BatchedRehabEnv:
     return BatchedRehabEnv(env_id, **kwargs)
 
 
-__all__ = ["RULE_CODES", "SUPPORTED_IDS", "BatchedRehabEnv", "State", "make"]
+__all__ = ["RULE_CODES", "SUPPORTED_IDS", "BatchedRehabEnv", "BatchedVectorEnv", "State", "make",
+           "make_vec", "register_vector_entry_points"]
