@@ -86,3 +86,23 @@ def test_gymnasium_vector_door():
         vec.step(np.zeros(6, np.float32))
     with pytest.raises(ValueError, match="options"):
         vec.reset(options={"exercise": 1})
+
+
+@pytest.mark.slow
+def test_vector_env_resets_in_the_same_step():
+    """A world stopped by the cuff-force rule returns the next episode's first observation,
+    with the ended episode's last one in info["final_obs"] (Gymnasium's SAME_STEP mode)."""
+    vec = batch.make_vec("rehabbot/rehab-reach-v2", 2, exercise=0, weight_level=0)
+    first, _ = vec.reset(seed=1)
+    actions = np.zeros((2, 6), np.float32)
+    actions[0, 0] = -1.0  # pulls the shoulder until the cuff force stops world 0
+    for _ in range(200):
+        obs, _reward, terminated, truncated, info = vec.step(actions)
+        if terminated.any():
+            break
+    assert terminated.tolist() == [True, False] and not truncated.any()
+    assert info["safety_violation"][0] == batch.RULE_CODES["cuff_force"]
+    assert info["_final_obs"].tolist() == [True, False]
+    assert info["final_obs"][1] is None
+    assert np.abs(obs[0] - first[0]).max() < 1e-3
+    assert np.abs(info["final_obs"][0] - first[0]).max() > 0.1
