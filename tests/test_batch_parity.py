@@ -175,3 +175,30 @@ def test_auto_reset_starts_the_next_episode_and_leaves_running_worlds_alone():
     assert abs(second.sum() - first.sum()) <= RETURN_RTOL * abs(first.sum())
     assert not done[:, 1].any()
     assert np.abs(obs[:, 1] - cpu_hold["obs"][1:steps + 1]).max() < OBS_TOL
+
+
+def test_instability_is_judged_from_the_values():
+    """MuJoCo Warp neither warns nor resets on a diverging state: a wrist spun to 1e4 rad/s
+    (beyond the blow-up speed) stops both envs on the first step with the instability rule,
+    the same penalty and the last healthy observation."""
+    env_id = "rehabbot/rehab-reach-v2"
+    speed_rad_s = 1.0e4
+    cpu = gym.make(env_id).unwrapped
+    cpu.reset(seed=0, options=START)
+    wrist = cpu.handles[0].dof_adr[-1]
+    cpu.data.qvel[wrist] = speed_rad_s
+    cpu_obs, cpu_reward, terminated, _, info = cpu.step(np.zeros(6, np.float32))
+    assert terminated and info["safety_violation"] == "instability"
+
+    env = batch.make(env_id, naconmax=16, **START)
+    state = jax.jit(env.reset)(jax.random.key(0))
+    data = state.data
+    state = state.replace(data=data.replace(qvel=data.qvel.at[wrist].set(speed_rad_s)))
+    state = jax.jit(env.step)(state, jp.zeros(6))
+    assert float(state.done) == 1.0
+    assert int(state.metrics["safety_violation"]) == batch.RULE_CODES["instability"]
+    assert abs(float(state.reward) - cpu_reward) <= RETURN_RTOL * abs(cpu_reward)
+    # the fields of the last healthy state (tracking errors, next target, setpoint lead); the
+    # velocities and forces are the diverged ones
+    healthy = slice(0, cpu.agent_layout.slice("setpoint_lead").stop)
+    assert np.abs(np.asarray(state.obs)[healthy] - cpu_obs[healthy]).max() < OBS_TOL
