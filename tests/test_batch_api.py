@@ -106,3 +106,20 @@ def test_vector_env_resets_in_the_same_step():
     assert info["final_obs"][1] is None
     assert np.abs(obs[0] - first[0]).max() < 1e-3
     assert np.abs(info["final_obs"][0] - first[0]).max() > 0.1
+
+
+def test_tables_follow_the_cpu_env_kwargs():
+    """Changing a CPU keyword changes the batched env's table: nothing is copied by hand."""
+    kwargs = {"target_tolerance_rad": 0.08, "cuff_force_limit_n": 100.0,
+              "reward": {"design": "progress", "time_cost": 0.1, "progress_weight": 5.0},
+              "exercise": 1, "weight_level": 3, "frame_skip": 5}
+    env = batch.make("rehabbot/rehab-knee-v2", naconmax=16, **kwargs)
+    t, cpu = env.tables, env.cpu_env
+    assert (t.target_tolerance_rad, t.cuff_force_limit_n) == (0.08, 100.0)
+    assert (t.time_cost, t.progress_weight) == (0.1, 5.0)
+    assert (t.exercise, t.weight_level, t.frame_skip) == (1, 3, 5)
+    cpu.reset(seed=0)
+    np.testing.assert_array_equal(t.home_setpoint_rad, cpu.controller.setpoint_rad)
+    np.testing.assert_array_equal(t.targets_rad[1, :len(cpu.target_sequence.robot_rad)],
+                                  cpu.target_sequence.robot_rad)
+    np.testing.assert_array_equal(t.agent_matrix, cpu._agent.matrix)
