@@ -119,7 +119,7 @@ def test_tables_follow_the_cpu_env_kwargs():
     assert (t.time_cost, t.progress_weight) == (0.1, 5.0)
     assert (t.exercise, t.weight_level, t.frame_skip) == (1, 3, 5)
     cpu.reset(seed=0)
-    np.testing.assert_array_equal(t.home_setpoint_rad, cpu.controller.setpoint_rad)
+    np.testing.assert_array_equal(t.home_setpoints_rad[3], cpu.controller.setpoint_rad)
     np.testing.assert_array_equal(t.targets_rad[1, :len(cpu.target_sequence.robot_rad)],
                                   cpu.target_sequence.robot_rad)
     np.testing.assert_array_equal(t.agent_matrix, cpu._agent.matrix)

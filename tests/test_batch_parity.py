@@ -202,3 +202,39 @@ def test_instability_is_judged_from_the_values():
     # velocities and forces are the diverged ones
     healthy = slice(0, cpu.agent_layout.slice("setpoint_lead").stop)
     assert np.abs(np.asarray(state.obs)[healthy] - cpu_obs[healthy]).max() < OBS_TOL
+
+
+def test_weight_levels_drawn_per_world():
+    """With the weight level left to be drawn, each world draws its own at reset and steps
+    with that level's masses, inertias and home setpoints (MuJoCo Warp's per-world model
+    fields): every world follows the CPU env's expert at its level."""
+    env_id, steps, worlds = "rehabbot/rehab-reach-v2", 25, 3
+    env = batch.make(env_id, naconmax=16 * worlds, exercise=0)
+    start = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
+    levels = np.asarray(start.info["weight_level"]).tolist()
+    assert len(set(levels)) > 1, levels
+    episodes = []
+    for level in levels:
+        cpu = gym.make(env_id).unwrapped
+        obs, _ = cpu.reset(seed=0, options={"exercise": 0, "weight_level": level})
+        expert, actions, observations = ScriptedExpert(cpu), [], [obs]
+        for _ in range(steps):
+            action = np.asarray(expert.predict(obs)[0], np.float32)
+            obs, *_ = cpu.step(action)
+            actions.append(action)
+            observations.append(obs)
+        episodes.append((np.asarray(actions), np.asarray(observations)))
+    actions = np.stack([a for a, _ in episodes], axis=1)
+
+    def run(state, action_seq):
+        def body(state, action):
+            state = jax.vmap(env.step)(state, action)
+            return state, state.obs
+        return jax.lax.scan(body, state, action_seq)
+
+    _, obs = jax.jit(run)(start, jp.asarray(actions))
+    obs = np.asarray(obs)
+    for world, (_, cpu_obs) in enumerate(episodes):
+        assert np.abs(np.asarray(start.obs[world]) - cpu_obs[0]).max() < OBS_TOL
+        error = np.abs(obs[:, world] - cpu_obs[1:]).max()
+        assert error < OBS_TOL, (world, levels[world], error)

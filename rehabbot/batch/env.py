@@ -23,6 +23,7 @@ contact), which belong to this world only, whatever ``vmap`` does.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -34,6 +35,7 @@ from mujoco import mjx
 
 from rehabbot.batch.state import State
 from rehabbot.batch.tables import RULE_CODES, EnvTables, read_tables
+from rehabbot.sim.scene import WEIGHT_LEVELS
 
 CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
                        int(mujoco.mjtConstraint.mjCNSTR_CONTACT_PYRAMIDAL),
@@ -70,7 +72,8 @@ class BatchedRehabEnv:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}={value!r} must be a positive integer")
         cpu = gym.make(env_id, **kwargs).unwrapped
-        self.tables: EnvTables = read_tables(env_id, cpu)
+        model_fields = {field.name for field in dataclasses.fields(mjx.Model)}
+        self.tables: EnvTables = read_tables(env_id, cpu, model_fields)
         self.cpu_env = cpu
         self.mj_model: mujoco.MjModel = cpu.model
         self.mjx_model = mjx.put_model(cpu.model, impl="warp")
@@ -85,8 +88,12 @@ class BatchedRehabEnv:
         self._center, self._half = _f32(t.action_center), _f32(t.action_half)
         self._low, self._high = _f32(t.setpoint_low_rad), _f32(t.setpoint_high_rad)
         self._home_qpos = _f32(t.home_qpos)
-        self._home_ctrl = _f32(np.zeros(self.mj_model.nu)).at[self._servo].set(
-            _f32(t.home_setpoint_rad))
+        home_ctrl = np.zeros((len(WEIGHT_LEVELS), self.mj_model.nu))
+        home_ctrl[:, t.servo_ids] = t.home_setpoints_rad
+        self._home_ctrl = _f32(home_ctrl)  # per weight level
+        self._level_fields = {
+            name: jp.asarray(rows, dtype=getattr(self.mjx_model, name).dtype)
+            for name, rows in t.level_fields.items()}
         self._base, self._rot_t = _f32(t.base_pos_m), _f32(t.base_rot_t)
         self._phi = _i32(t.phi_adr)
         self._box_low, self._box_high = jp.asarray(t.healthy_low), jp.asarray(t.healthy_high)
@@ -100,19 +107,26 @@ class BatchedRehabEnv:
         self._contact_types = _i32(CONTACT_CONSTRAINTS)
 
     # -- pieces ------------------------------------------------------------------------------
+    def _model(self, level: jax.Array) -> Any:
+        """The MJX model at weight ``level``; under ``jax.vmap`` its level fields are per world
+        (MuJoCo Warp's batched model fields)."""
+        return self.mjx_model.replace(**{name: rows[level]
+                                         for name, rows in self._level_fields.items()})
+
     def _dynamic(self, data: Any) -> tuple[jax.Array, jax.Array]:
         """theta (the robot's joint angles) and the paper observation's theta, p, phi."""
         theta = data.qpos[self._qpos]
         p = self._rot_t @ (data.site_xpos[self.tables.tool_site] - self._base)
         return theta, jp.concatenate([theta, p, data.qpos[self._phi]])
 
-    def _paper(self, exercise: jax.Array, index: jax.Array, dynamic: jax.Array) -> jax.Array:
+    def _paper(self, exercise: jax.Array, index: jax.Array, dynamic: jax.Array,
+               level: jax.Array) -> jax.Array:
         """The paper observation (float32), in the CPU layout's order."""
         t = self.tables
         fields = {"theta_star": self._targets[exercise, index],
                   "p_star": self._tools[exercise, index],
                   "e": exercise.astype(jp.float32)[None],
-                  "l": jp.full((1,), float(t.weight_level), jp.float32)}
+                  "l": level.astype(jp.float32)[None]}
         paper = jp.zeros(self._box_low.shape[0], jp.float32)
         for name, values in fields.items():
             start, stop = t.paper_slices[name]
@@ -159,27 +173,32 @@ class BatchedRehabEnv:
         return v.at[t.progress_index].set(progress).astype(jp.float32)
 
     # -- API ---------------------------------------------------------------------------------
-    def _draw_exercise(self, rng: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """The episode's exercise (the config's, or drawn) and the key for the next draw."""
-        rng, key = jax.random.split(rng)
-        if self.tables.exercise is not None:
-            return jp.int32(self.tables.exercise), rng
-        return jax.random.randint(key, (), 0, self._targets.shape[0], jp.int32), rng
+    def _draw(self, rng: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+        """The episode's exercise and weight level (the config's, or drawn uniformly, as the
+        CPU env draws them) and the key for the next draw."""
+        rng, exercise_key, level_key = jax.random.split(rng, 3)
+        t = self.tables
+        exercise = jp.int32(t.exercise) if t.exercise is not None else jax.random.randint(
+            exercise_key, (), 0, self._targets.shape[0], jp.int32)
+        level = jp.int32(t.weight_level) if t.weight_level is not None else \
+            jax.random.randint(level_key, (), 0, len(WEIGHT_LEVELS), jp.int32)
+        return exercise, level, rng
 
-    def _start(self, data: Any, exercise: jax.Array, rng: jax.Array) -> State:
-        """The state of an episode of ``exercise`` starting at ``data`` (the home state, after
-        ``mjx.forward``)."""
+    def _start(self, data: Any, exercise: jax.Array, level: jax.Array,
+               rng: jax.Array) -> State:
+        """The state of an episode of ``exercise`` at weight ``level`` starting at ``data``
+        (the home state, after ``mjx.forward``)."""
         t = self.tables
         theta, dynamic = self._dynamic(data)
-        setpoint = self._home_ctrl[self._servo]
+        setpoint = self._home_ctrl[level][self._servo]
         index = jp.int32(0)
-        paper = self._paper(exercise, index, dynamic)
+        paper = self._paper(exercise, index, dynamic, level)
         force = self._cuff_force(data)
         obs = self._agent_obs(paper, exercise, index, setpoint, data.qvel[self._dof], force)
         zero = jp.zeros((), jp.float32)
         info = {
             "setpoint": setpoint, "target_index": index, "exercise": exercise,
-            "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
+            "weight_level": level, "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
             "path_left": jp.linalg.norm(theta - self._targets[exercise, 0])
             + self._rests[exercise, 0],
             "hold_gap": jp.float32(t.max_episode_steps * t.time_cost)
@@ -193,35 +212,38 @@ class BatchedRehabEnv:
         return State(data, obs, zero, zero, metrics, info)
 
     def reset(self, rng: jax.Array) -> State:
-        """A new episode at home: the exercise is the config's, or drawn from ``rng``."""
-        exercise, rng = self._draw_exercise(rng)
+        """A new episode at home: the exercise and the weight level are the config's, or drawn
+        from ``rng``."""
+        exercise, level, rng = self._draw(rng)
         data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.naconmax,
                              njmax=self.njmax)
-        data = data.replace(qpos=self._home_qpos, ctrl=self._home_ctrl)
-        return self._start(mjx.forward(self.mjx_model, data), exercise, rng)
+        data = data.replace(qpos=self._home_qpos, ctrl=self._home_ctrl[level])
+        return self._start(mjx.forward(self._model(level), data), exercise, level, rng)
 
     def restart_done(self, state: State) -> State:
         """Auto-reset: a world whose episode ended (``state.done``) starts a new one (a new
-        exercise drawn from its key); the state keeps the ending step's ``reward``, ``done``
-        and ``metrics``, and ``info["truncation"]``. Only the inputs of the physics are put
-        back home (qpos, qvel, ctrl, the warm start, applied forces, time), then every world
-        is forwarded: MuJoCo Warp's shared contact array is never mixed between worlds, and
-        a forward leaves a running world's next step unchanged (it only recomputes derived
-        quantities; the warm start is written by a step)."""
+        exercise and weight level drawn from its key); the state keeps the ending step's
+        ``reward``, ``done`` and ``metrics``, and ``info["truncation"]``. Only the inputs of
+        the physics are put back home (qpos, qvel, ctrl, the warm start, applied forces,
+        time), then every world is forwarded at its level: MuJoCo Warp's shared contact array
+        is never mixed between worlds, and a forward leaves a running world's next step
+        unchanged (it only recomputes derived quantities; the warm start is written by a
+        step)."""
         done = state.done > 0
         data = state.data
+        exercise, level, rng = self._draw(state.info["rng"])
+        level = jp.where(done, level, state.info["weight_level"])
 
         def home(value: jax.Array, start: jax.Array | float) -> jax.Array:
             return jp.where(done, jp.broadcast_to(start, value.shape).astype(value.dtype), value)
 
         data = data.replace(qpos=home(data.qpos, self._home_qpos), qvel=home(data.qvel, 0.0),
-                            ctrl=home(data.ctrl, self._home_ctrl),
+                            ctrl=home(data.ctrl, self._home_ctrl[level]),
                             qacc_warmstart=home(data.qacc_warmstart, 0.0),
                             qfrc_applied=home(data.qfrc_applied, 0.0),
                             time=home(data.time, 0.0))
-        data = mjx.forward(self.mjx_model, data)
-        exercise, rng = self._draw_exercise(state.info["rng"])
-        fresh = self._start(data, exercise, rng)
+        data = mjx.forward(self._model(level), data)
+        fresh = self._start(data, exercise, level, rng)
         info = jax.tree.map(lambda new, old: jp.where(done, new, old), fresh.info, state.info)
         info["truncation"] = state.info["truncation"]
         return State(data, jp.where(done, fresh.obs, state.obs), state.reward, state.done,
@@ -243,8 +265,11 @@ class BatchedRehabEnv:
                            self._low, self._high)
         data = state.data.replace(ctrl=state.data.ctrl.at[self._servo].set(setpoint))
 
+        level = info["weight_level"]
+        model = self._model(level)
+
         def physics_step(d: Any, _: None) -> tuple[Any, None]:
-            return mjx.step(self.mjx_model, d), None
+            return mjx.step(model, d), None
 
         data, _ = jax.lax.scan(physics_step, data, None, length=t.frame_skip)
 
@@ -255,7 +280,7 @@ class BatchedRehabEnv:
                     | ~(speed <= t.blowup_speed_rad_s))
         exercise, index = info["exercise"], info["target_index"]
         theta, dynamic = self._dynamic(data)
-        before = self._paper(exercise, index, dynamic)
+        before = self._paper(exercise, index, dynamic, level)
         outside = ~jp.all((before >= self._box_low) & (before <= self._box_high))
         unstable = unstable | outside
         q = data.qpos[self._patient]
@@ -297,7 +322,7 @@ class BatchedRehabEnv:
         terminated = stop | (reached & last)
         truncated = (steps >= t.max_episode_steps) & ~terminated
 
-        paper = self._paper(exercise, new_index, dynamic)
+        paper = self._paper(exercise, new_index, dynamic, level)
         obs = self._agent_obs(paper, exercise, new_index, setpoint, data.qvel[self._dof],
                               self._cuff_force(data))
         f32 = jp.float32

@@ -16,6 +16,7 @@ import numpy as np
 
 from rehabbot.envs.registration import BILATERAL_IDS, V2_IDS
 from rehabbot.sim.physics import BLOWUP_FORCE_N, BLOWUP_SPEED_RAD_S, RULES
+from rehabbot.sim.scene import WEIGHT_LEVELS
 from rehabbot.tasks.reward import STOP_MARGIN
 
 # The ids the batched env builds: the single-arm -v2 base ids (healthy patient).
@@ -40,8 +41,11 @@ class EnvTables:
     env_id: str
     frame_skip: int
     max_episode_steps: int
-    weight_level: int
+    weight_level: int | None  # fixed by the config, or None: drawn at every reset
     exercise: int | None  # fixed by the config, or None: drawn at every reset
+    # per weight level (row l = level l): the MjModel fields the level changes (masses,
+    # inertias and what mj_setConst derives from them), by name
+    level_fields: dict[str, np.ndarray]
     # the controller (joint_delta) and the -v2 unit actions
     servo_ids: np.ndarray  # (n,) actuator ids of the servos
     motor_ids: np.ndarray  # (n,) actuator ids of the feed-forward motors
@@ -51,7 +55,7 @@ class EnvTables:
     setpoint_high_rad: np.ndarray
     # the home state at this weight level
     home_qpos: np.ndarray  # (nq,)
-    home_setpoint_rad: np.ndarray  # (n,) clipped to the bounds, as the controller does
+    home_setpoints_rad: np.ndarray  # (levels, n) clipped to the bounds, as the controller does
     # the paper observation
     qpos_adr: np.ndarray  # (n,) robot joints in qpos
     dof_adr: np.ndarray  # (n,) robot joints in qvel
@@ -135,16 +139,41 @@ def check_supported(env_id: str, env: Any) -> None:
                          "batched contact rule does not read yet")
 
 
+def _level_tables(env: Any, model_fields: set[str]) -> tuple[dict[str, np.ndarray],
+                                                             np.ndarray]:
+    """Per weight level: the fields of the MJX model that the level changes (the limb's
+    masses and inertias and what ``mj_setConst`` derives from them) and the home setpoints.
+    The CPU env's scene is put back at its config's level afterwards."""
+    scene, model, controller = env.scene, env.model, env.controller
+    start = scene.weight_level
+    rows: list[dict[str, np.ndarray]] = []
+    homes = []
+    for level in WEIGHT_LEVELS:
+        scene.set_weight_level(level)
+        rows.append({name: np.array(getattr(model, name)) for name in sorted(model_fields)
+                     if isinstance(getattr(model, name, None), np.ndarray)})
+        homes.append(np.clip(scene.home_setpoints[0], controller.low_rad, controller.high_rad))
+    scene.set_weight_level(start)
+    changed = {name: np.stack([row[name] for row in rows]) for name in rows[0]
+               if any(not np.array_equal(row[name], rows[0][name]) for row in rows)}
+    return changed, np.stack(homes)
+
+
 def _rotation_t(frame: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The CPU env's base frame (origin, then R^T row by row) as arrays."""
     values = np.asarray(frame, dtype=float)
     return values[:3], values[3:].reshape(3, 3)
 
 
-def read_tables(env_id: str, env: Any) -> EnvTables:
+def read_tables(env_id: str, env: Any, model_fields: set[str]) -> EnvTables:
     """Every table of the batched env, from the CPU env ``env`` (``gym.make(...).unwrapped``,
-    freshly made: its scene at the config's weight level). Refuses what is not built yet."""
+    freshly made: its scene at the config's weight level); ``model_fields`` are the names of
+    the MJX model's fields. Refuses what is not built yet."""
     check_supported(env_id, env)
+    if env.config.weight_level is None and env._unusable_levels:
+        raise ValueError(f"weight levels {sorted(env._unusable_levels)} are unusable for this "
+                         "patient and weight_level=None would draw them; fix weight_level")
+    level_fields, homes = _level_tables(env, model_fields)
     config, scene, safety, agent = env.config, env.scene, env.safety, env._agent
     controller, handle, reward = env.controller, env.handles[0], env.reward_function
     n = controller.n_joints
@@ -165,8 +194,8 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
     low, high = controller.low_rad, controller.high_rad
     return EnvTables(
         env_id=env_id, frame_skip=int(config.frame_skip),
-        max_episode_steps=int(env.max_episode_steps), weight_level=int(scene.weight_level),
-        exercise=config.exercise,
+        max_episode_steps=int(env.max_episode_steps), weight_level=config.weight_level,
+        exercise=config.exercise, level_fields=level_fields,
         servo_ids=np.asarray(handle.servo_ids, dtype=int),
         motor_ids=np.asarray(handle.motor_ids, dtype=int),
         action_center=np.asarray(unit._center, dtype=float),
@@ -174,7 +203,7 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
         setpoint_low_rad=np.asarray(low, dtype=float),
         setpoint_high_rad=np.asarray(high, dtype=float),
         home_qpos=np.asarray(scene.home_qpos, dtype=float),
-        home_setpoint_rad=np.clip(scene.home_setpoints[0], low, high),
+        home_setpoints_rad=homes,
         qpos_adr=np.asarray(handle.qpos_adr, dtype=int),
         dof_adr=np.asarray(handle.dof_adr, dtype=int),
         tool_site=int(handle.tool_site_id), base_pos_m=base_pos, base_rot_t=base_rot_t,
