@@ -46,6 +46,25 @@ INSTABILITY = RULE_CODES["instability"]
 REWARD_TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety")
 
 
+def physics_model(model: mujoco.MjModel, tables: EnvTables) -> mujoco.MjModel:
+    """The model MuJoCo Warp steps: the CPU env's, except in ``torque`` mode, where the servos
+    are switched off by zero gains (MuJoCo Warp ignores ``opt.disableactuator``, with which the
+    CPU env switches them off). The robot's gravity compensation and torque clamp are joint
+    properties (``actgravcomp``, ``actfrcrange``), so nothing else changes."""
+    if tables.control_mode != "torque":
+        return model
+    if not model.opt.disableactuator:
+        raise AssertionError("the CPU env's torque mode no longer disables the servos")
+    servo = tables.servo_ids
+    if np.any(model.actuator_biasprm[servo, 0] != 0):
+        raise AssertionError("a servo has a constant bias: zero gains would not switch it off")
+    copy = mujoco.MjModel.__copy__(model)
+    copy.actuator_gainprm[servo, 0] = 0.0
+    copy.actuator_biasprm[servo, 1:3] = 0.0
+    copy.opt.disableactuator = 0
+    return copy
+
+
 def _f32(array: Any) -> jax.Array:
     return jp.asarray(np.asarray(array, dtype=np.float32))
 
@@ -75,8 +94,8 @@ class BatchedRehabEnv:
         model_fields = {field.name for field in dataclasses.fields(mjx.Model)}
         self.tables: EnvTables = read_tables(env_id, cpu, model_fields)
         self.cpu_env = cpu
-        self.mj_model: mujoco.MjModel = cpu.model
-        self.mjx_model = mjx.put_model(cpu.model, impl="warp")
+        self.mj_model: mujoco.MjModel = physics_model(cpu.model, self.tables)
+        self.mjx_model = mjx.put_model(self.mj_model, impl="warp")
         self.naconmax, self.njmax = naconmax, njmax
         self.action_size = int(cpu.action_space.shape[0])
         self.observation_size = int(cpu.observation_space.shape[0])
@@ -85,6 +104,7 @@ class BatchedRehabEnv:
 
     def _build_arrays(self, t: EnvTables) -> None:
         self._servo, self._dof, self._qpos = _i32(t.servo_ids), _i32(t.dof_adr), _i32(t.qpos_adr)
+        self._motor, self._torque_limit = _i32(t.motor_ids), _f32(t.torque_limit_nm)
         self._center, self._half = _f32(t.action_center), _f32(t.action_half)
         self._low, self._high = _f32(t.setpoint_low_rad), _f32(t.setpoint_high_rad)
         self._home_qpos = _f32(t.home_qpos)
@@ -118,6 +138,16 @@ class BatchedRehabEnv:
         theta = data.qpos[self._qpos]
         p = self._rot_t @ (data.site_xpos[self.tables.tool_site] - self._base)
         return theta, jp.concatenate([theta, p, data.qpos[self._phi]])
+
+    def _hold_travel(self, setpoint: jax.Array, theta: jax.Array,
+                     speed: jax.Array) -> jax.Array:
+        """How far [rad] the joints may still travel if the agent holds still
+        (``Controller.hold_travel_rad``): to the setpoints, or in ``torque`` mode the sag and
+        braking allowance."""
+        t = self.tables
+        if t.control_mode == "torque":
+            return t.hold_sag_rad + t.hold_brake_s * speed
+        return jp.linalg.norm(setpoint - theta)
 
     def _paper(self, exercise: jax.Array, index: jax.Array, dynamic: jax.Array,
                level: jax.Array) -> jax.Array:
@@ -193,6 +223,7 @@ class BatchedRehabEnv:
         setpoint = self._home_ctrl[level][self._servo]
         index = jp.int32(0)
         paper = self._paper(exercise, index, dynamic, level)
+        speed = jp.linalg.norm(data.qvel[self._dof])
         force = self._cuff_force(data)
         obs = self._agent_obs(paper, exercise, index, setpoint, data.qvel[self._dof], force)
         zero = jp.zeros((), jp.float32)
@@ -202,7 +233,7 @@ class BatchedRehabEnv:
             "path_left": jp.linalg.norm(theta - self._targets[exercise, 0])
             + self._rests[exercise, 0],
             "hold_gap": jp.float32(t.max_episode_steps * t.time_cost)
-            + t.progress_weight * jp.linalg.norm(setpoint - theta),
+            + t.progress_weight * self._hold_travel(setpoint, theta, speed),
             "rng": rng, "truncation": zero,
         }
         metrics = {"interaction_force_n": force, "cost": zero,
@@ -261,9 +292,14 @@ class BatchedRehabEnv:
         finite = jp.isfinite(action)
         clipped = jp.sum(~finite | (jp.abs(action) > 1.0)).astype(jp.int32)
         unit = jp.clip(jp.where(finite, action, 0.0), -1.0, 1.0)
-        setpoint = jp.clip(info["setpoint"] + (self._center + self._half * unit),
-                           self._low, self._high)
-        data = state.data.replace(ctrl=state.data.ctrl.at[self._servo].set(setpoint))
+        native = self._center + self._half * unit
+        if t.control_mode == "torque":  # motor torques; the servos are off
+            setpoint = info["setpoint"]
+            ctrl = state.data.ctrl.at[self._motor].set(self._torque_limit * native)
+        else:  # joint_delta: the setpoints move
+            setpoint = jp.clip(info["setpoint"] + native, self._low, self._high)
+            ctrl = state.data.ctrl.at[self._servo].set(setpoint)
+        data = state.data.replace(ctrl=ctrl)
 
         level = info["weight_level"]
         model = self._model(level)
@@ -315,7 +351,7 @@ class BatchedRehabEnv:
                                   + t.stop_margin), 0.0)
         bonus = jp.where(reached, jp.where(last, t.final_bonus, t.intermediate_bonus), 0.0)
         reward = progress + bonus - t.time_cost + safety
-        lead = jp.linalg.norm(setpoint - theta)
+        lead = self._hold_travel(setpoint, theta, jp.linalg.norm(data.qvel[self._dof]))
         hold = jp.maximum(t.max_episode_steps - steps, 0) * t.time_cost \
             + t.progress_weight * lead
         gap = jp.where(stop, gap, jp.maximum(gap + reward, hold))

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from rehabbot.envs.control import TORQUE_HOLD_BRAKE_S, TORQUE_HOLD_SAG_RAD
 from rehabbot.envs.registration import BILATERAL_IDS, V2_IDS
 from rehabbot.sim.physics import BLOWUP_FORCE_N, BLOWUP_SPEED_RAD_S, RULES
 from rehabbot.sim.scene import WEIGHT_LEVELS
@@ -26,6 +27,8 @@ SUPPORTED_IDS: tuple[str, ...] = (
     "rehabbot/rehab-hip-v2",
     "rehabbot/rehab-knee-v2",
 )
+# The control modes the batched env builds.
+CONTROL_MODES: tuple[str, ...] = ("joint_delta", "torque")
 # The safety rules' codes in the batched state: 0 for none, then RULES in order (1-based).
 RULE_CODES: dict[str, int] = {rule: k + 1 for k, rule in enumerate(RULES)}
 
@@ -46,7 +49,11 @@ class EnvTables:
     # per weight level (row l = level l): the MjModel fields the level changes (masses,
     # inertias and what mj_setConst derives from them), by name
     level_fields: dict[str, np.ndarray]
-    # the controller (joint_delta) and the -v2 unit actions
+    # the controller (joint_delta or torque) and the -v2 unit actions
+    control_mode: str
+    torque_limit_nm: np.ndarray  # (n,) torque mode: motor torque = limit x native action
+    hold_sag_rad: float  # torque mode: what a hold may still travel, at rest ...
+    hold_brake_s: float  # ... plus the joints' speed times this
     servo_ids: np.ndarray  # (n,) actuator ids of the servos
     motor_ids: np.ndarray  # (n,) actuator ids of the feed-forward motors
     action_center: np.ndarray  # (n,) native action = center + half * unit action
@@ -110,7 +117,6 @@ def check_supported(env_id: str, env: Any) -> None:
                          f"it builds {list(SUPPORTED_IDS)}")
     config = env.config
     checks = (
-        ("control_mode", config.control_mode, "joint_delta"),
         ("observation", config.observation, "agent"),
         ("action_scale", config.action_scale, "unit"),
         ("reward", config.reward.design, "progress"),
@@ -124,6 +130,9 @@ def check_supported(env_id: str, env: Any) -> None:
     for name, value, wanted in checks:
         if value != wanted:
             raise ValueError(f"{name}={value!r} is not batched yet (only {wanted!r})")
+    if config.control_mode not in CONTROL_MODES:
+        raise ValueError(f"control_mode={config.control_mode!r} is not batched yet (only "
+                         f"{list(CONTROL_MODES)})")
     physics = env._physics
     if physics.drive is not None or physics.muscles is not None:
         raise ValueError(f"condition={config.condition!r}: patient conditions that act "
@@ -196,6 +205,9 @@ def read_tables(env_id: str, env: Any, model_fields: set[str]) -> EnvTables:
         env_id=env_id, frame_skip=int(config.frame_skip),
         max_episode_steps=int(env.max_episode_steps), weight_level=config.weight_level,
         exercise=config.exercise, level_fields=level_fields,
+        control_mode=config.control_mode,
+        torque_limit_nm=np.asarray(controller.robot.torque_limits(), dtype=float),
+        hold_sag_rad=float(TORQUE_HOLD_SAG_RAD), hold_brake_s=float(TORQUE_HOLD_BRAKE_S),
         servo_ids=np.asarray(handle.servo_ids, dtype=int),
         motor_ids=np.asarray(handle.motor_ids, dtype=int),
         action_center=np.asarray(unit._center, dtype=float),
