@@ -23,6 +23,8 @@ Tolerances, and why they do not depend on the machine:
   velocity entry and 0.0025 in the force entry). Those entries get ``TORQUE_TRANSIENT_TOL =
   0.05``, which is 0.025 rad/s or 7 N, 5 % of the 140 N limit. Every other entry keeps
   ``OBS_TOL``.
+* The robot's work on the limb over an episode (a sum of about 3000 float32 products of
+  force and displacement): ``WORK_RTOL = 1e-3`` relative.
 * Target switches, the termination step and the safety rule must match exactly: they are
   the task's discrete outcomes.
 """
@@ -46,6 +48,7 @@ pytestmark = pytest.mark.slow
 
 OBS_TOL = 1e-3
 TORQUE_TRANSIENT_TOL = 0.05
+WORK_RTOL = 1e-3
 RETURN_RTOL = 1e-4
 START = {"exercise": 0, "weight_level": 0}
 
@@ -65,6 +68,7 @@ def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int |
         out["obs"].append(obs)
         out["rewards"].append(reward)
         out["index"].append(info["target_index"])
+        out["robot_work_j"] = info["robot_work_j"]
         if terminated:
             out["violation"] = info["safety_violation"]
             break
@@ -82,12 +86,12 @@ def batched_rollout(env_id: str, actions: np.ndarray, **kwargs) -> dict:
             state = jax.vmap(env.step)(state, action)
             m = state.metrics
             return state, (state.obs, state.reward, state.done, m["target_index"],
-                           m["safety_violation"])
+                           m["safety_violation"], m["robot_work_j"])
         return jax.lax.scan(body, state, action_seq)
 
     state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
     _, out = jax.jit(run)(state, jp.asarray(actions))
-    names = ("obs", "rewards", "done", "index", "violation")
+    names = ("obs", "rewards", "done", "index", "violation", "robot_work_j")
     return {"reset_obs": np.asarray(state.obs),
             **{k: np.asarray(v) for k, v in zip(names, out, strict=True)}}
 
@@ -113,6 +117,9 @@ def test_expert_episode_replays_on_warp(env_id):
     done = np.flatnonzero(out["done"][:, 0])
     assert done.size and done[0] == steps - 1, (done[:3], steps - 1)
     assert out["violation"][:, 0].max() == 0
+    work = float(out["robot_work_j"][steps - 1, 0])
+    assert abs(work - cpu["robot_work_j"]) <= WORK_RTOL * abs(cpu["robot_work_j"]), \
+        (work, cpu["robot_work_j"])
     batched_return = float(out["rewards"][:, 0].sum())
     cpu_return = float(cpu["rewards"].sum())
     assert abs(batched_return - cpu_return) <= RETURN_RTOL * abs(cpu_return), \

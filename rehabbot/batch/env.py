@@ -43,6 +43,8 @@ CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
 # A non-finite cuff force reads as this in the agent observation (as the CPU env does).
 NONFINITE_FORCE_N = 1e9
 INSTABILITY = RULE_CODES["instability"]
+METER_KEYS = ("meter_pos", "meter_force", "meter_has_force", "robot_work_j",
+              "robot_positive_work_j")
 REWARD_TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety")
 
 
@@ -139,6 +141,38 @@ class BatchedRehabEnv:
         p = self._rot_t @ (data.site_xpos[self.tables.tool_site] - self._base)
         return theta, jp.concatenate([theta, p, data.qpos[self._phi]])
 
+    def _cuff_rows_force(self, data: Any) -> tuple[jax.Array, jax.Array]:
+        """The cuff's constraint force (3,) and whether its rows exist (the work meter's)."""
+        row, impl = self.tables.cuff_row, data._impl
+        return impl.efc__force[row:row + 3], jp.reshape(impl.nefc, ()) >= row + 3
+
+    def _meter_start(self, data: Any) -> dict[str, jax.Array]:
+        """The work meter at the start of an episode (``WorkMeter.reset``)."""
+        zero = jp.zeros((), jp.float32)
+        return {"meter_pos": data.site_xpos[self.tables.patient_cuff_site],
+                "meter_force": jp.zeros(3, jp.float32), "meter_has_force": jp.bool_(False),
+                "robot_work_j": zero, "robot_positive_work_j": zero}
+
+    def _meter_after_step(self, meter: dict, data: Any) -> dict[str, jax.Array]:
+        """``WorkMeter.after_step``: the force of the physics step before times the cuff
+        site's displacement since (the force on the limb is minus the constraint force)."""
+        pos = data.site_xpos[self.tables.patient_cuff_site]
+        work = jp.where(meter["meter_has_force"],
+                        jp.dot(meter["meter_force"], meter["meter_pos"] - pos), 0.0)
+        force, has_force = self._cuff_rows_force(data)
+        return {"meter_pos": pos, "meter_force": force, "meter_has_force": has_force,
+                "robot_work_j": meter["robot_work_j"] + work,
+                "robot_positive_work_j": meter["robot_positive_work_j"]
+                + jp.maximum(work, 0.0)}
+
+    @staticmethod
+    def _work_metrics(meter: dict) -> dict[str, jax.Array]:
+        """The work entries of the CPU env's ``info`` for a healthy patient, who does no work
+        (so the robot's share of the positive work, the assistance ratio, is 1)."""
+        return {"robot_work_j": meter["robot_work_j"],
+                "patient_work_j": jp.zeros((), jp.float32),
+                "assistance_ratio": jp.ones((), jp.float32)}
+
     def _hold_travel(self, setpoint: jax.Array, theta: jax.Array,
                      speed: jax.Array) -> jax.Array:
         """How far [rad] the joints may still travel if the agent holds still
@@ -234,12 +268,12 @@ class BatchedRehabEnv:
             + self._rests[exercise, 0],
             "hold_gap": jp.float32(t.max_episode_steps * t.time_cost)
             + t.progress_weight * self._hold_travel(setpoint, theta, speed),
-            "rng": rng, "truncation": zero,
+            "rng": rng, "truncation": zero, **self._meter_start(data),
         }
         metrics = {"interaction_force_n": force, "cost": zero,
                    "safety_violation": jp.int32(0), "is_success": zero,
                    "target_index": index, "action_clipped": jp.int32(0),
-                   **dict.fromkeys(REWARD_TERMS, zero)}
+                   **self._work_metrics(info), **dict.fromkeys(REWARD_TERMS, zero)}
         return State(data, obs, zero, zero, metrics, info)
 
     def reset(self, rng: jax.Array) -> State:
@@ -304,10 +338,14 @@ class BatchedRehabEnv:
         level = info["weight_level"]
         model = self._model(level)
 
-        def physics_step(d: Any, _: None) -> tuple[Any, None]:
-            return mjx.step(model, d), None
+        def physics_step(carry: tuple, _: None) -> tuple[tuple, None]:
+            d, meter = carry
+            d = mjx.step(model, d)
+            return (d, self._meter_after_step(meter, d)), None
 
-        data, _ = jax.lax.scan(physics_step, data, None, length=t.frame_skip)
+        meter = {k: info[k] for k in METER_KEYS}
+        (data, meter), _ = jax.lax.scan(physics_step, (data, meter), None,
+                                        length=t.frame_skip)
 
         # Safety rules, in the CPU env's order.
         force = self._cuff_force(data)
@@ -362,13 +400,15 @@ class BatchedRehabEnv:
         obs = self._agent_obs(paper, exercise, new_index, setpoint, data.qvel[self._dof],
                               self._cuff_force(data))
         f32 = jp.float32
-        new_info = {**info, "setpoint": setpoint, "target_index": new_index, "steps": steps,
+        new_info = {**info, **meter, "setpoint": setpoint, "target_index": new_index,
+                    "steps": steps,
                     "theta": theta, "healthy": dynamic, "path_left": after, "hold_gap": gap,
                     "truncation": truncated.astype(f32)}
         metrics = {"interaction_force_n": force, "cost": (violation > 0).astype(f32),
                    "safety_violation": violation,
                    "is_success": (reached & last).astype(f32),
                    "target_index": new_index, "action_clipped": clipped,
+                   **self._work_metrics(meter),
                    "reward_progress": progress, "reward_bonus": bonus,
                    "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety}
         return State(data, obs, reward.astype(f32), (terminated | truncated).astype(f32),

@@ -91,6 +91,7 @@ class EnvTables:
     rom_low_rad: np.ndarray
     rom_high_rad: np.ndarray
     cuff_row: int  # the cuff's first constraint row
+    patient_cuff_site: int  # the patient's side of the cuff (the work meter's point)
     cuff_force_limit_n: float
     contact_tolerance_m: float
     is_robot_geom: np.ndarray  # (ngeom,) bool
@@ -234,7 +235,8 @@ def read_tables(env_id: str, env: Any, model_fields: set[str]) -> EnvTables:
         patient_qpos_adr=np.asarray(scene.patient_qpos_adr, dtype=int),
         rom_low_rad=np.asarray(safety._rom_low, dtype=float),
         rom_high_rad=np.asarray(safety._rom_high, dtype=float),
-        cuff_row=int(safety.cuff_rows[0]), cuff_force_limit_n=float(safety.force_limits_n[0]),
+        cuff_row=int(safety.cuff_rows[0]), patient_cuff_site=int(handle.patient_cuff_site_id),
+        cuff_force_limit_n=float(safety.force_limits_n[0]),
         contact_tolerance_m=float(safety.thresholds.contact_tolerance_m),
         is_robot_geom=np.asarray(safety._is_robot, dtype=bool),
         is_other_geom=np.asarray(safety._is_other, dtype=bool),
