@@ -1,0 +1,124 @@
+"""A Gymnasium ``VectorEnv`` backed by the batched env: ``num_envs`` worlds stepped in one
+jitted, vmapped call, with NumPy arrays in and out.
+
+Gymnasium's door, ``gym.make_vec(env_id, num_envs=N, vectorization_mode="vector_entry_point")``,
+opens after :func:`register_vector_entry_points` (an explicit call: with a vector entry point
+registered, ``gym.make_vec`` *without* a mode also picks it, so ``import rehabbot`` does not
+register it and existing ``make_vec`` calls keep Gymnasium's ``SyncVectorEnv``).
+
+Episodes restart in the same step (Gymnasium's ``AutoresetMode.SAME_STEP``): a world that
+ends returns the next episode's first observation, and the last observation of the ended
+episode is in ``info["final_obs"]`` (masked by ``info["_final_obs"]``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import jax
+import jax.numpy as jp
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from rehabbot.batch.env import BatchedRehabEnv
+from rehabbot.batch.tables import SUPPORTED_IDS
+
+CONTACTS_PER_WORLD = 16  # MuJoCo Warp's contact slots per world (naconmax = this x worlds)
+
+
+class BatchedVectorEnv(VectorEnv):
+    """``num_envs`` worlds of ``env_id`` (a :data:`~rehabbot.batch.tables.SUPPORTED_IDS` id)
+    on MuJoCo Warp; ``**kwargs`` are the CPU env's keyword arguments (and ``naconmax``,
+    ``njmax``: :class:`~rehabbot.batch.env.BatchedRehabEnv`)."""
+
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP}  # noqa: RUF012
+
+    def __init__(self, env_id: str, num_envs: int, **kwargs: Any) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r} must be a positive integer")
+        kwargs.setdefault("naconmax", CONTACTS_PER_WORLD * num_envs)
+        self.env = BatchedRehabEnv(env_id, **kwargs)
+        self.num_envs = num_envs
+        cpu = self.env.cpu_env
+        self.single_observation_space = cpu.observation_space
+        self.single_action_space = cpu.action_space
+        self.observation_space = batch_space(cpu.observation_space, num_envs)
+        self.action_space = batch_space(cpu.action_space, num_envs)
+        self.spec = None
+        self._reset = jax.jit(jax.vmap(self.env.reset))
+        env = self.env
+
+        def step(state, action):
+            stepped = env.step(state, action)
+            return env.restart_done(stepped), stepped.obs
+
+        self._step = jax.jit(jax.vmap(step))
+        self._state = None
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Every world starts an episode (exercise drawn per world unless the config fixes
+        it). ``options`` are not supported yet (``ValueError``)."""
+        if options:
+            raise ValueError(f"options={options!r}: reset options are not batched yet "
+                             "(fix the exercise with make_vec(..., exercise=e))")
+        super().reset(seed=seed)
+        key = jax.random.key(int(self.np_random.integers(2**31)))
+        self._state = self._reset(jax.random.split(key, self.num_envs))
+        return np.asarray(self._state.obs), self._info(self._state)
+
+    def step(self, actions):
+        if self._state is None:
+            raise gym.error.ResetNeeded("step() called before reset(); call reset() first")
+        actions = np.asarray(actions, dtype=np.float32)
+        if actions.shape != self.action_space.shape:
+            raise ValueError(f"actions have shape {actions.shape}; expected "
+                             f"{self.action_space.shape}")
+        self._state, final_obs = self._step(self._state, jp.asarray(actions))
+        state = self._state
+        done = np.asarray(state.done) > 0
+        truncated = np.asarray(state.info["truncation"]) > 0
+        info = self._info(state)
+        if done.any():
+            final = np.asarray(final_obs)
+            info["final_obs"] = np.array([final[k] if done[k] else None
+                                          for k in range(self.num_envs)], dtype=object)
+            info["_final_obs"] = done
+        return (np.asarray(state.obs), np.asarray(state.reward, dtype=np.float64),
+                done & ~truncated, truncated, info)
+
+    @staticmethod
+    def _info(state: Any) -> dict[str, np.ndarray]:
+        return {name: np.asarray(value) for name, value in state.metrics.items()}
+
+
+def make_vec(env_id: str, num_envs: int, **kwargs: Any) -> BatchedVectorEnv:
+    """:class:`BatchedVectorEnv` of ``env_id`` (what ``gym.make_vec``'s door returns)."""
+    return BatchedVectorEnv(env_id, num_envs, **kwargs)
+
+
+def _creator(env_id: str):
+    def create(num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:
+        return BatchedVectorEnv(env_id, num_envs, **kwargs)
+
+    create.__doc__ = f"The vector entry point of {env_id}."
+    return create
+
+
+# One creator per id, by name (Gymnasium passes a vector entry point the number of envs and
+# the id's keyword arguments, not the id).
+VECTOR_ENTRY_POINTS: dict[str, str] = {}
+for _env_id in SUPPORTED_IDS:
+    _name = "vector_" + _env_id.split("/")[-1].replace("-", "_")
+    globals()[_name] = _creator(_env_id)
+    VECTOR_ENTRY_POINTS[_env_id] = f"{__name__}:{_name}"
+
+
+def register_vector_entry_points() -> None:
+    """Give every batched id its vector entry point, so that ``gym.make_vec(env_id,
+    num_envs=N, vectorization_mode="vector_entry_point")`` returns a
+    :class:`BatchedVectorEnv` (module docstring: ``make_vec`` without a mode then picks it
+    too)."""
+    for env_id, entry_point in VECTOR_ENTRY_POINTS.items():
+        gym.registry[env_id].vector_entry_point = entry_point

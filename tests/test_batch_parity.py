@@ -1,0 +1,282 @@
+"""The batched env (rehabbot.batch, MuJoCo Warp's CPU device) against the CPU env: the scripted
+expert's episode replayed with the same target switches, termination step and return, every
+observation within a float32 bound, and safety stops on the same step with the same rule.
+
+Slow (``pytest --full``): Warp compiles its kernels once (about 40-80 s, cached in
+``~/.cache/warp``), then steps one world in about 15 ms on the CPU.
+
+Tolerances, and why they do not depend on the machine:
+
+* Observation: every entry of the ``-v2`` observation lies in [-2, 2]; the most sensitive
+  entries are ``tanh`` of a joint error over 0.05 rad (20 per rad), of a velocity over
+  0.5 rad/s (2 per rad/s) and the cuff force over its limit (1/130 per N). A bound of
+  ``OBS_TOL = 1e-3`` is 5e-5 rad of joint angle (1/1000 of the 0.05 rad target tolerance),
+  5e-4 rad/s of joint speed and 0.13 N of cuff force: far below anything the task can see,
+  and far above float32's rounding of the physics (the study measured 3.5e-6 rad of qpos after
+  1000 steps; the replays here stay below 1e-4 in every entry).
+* Return: the progress terms add up to ``10 / rad x`` the path travelled, so a relative
+  ``RETURN_RTOL = 1e-4`` of a return of about 175 (0.018) is 1.8e-3 rad of path in a whole
+  episode, again far below the 0.05 rad tolerance; float32 rewards differ by about 1e-5 a
+  step.
+* In ``torque`` mode no servo damps the joints, and float32 rounding in the constraint solve
+  shows in the transient joint velocities and cuff force (measured: up to 0.018 in a
+  velocity entry and 0.0025 in the force entry). Those entries get ``TORQUE_TRANSIENT_TOL =
+  0.05``, which is 0.025 rad/s or 7 N, 5 % of the 140 N limit. Every other entry keeps
+  ``OBS_TOL``.
+* The robot's work on the limb over an episode (a sum of about 3000 float32 products of
+  force and displacement): ``WORK_RTOL = 1e-3`` relative.
+* Target switches, the termination step and the safety rule must match exactly: they are
+  the task's discrete outcomes.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+jax = pytest.importorskip("jax")
+pytest.importorskip("warp")
+pytest.importorskip("mujoco.mjx")
+
+import jax.numpy as jp  # noqa: E402
+
+import rehabbot.batch as batch  # noqa: E402
+from rehabbot.rl.experts import ScriptedExpert  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+OBS_TOL = 1e-3
+TORQUE_TRANSIENT_TOL = 0.05
+WORK_RTOL = 1e-3
+RETURN_RTOL = 1e-4
+START = {"exercise": 0, "weight_level": 0}
+
+
+def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int | None = None,
+                **kwargs) -> dict:
+    """One CPU episode from ``reset(seed=0, options=START)``: the scripted expert's
+    (``actions`` None) or a constant action's, to its end or ``max_steps``."""
+    env = gym.make(env_id, **kwargs).unwrapped
+    obs, info = env.reset(seed=0, options=START)
+    expert = ScriptedExpert(env) if actions is None else None
+    out = {"actions": [], "obs": [obs], "rewards": [], "index": [0], "violation": None}
+    for _ in range(max_steps or env.max_episode_steps):
+        action = np.asarray(expert.predict(obs)[0] if expert else actions, np.float32)
+        obs, reward, terminated, _truncated, info = env.step(action)
+        out["actions"].append(action)
+        out["obs"].append(obs)
+        out["rewards"].append(reward)
+        out["index"].append(info["target_index"])
+        out["robot_work_j"] = info["robot_work_j"]
+        if terminated:
+            out["violation"] = info["safety_violation"]
+            break
+    return {k: np.asarray(v) if isinstance(v, list) else v for k, v in out.items()}
+
+
+def batched_rollout(env_id: str, actions: np.ndarray, **kwargs) -> dict:
+    """Every world's observations, rewards, dones, target indices and safety rules for the
+    actions ``(steps, worlds, n)``, from the same start as :func:`cpu_episode`."""
+    worlds = actions.shape[1]
+    env = batch.make(env_id, naconmax=16 * worlds, **START, **kwargs)
+
+    def run(state, action_seq):
+        def body(state, action):
+            state = jax.vmap(env.step)(state, action)
+            m = state.metrics
+            return state, (state.obs, state.reward, state.done, m["target_index"],
+                           m["safety_violation"], m["robot_work_j"])
+        return jax.lax.scan(body, state, action_seq)
+
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
+    _, out = jax.jit(run)(state, jp.asarray(actions))
+    names = ("obs", "rewards", "done", "index", "violation", "robot_work_j")
+    return {"reset_obs": np.asarray(state.obs),
+            **{k: np.asarray(v) for k, v in zip(names, out, strict=True)}}
+
+
+def switches(index: np.ndarray) -> list[int]:
+    """The steps (0-based) after which the target index moved on."""
+    return np.flatnonzero(np.diff(index)).tolist()
+
+
+@pytest.mark.parametrize("env_id", batch.SUPPORTED_IDS)
+def test_expert_episode_replays_on_warp(env_id):
+    cpu = cpu_episode(env_id)
+    steps = len(cpu["actions"])
+    # world 0 replays the expert; world 1 acts otherwise (its contacts and constraints must
+    # not reach world 0).
+    actions = np.repeat(cpu["actions"][:, None], 2, axis=1)
+    actions[:, 1] = np.clip(actions[:, 1] + 0.3, -1, 1)
+    out = batched_rollout(env_id, actions)
+    assert np.abs(out["reset_obs"][0] - cpu["obs"][0]).max() < OBS_TOL
+    obs_error = np.abs(out["obs"][:, 0] - cpu["obs"][1:]).max()
+    assert obs_error < OBS_TOL, obs_error
+    assert switches(np.r_[0, out["index"][:, 0]]) == switches(cpu["index"])
+    done = np.flatnonzero(out["done"][:, 0])
+    assert done.size and done[0] == steps - 1, (done[:3], steps - 1)
+    assert out["violation"][:, 0].max() == 0
+    work = float(out["robot_work_j"][steps - 1, 0])
+    assert abs(work - cpu["robot_work_j"]) <= WORK_RTOL * abs(cpu["robot_work_j"]), \
+        (work, cpu["robot_work_j"])
+    batched_return = float(out["rewards"][:, 0].sum())
+    cpu_return = float(cpu["rewards"].sum())
+    assert abs(batched_return - cpu_return) <= RETURN_RTOL * abs(cpu_return), \
+        (batched_return, cpu_return)
+
+
+def first_stop(done: np.ndarray) -> int:
+    stops = np.flatnonzero(done)
+    assert stops.size, "the batched world never stopped"
+    return int(stops[0])
+
+
+@pytest.mark.parametrize(("kwargs", "unit_actions"), [
+    # the cuff-force rule, pulling on the shoulder joint both ways
+    ({}, ([1, 0, 0, 0, 0, 0], [-1, 0, 0, 0, 0, 0])),
+    # with the highest cuff limit (880 N): unintended contact in world 0, range of motion in
+    # world 1 (which stops first and keeps moving: its contacts share MuJoCo Warp's array)
+    ({"cuff_force_limit_n": 880.0}, ([1, 0, 0, -1, -1, -1], [1, 0, -1, 1, 1, -1])),
+])
+def test_safety_stops_match(kwargs, unit_actions):
+    env_id = "rehabbot/rehab-reach-v2"
+    cpus = [cpu_episode(env_id, np.asarray(a, np.float32), **kwargs) for a in unit_actions]
+    steps = max(len(c["actions"]) for c in cpus) + 5
+    actions = np.repeat(np.asarray(unit_actions, np.float32)[None], steps, axis=0)
+    out = batched_rollout(env_id, actions, **kwargs)
+    for world, cpu in enumerate(cpus):
+        assert cpu["violation"] is not None, f"world {world}: the CPU episode did not stop"
+        stop = first_stop(out["done"][:, world])
+        assert stop == len(cpu["actions"]) - 1, (world, stop, len(cpu["actions"]) - 1)
+        assert out["violation"][stop, world] == batch.RULE_CODES[cpu["violation"]]
+        rewards = out["rewards"][:stop + 1, world]
+        assert abs(rewards[-1] - cpu["rewards"][-1]) <= RETURN_RTOL * abs(cpu["rewards"][-1])
+        assert abs(rewards.sum() - cpu["rewards"].sum()) <= \
+            RETURN_RTOL * abs(cpu["rewards"].sum())
+
+
+def test_auto_reset_starts_the_next_episode_and_leaves_running_worlds_alone():
+    """World 0 stops on the cuff force, restarts at home and stops again on the same step of
+    its second episode; world 1 holds still throughout, as on the CPU (the forward of the
+    auto-reset does not disturb a running world)."""
+    env_id = "rehabbot/rehab-reach-v2"
+    pull = np.asarray([-1, 0, 0, 0, 0, 0], np.float32)
+    cpu_pull = cpu_episode(env_id, pull)
+    length = len(cpu_pull["actions"])
+    cpu_hold = cpu_episode(env_id, np.zeros(6, np.float32))
+    steps = 2 * length + 3
+    actions = np.zeros((steps, 2, 6), np.float32)
+    actions[:, 0] = pull
+    env = batch.make(env_id, naconmax=32, **START)
+
+    def run(state, action_seq):
+        def body(state, action):
+            state = jax.vmap(env.step_auto_reset)(state, action)
+            return state, (state.obs, state.reward, state.done,
+                           state.metrics["safety_violation"])
+        return jax.lax.scan(body, state, action_seq)
+
+    start = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), 2))
+    _, (obs, rewards, done, violation) = jax.jit(run)(start, jp.asarray(actions))
+    obs, rewards, done, violation = map(np.asarray, (obs, rewards, done, violation))
+    assert np.flatnonzero(done[:, 0]).tolist() == [length - 1, 2 * length - 1]
+    assert (violation[[length - 1, 2 * length - 1], 0] == batch.RULE_CODES["cuff_force"]).all()
+    # the step that stopped shows the next episode's first observation
+    assert np.abs(obs[length - 1, 0] - np.asarray(start.obs[0])).max() < OBS_TOL
+    first, second = rewards[:length, 0], rewards[length:2 * length, 0]
+    assert np.abs(first - cpu_pull["rewards"]).max() <= RETURN_RTOL * abs(cpu_pull["rewards"]).max()
+    assert abs(second.sum() - first.sum()) <= RETURN_RTOL * abs(first.sum())
+    assert not done[:, 1].any()
+    assert np.abs(obs[:, 1] - cpu_hold["obs"][1:steps + 1]).max() < OBS_TOL
+
+
+def test_instability_is_judged_from_the_values():
+    """MuJoCo Warp neither warns nor resets on a diverging state: a wrist spun to 1e4 rad/s
+    (beyond the blow-up speed) stops both envs on the first step with the instability rule,
+    the same penalty and the last healthy observation."""
+    env_id = "rehabbot/rehab-reach-v2"
+    speed_rad_s = 1.0e4
+    cpu = gym.make(env_id).unwrapped
+    cpu.reset(seed=0, options=START)
+    wrist = cpu.handles[0].dof_adr[-1]
+    cpu.data.qvel[wrist] = speed_rad_s
+    cpu_obs, cpu_reward, terminated, _, info = cpu.step(np.zeros(6, np.float32))
+    assert terminated and info["safety_violation"] == "instability"
+
+    env = batch.make(env_id, naconmax=16, **START)
+    state = jax.jit(env.reset)(jax.random.key(0))
+    data = state.data
+    state = state.replace(data=data.replace(qvel=data.qvel.at[wrist].set(speed_rad_s)))
+    state = jax.jit(env.step)(state, jp.zeros(6))
+    assert float(state.done) == 1.0
+    assert int(state.metrics["safety_violation"]) == batch.RULE_CODES["instability"]
+    assert abs(float(state.reward) - cpu_reward) <= RETURN_RTOL * abs(cpu_reward)
+    # the fields of the last healthy state (tracking errors, next target, setpoint lead); the
+    # velocities and forces are the diverged ones
+    healthy = slice(0, cpu.agent_layout.slice("setpoint_lead").stop)
+    assert np.abs(np.asarray(state.obs)[healthy] - cpu_obs[healthy]).max() < OBS_TOL
+
+
+def test_weight_levels_drawn_per_world():
+    """With the weight level left to be drawn, each world draws its own at reset and steps
+    with that level's masses, inertias and home setpoints (MuJoCo Warp's per-world model
+    fields): every world follows the CPU env's expert at its level."""
+    env_id, steps, worlds = "rehabbot/rehab-reach-v2", 25, 3
+    env = batch.make(env_id, naconmax=16 * worlds, exercise=0)
+    start = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
+    levels = np.asarray(start.info["weight_level"]).tolist()
+    assert len(set(levels)) > 1, levels
+    episodes = []
+    for level in levels:
+        cpu = gym.make(env_id).unwrapped
+        obs, _ = cpu.reset(seed=0, options={"exercise": 0, "weight_level": level})
+        expert, actions, observations = ScriptedExpert(cpu), [], [obs]
+        for _ in range(steps):
+            action = np.asarray(expert.predict(obs)[0], np.float32)
+            obs, *_ = cpu.step(action)
+            actions.append(action)
+            observations.append(obs)
+        episodes.append((np.asarray(actions), np.asarray(observations)))
+    actions = np.stack([a for a, _ in episodes], axis=1)
+
+    def run(state, action_seq):
+        def body(state, action):
+            state = jax.vmap(env.step)(state, action)
+            return state, state.obs
+        return jax.lax.scan(body, state, action_seq)
+
+    _, obs = jax.jit(run)(start, jp.asarray(actions))
+    obs = np.asarray(obs)
+    for world, (_, cpu_obs) in enumerate(episodes):
+        assert np.abs(np.asarray(start.obs[world]) - cpu_obs[0]).max() < OBS_TOL
+        error = np.abs(obs[:, world] - cpu_obs[1:]).max()
+        assert error < OBS_TOL, (world, levels[world], error)
+
+
+def test_torque_mode_zeroes_the_servo_gains():
+    """``control_mode="torque"``: MuJoCo Warp ignores ``opt.disableactuator``, so the batched
+    model has zero servo gains instead. World 0 holds zero torque and sags into the cuff-force
+    stop; world 1 pushes the shoulder and elbow and runs on: both as on the CPU."""
+    env_id, steps, kwargs = "rehabbot/rehab-reach-v2", 60, {"control_mode": "torque"}
+    unit_actions = ([0, 0, 0, 0, 0, 0], [0, -0.1, 0.1, 0, 0, 0])
+    cpus = [cpu_episode(env_id, np.asarray(a, np.float32), max_steps=steps, **kwargs)
+            for a in unit_actions]
+    assert cpus[0]["violation"] == "cuff_force" and cpus[1]["violation"] is None
+    actions = np.repeat(np.asarray(unit_actions, np.float32)[None], steps, axis=0)
+    out = batched_rollout(env_id, actions, **kwargs)
+    stop = len(cpus[0]["actions"]) - 1
+    assert first_stop(out["done"][:, 0]) == stop
+    assert out["violation"][stop, 0] == batch.RULE_CODES["cuff_force"]
+    assert not out["done"][:, 1].any()
+    layout = gym.make(env_id, **kwargs).unwrapped.agent_layout
+    transient = np.zeros(layout.size, bool)
+    for name in ("joint_velocity", "cuff_force"):
+        transient[layout.slice(name)] = True
+    for world, cpu in enumerate(cpus):
+        n = len(cpu["actions"])
+        error = np.abs(out["obs"][:n, world] - cpu["obs"][1:])
+        assert error[:, ~transient].max() < OBS_TOL
+        assert error[:, transient].max() < TORQUE_TRANSIENT_TOL
+        assert abs(out["rewards"][:n, world].sum() - cpu["rewards"].sum()) <= \
+            RETURN_RTOL * abs(cpu["rewards"].sum())
