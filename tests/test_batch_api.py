@@ -124,3 +124,17 @@ def test_tables_follow_the_cpu_env_kwargs():
     np.testing.assert_array_equal(t.targets_rad[1, :len(cpu.target_sequence.robot_rad)],
                                   cpu.target_sequence.robot_rad)
     np.testing.assert_array_equal(t.agent_matrix, cpu._agent.matrix)
+
+
+def test_the_batched_env_prints_nothing():
+    """Building, compiling and stepping a batched env prints nothing (Warp announces every
+    kernel module it loads unless told to be quiet), in a fresh process."""
+    code = ("import jax, rehabbot.batch as b; env = b.make('rehabbot/rehab-reach-v2', "
+            "naconmax=16, exercise=0, weight_level=0); "
+            "s = jax.jit(env.reset)(jax.random.key(0)); "
+            "s = jax.jit(env.step)(s, jax.numpy.zeros(env.action_size)); "
+            "s.obs.block_until_ready()")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=600, check=True)
+    assert result.stdout == "" and result.stderr == "", (result.stdout[-500:],
+                                                         result.stderr[-500:])

@@ -42,6 +42,13 @@ pytest.importorskip("mujoco.mjx")
 import jax.numpy as jp  # noqa: E402
 
 import rehabbot.batch as batch  # noqa: E402
+from rehabbot.analysis.batch_parity import (  # noqa: E402
+    START,
+    batched_rollout,
+    cpu_episode,
+    replay_expert,
+    replay_stops,
+)
 from rehabbot.rl.experts import ScriptedExpert  # noqa: E402
 
 pytestmark = pytest.mark.slow
@@ -50,78 +57,19 @@ OBS_TOL = 1e-3
 TORQUE_TRANSIENT_TOL = 0.05
 WORK_RTOL = 1e-3
 RETURN_RTOL = 1e-4
-START = {"exercise": 0, "weight_level": 0}
-
-
-def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int | None = None,
-                **kwargs) -> dict:
-    """One CPU episode from ``reset(seed=0, options=START)``: the scripted expert's
-    (``actions`` None) or a constant action's, to its end or ``max_steps``."""
-    env = gym.make(env_id, **kwargs).unwrapped
-    obs, info = env.reset(seed=0, options=START)
-    expert = ScriptedExpert(env) if actions is None else None
-    out = {"actions": [], "obs": [obs], "rewards": [], "index": [0], "violation": None}
-    for _ in range(max_steps or env.max_episode_steps):
-        action = np.asarray(expert.predict(obs)[0] if expert else actions, np.float32)
-        obs, reward, terminated, _truncated, info = env.step(action)
-        out["actions"].append(action)
-        out["obs"].append(obs)
-        out["rewards"].append(reward)
-        out["index"].append(info["target_index"])
-        out["robot_work_j"] = info["robot_work_j"]
-        if terminated:
-            out["violation"] = info["safety_violation"]
-            break
-    return {k: np.asarray(v) if isinstance(v, list) else v for k, v in out.items()}
-
-
-def batched_rollout(env_id: str, actions: np.ndarray, **kwargs) -> dict:
-    """Every world's observations, rewards, dones, target indices and safety rules for the
-    actions ``(steps, worlds, n)``, from the same start as :func:`cpu_episode`."""
-    worlds = actions.shape[1]
-    env = batch.make(env_id, naconmax=16 * worlds, **START, **kwargs)
-
-    def run(state, action_seq):
-        def body(state, action):
-            state = jax.vmap(env.step)(state, action)
-            m = state.metrics
-            return state, (state.obs, state.reward, state.done, m["target_index"],
-                           m["safety_violation"], m["robot_work_j"])
-        return jax.lax.scan(body, state, action_seq)
-
-    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
-    _, out = jax.jit(run)(state, jp.asarray(actions))
-    names = ("obs", "rewards", "done", "index", "violation", "robot_work_j")
-    return {"reset_obs": np.asarray(state.obs),
-            **{k: np.asarray(v) for k, v in zip(names, out, strict=True)}}
-
-
-def switches(index: np.ndarray) -> list[int]:
-    """The steps (0-based) after which the target index moved on."""
-    return np.flatnonzero(np.diff(index)).tolist()
 
 
 @pytest.mark.parametrize("env_id", batch.SUPPORTED_IDS)
 def test_expert_episode_replays_on_warp(env_id):
-    cpu = cpu_episode(env_id)
-    steps = len(cpu["actions"])
-    # world 0 replays the expert; world 1 acts otherwise (its contacts and constraints must
-    # not reach world 0).
-    actions = np.repeat(cpu["actions"][:, None], 2, axis=1)
-    actions[:, 1] = np.clip(actions[:, 1] + 0.3, -1, 1)
-    out = batched_rollout(env_id, actions)
-    assert np.abs(out["reset_obs"][0] - cpu["obs"][0]).max() < OBS_TOL
-    obs_error = np.abs(out["obs"][:, 0] - cpu["obs"][1:]).max()
-    assert obs_error < OBS_TOL, obs_error
-    assert switches(np.r_[0, out["index"][:, 0]]) == switches(cpu["index"])
-    done = np.flatnonzero(out["done"][:, 0])
-    assert done.size and done[0] == steps - 1, (done[:3], steps - 1)
-    assert out["violation"][:, 0].max() == 0
-    work = float(out["robot_work_j"][steps - 1, 0])
-    assert abs(work - cpu["robot_work_j"]) <= WORK_RTOL * abs(cpu["robot_work_j"]), \
-        (work, cpu["robot_work_j"])
-    batched_return = float(out["rewards"][:, 0].sum())
-    cpu_return = float(cpu["rewards"].sum())
+    replay = replay_expert(env_id)
+    assert replay["reset_obs_error"] < OBS_TOL
+    assert replay["obs_error"] < OBS_TOL, replay["obs_error"]
+    assert replay["switches_batched"] == replay["switches_cpu"]
+    assert replay["end_batched"] == replay["end_cpu"], replay
+    assert replay["stop_batched"] == 0
+    work, cpu_work = replay["robot_work_batched_j"], replay["robot_work_cpu_j"]
+    assert abs(work - cpu_work) <= WORK_RTOL * abs(cpu_work), (work, cpu_work)
+    batched_return, cpu_return = replay["return_batched"], replay["return_cpu"]
     assert abs(batched_return - cpu_return) <= RETURN_RTOL * abs(cpu_return), \
         (batched_return, cpu_return)
 
@@ -140,20 +88,14 @@ def first_stop(done: np.ndarray) -> int:
     ({"cuff_force_limit_n": 880.0}, ([1, 0, 0, -1, -1, -1], [1, 0, -1, 1, 1, -1])),
 ])
 def test_safety_stops_match(kwargs, unit_actions):
-    env_id = "rehabbot/rehab-reach-v2"
-    cpus = [cpu_episode(env_id, np.asarray(a, np.float32), **kwargs) for a in unit_actions]
-    steps = max(len(c["actions"]) for c in cpus) + 5
-    actions = np.repeat(np.asarray(unit_actions, np.float32)[None], steps, axis=0)
-    out = batched_rollout(env_id, actions, **kwargs)
-    for world, cpu in enumerate(cpus):
-        assert cpu["violation"] is not None, f"world {world}: the CPU episode did not stop"
-        stop = first_stop(out["done"][:, world])
-        assert stop == len(cpu["actions"]) - 1, (world, stop, len(cpu["actions"]) - 1)
-        assert out["violation"][stop, world] == batch.RULE_CODES[cpu["violation"]]
-        rewards = out["rewards"][:stop + 1, world]
-        assert abs(rewards[-1] - cpu["rewards"][-1]) <= RETURN_RTOL * abs(cpu["rewards"][-1])
-        assert abs(rewards.sum() - cpu["rewards"].sum()) <= \
-            RETURN_RTOL * abs(cpu["rewards"].sum())
+    for row in replay_stops("rehabbot/rehab-reach-v2", unit_actions, **kwargs):
+        assert row["rule_cpu"] is not None, f"{row['unit_action']}: the CPU episode did not stop"
+        assert row["stop_batched"] == row["stop_cpu"], row
+        assert row["rule_batched"] == row["rule_cpu"], row
+        assert abs(row["last_reward_batched"] - row["last_reward_cpu"]) <= \
+            RETURN_RTOL * abs(row["last_reward_cpu"])
+        assert abs(row["return_batched"] - row["return_cpu"]) <= \
+            RETURN_RTOL * abs(row["return_cpu"])
 
 
 def test_auto_reset_starts_the_next_episode_and_leaves_running_worlds_alone():

@@ -19,10 +19,23 @@ from __future__ import annotations
 
 from typing import Any
 
-from rehabbot.batch.env import BatchedRehabEnv
-from rehabbot.batch.state import State
-from rehabbot.batch.tables import RULE_CODES, SUPPORTED_IDS
-from rehabbot.batch.vector import BatchedVectorEnv, make_vec, register_vector_entry_points
+import warp
+
+from rehabbot.common.native_output import dropping_stderr_lines
+
+# Warp logs its start and every kernel module it compiles or loads, and its native library
+# warns on a machine without a CUDA driver (the CPU device still runs). RehabBot prints
+# nothing: Warp's log shows errors only (set warp.config.log_level = warp.LOG_INFO after
+# importing rehabbot.batch to see the rest), and the driver warning is dropped at init.
+warp.config.log_level = warp.LOG_ERROR
+NO_CUDA_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"
+with dropping_stderr_lines(NO_CUDA_DRIVER_WARNING):
+    warp.init()
+
+from rehabbot.batch.env import BatchedRehabEnv  # noqa: E402
+from rehabbot.batch.state import State  # noqa: E402
+from rehabbot.batch.tables import RULE_CODES, SUPPORTED_IDS  # noqa: E402
+from rehabbot.batch.vector import BatchedVectorEnv, make_vec, register_vector_entry_points  # noqa: E402
 
 
 def make(env_id: str, **kwargs: Any) -> BatchedRehabEnv:

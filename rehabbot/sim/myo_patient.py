@@ -34,20 +34,15 @@ built for the default :class:`rehabbot.sim.patient.PatientProfile` only.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import math
-import os
-import sys
-import tempfile
-import warnings
-from collections.abc import Iterator
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from rehabbot.common.extras import missing_module_message
+from rehabbot.common.native_output import dropping_stderr_lines
 from rehabbot.sim.patient import PatientProfile
 
 PATIENT_MODELS: tuple[str, ...] = ("rigid", "myo")
@@ -91,28 +86,6 @@ class MyoModelMissingError(ImportError):
     """``myo-sim`` is not installed."""
 
 
-@contextlib.contextmanager
-def _quiet_composition() -> Iterator[None]:
-    """Drop MuJoCo's empty-prefix warning (Python and C stderr) while myo-sim composes a
-    model; anything else written to stderr is passed on."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile(mode="w+b") as captured, warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=EMPTY_PREFIX_WARNING)
-        os.dup2(captured.fileno(), 2)
-        try:
-            yield
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            captured.seek(0)
-            text = captured.read().decode(errors="replace")
-    rest = [line for line in text.splitlines()
-            if line.strip() and EMPTY_PREFIX_WARNING not in line]
-    if rest:
-        print("\n".join(rest), file=sys.stderr)
-
-
 def build_myo_spec(name: str) -> mujoco.MjSpec:
     """myo-sim's model ``name`` (a ``myo_sim.build.compose`` registry name: ``"myolegs"``,
     ``"myoarm_r"``, ...) as an ``MjSpec``, built without MuJoCo's empty-prefix warnings.
@@ -122,7 +95,7 @@ def build_myo_spec(name: str) -> mujoco.MjSpec:
     except ImportError as err:
         raise MyoModelMissingError(missing_module_message(
             "patient_model='myo' (MyoSuite's models)", "myo_sim")) from err
-    with _quiet_composition():
+    with dropping_stderr_lines(EMPTY_PREFIX_WARNING):
         return build_spec(name)
 
 

@@ -1,0 +1,139 @@
+"""The batched env (:mod:`rehabbot.batch`, MuJoCo Warp) against the CPU env, episode by episode:
+the same actions in both, and what came out of each.
+
+* :func:`cpu_episode`: one CPU episode from ``reset(seed=0, options=START)``, the scripted
+  expert's or a constant action's;
+* :func:`batched_rollout`: the same start in every world of the batched env and a sequence of
+  actions per world, stepped in one ``jax.lax.scan``;
+* :func:`replay_expert` and :func:`replay_stops`: the comparisons the parity tests assert and
+  ``benchmarks/results/batch_parity.py`` publishes (target switches, termination step, return,
+  observation error, robot work; the stop's step and rule).
+
+Needs ``pip install "rehabbot[gpu]"``; JAX and the batched env are imported when called.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from rehabbot.rl.experts import ScriptedExpert
+
+START = {"exercise": 0, "weight_level": 0}
+
+
+def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int | None = None,
+                **kwargs: Any) -> dict:
+    """One CPU episode from ``reset(seed=0, options=START)``: the scripted expert's
+    (``actions`` None) or a constant action's, to its end or ``max_steps``. Arrays per step:
+    ``actions``, ``obs`` (the reset's first), ``rewards``, ``index`` (the target index, the
+    reset's first); ``violation`` (the stop's rule or None) and ``robot_work_j`` at the end."""
+    env = gym.make(env_id, **kwargs).unwrapped
+    obs, info = env.reset(seed=0, options=START)
+    expert = ScriptedExpert(env) if actions is None else None
+    out: dict[str, Any] = {"actions": [], "obs": [obs], "rewards": [], "index": [0],
+                           "violation": None, "robot_work_j": 0.0}
+    for _ in range(max_steps or env.max_episode_steps):
+        action = np.asarray(expert.predict(obs)[0] if expert else actions, np.float32)
+        obs, reward, terminated, _truncated, info = env.step(action)
+        out["actions"].append(action)
+        out["obs"].append(obs)
+        out["rewards"].append(reward)
+        out["index"].append(info["target_index"])
+        out["robot_work_j"] = info["robot_work_j"]
+        if terminated:
+            out["violation"] = info["safety_violation"]
+            break
+    env.close()
+    return {k: np.asarray(v) if isinstance(v, list) else v for k, v in out.items()}
+
+
+def batched_rollout(env_id: str, actions: np.ndarray, **kwargs: Any) -> dict:
+    """Every world's observations, rewards, dones, target indices, safety rules and robot
+    work for the actions ``(steps, worlds, n)``, from the same start as :func:`cpu_episode`
+    (no auto-reset: a stopped world stays stopped)."""
+    import jax
+    import jax.numpy as jp
+
+    import rehabbot.batch as batch
+
+    worlds = actions.shape[1]
+    env = batch.make(env_id, naconmax=16 * worlds, **START, **kwargs)
+
+    def run(state, action_seq):
+        def body(state, action):
+            state = jax.vmap(env.step)(state, action)
+            m = state.metrics
+            return state, (state.obs, state.reward, state.done, m["target_index"],
+                           m["safety_violation"], m["robot_work_j"])
+        return jax.lax.scan(body, state, action_seq)
+
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
+    _, out = jax.jit(run)(state, jp.asarray(actions))
+    names = ("obs", "rewards", "done", "index", "violation", "robot_work_j")
+    return {"reset_obs": np.asarray(state.obs),
+            **{k: np.asarray(v) for k, v in zip(names, out, strict=True)}}
+
+
+def switches(index: np.ndarray) -> list[int]:
+    """The steps (0-based) after which the target index moved on."""
+    return np.flatnonzero(np.diff(index)).tolist()
+
+
+def replay_expert(env_id: str, other_world_offset: float = 0.3) -> dict:
+    """The CPU scripted expert's episode replayed in world 0 of two (world 1 acts the same
+    actions plus ``other_world_offset``, so that its contacts and constraints would show if
+    they reached world 0); what each env gave."""
+    cpu = cpu_episode(env_id)
+    steps = len(cpu["actions"])
+    actions = np.repeat(cpu["actions"][:, None], 2, axis=1)
+    actions[:, 1] = np.clip(actions[:, 1] + other_world_offset, -1, 1)
+    out = batched_rollout(env_id, actions)
+    done = np.flatnonzero(out["done"][:, 0])
+    return {
+        "id": env_id, "start": START, "steps": steps,
+        "switches_cpu": switches(cpu["index"]),
+        "switches_batched": switches(np.r_[0, out["index"][:, 0]]),
+        "end_cpu": steps - 1, "end_batched": int(done[0]) if done.size else None,
+        "stop_batched": int(out["violation"][:, 0].max()),
+        "return_cpu": float(cpu["rewards"].sum()),
+        "return_batched": float(out["rewards"][:steps, 0].sum()),
+        "reset_obs_error": float(np.abs(out["reset_obs"][0] - cpu["obs"][0]).max()),
+        "obs_error": float(np.abs(out["obs"][:steps, 0] - cpu["obs"][1:]).max()),
+        "reward_error": float(np.abs(out["rewards"][:steps, 0] - cpu["rewards"]).max()),
+        "robot_work_cpu_j": float(cpu["robot_work_j"]),
+        "robot_work_batched_j": float(out["robot_work_j"][steps - 1, 0]),
+    }
+
+
+def replay_stops(env_id: str, unit_actions: Sequence[Sequence[float]],
+                 **kwargs: Any) -> list[dict]:
+    """Each constant unit action of ``unit_actions`` held in its own world (side by side in
+    one batch) and alone on the CPU, until the CPU episode stops: where and why each env
+    stopped, the last reward and the return."""
+    from rehabbot.batch import RULE_CODES
+
+    cpus = [cpu_episode(env_id, np.asarray(a, np.float32), **kwargs) for a in unit_actions]
+    steps = max(len(c["actions"]) for c in cpus) + 5
+    actions = np.repeat(np.asarray(unit_actions, np.float32)[None], steps, axis=0)
+    out = batched_rollout(env_id, actions, **kwargs)
+    codes = {code: rule for rule, code in RULE_CODES.items()}
+    rows = []
+    for world, cpu in enumerate(cpus):
+        stops = np.flatnonzero(out["done"][:, world])
+        stop = int(stops[0]) if stops.size else None
+        rewards = out["rewards"][:(stop if stop is not None else steps - 1) + 1, world]
+        rows.append({
+            "id": env_id, "kwargs": kwargs, "unit_action": list(unit_actions[world]),
+            "stop_cpu": len(cpu["actions"]) - 1 if cpu["violation"] else None,
+            "rule_cpu": cpu["violation"], "stop_batched": stop,
+            "rule_batched": None if stop is None else codes.get(
+                int(out["violation"][stop, world])),
+            "last_reward_cpu": float(cpu["rewards"][-1]),
+            "last_reward_batched": float(rewards[-1]),
+            "return_cpu": float(cpu["rewards"].sum()), "return_batched": float(rewards.sum()),
+        })
+    return rows
