@@ -18,6 +18,7 @@ LAYERS: tuple[tuple[str, str], ...] = (
     ("rehabbot.zoo", "`rehabbot.zoo`: the shipped agents"),
     ("rehabbot.analysis", "`rehabbot.analysis`: metrics, evaluation, figures, video"),
     ("rehabbot.rl", "`rehabbot.rl`: training, policies, experts, the zoo's loader"),
+    ("rehabbot.batch", "`rehabbot.batch`: the batched backend on MuJoCo Warp (`[gpu]`)"),
     ("rehabbot.envs", "`rehabbot.envs`: the Gymnasium envs, their config and ids"),
     ("rehabbot.tasks", "`rehabbot.tasks`: exercises, targets, observations, rewards"),
     ("rehabbot.sim", "`rehabbot.sim`: robots, patient, conditions, scenes, physics"),
