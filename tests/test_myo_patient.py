@@ -188,7 +188,7 @@ def test_the_rigid_patient_reports_no_muscles():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("env_id", MYO_IDS)
+@pytest.mark.parametrize("env_id", [*MYO_IDS, "rehabbot/rehab-reach-myo-v2"])
 def test_the_expert_finishes_every_exercise_at_the_lightest_and_heaviest_level(env_id):
     env = gym.make(env_id)
     for exercise in range(len(env.unwrapped.config.exercise_table)):

@@ -135,6 +135,7 @@ class MuscleDrive:
         self._goal_lag = round(condition.reaction_delay_s / (frame_skip * self.dt_s))
         self._goals: list[list[float]] = []
         self._arms = np.zeros((len(ids), len(dofs)))  # effective moment arms [m], per step
+        self._arms_current = False  # whether _arms are those of data's state
         self._lag = max(1, round(REFLEX_LATENCY_S / self.dt_s))
         self._speed_history = np.zeros((self._lag, len(self.reflex_rows)))
         self._step_index = 0
@@ -196,6 +197,7 @@ class MuscleDrive:
         """Start an episode: clear the delays and the excitations; fresh muscles; the tremor's
         phases drawn from ``rng``."""
         self._speed_history[:] = 0.0
+        self._arms_current = False  # a new state
         self._goals.clear()
         self._step_index = 0
         self.excitation[:] = 0.0
@@ -220,8 +222,8 @@ class MuscleDrive:
         if self._tremor is not None:
             self._tremor.advance(rng, self.frame_skip * self.dt_s)
         wishes = self._wishes
-        if wishes:
-            self._update_moment_arms(model, data)
+        if wishes and not self._arms_current:  # the last step's end left them current
+            self._update_moment_arms(data, moment_arms_m(model, data, self.muscle_ids))
         ids = self.muscle_ids
         for _ in range(self.frame_skip):
             excitation = self._reflex_excitation(data)
@@ -270,14 +272,14 @@ class MuscleDrive:
         excitation[self.reflex_rows] = fired * build_up * release
         return excitation
 
-    def _update_moment_arms(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+    def _update_moment_arms(self, data: mujoco.MjData, dense: np.ndarray) -> None:
         """The muscles' effective moment arms on the compliant joints now (the followers' share
-        included): ``d length / d q``."""
-        dense = moment_arms_m(model, data, self.muscle_ids)
+        included), ``d length / d q``, from their moment arms ``dense`` at ``data``'s state."""
         coupling = statics.coupling_map(self.scene, data)
         if coupling is not None:
             dense = dense @ coupling
         self._arms[:] = dense[:, self._dofs]
+        self._arms_current = True
 
     def _wished_torques_nm(self, data: mujoco.MjData, goal: list[float]) -> list[float]:
         """The torque the patient wishes on each compliant joint: the rigid patient's effort
@@ -316,9 +318,12 @@ class MuscleDrive:
         return excitation
 
     def _update_torque(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
-        """The muscles' active torques on the exercised joints now (``torque_nm``)."""
-        ids = self.muscle_ids
+        """The muscles' active torques on the exercised joints now (``torque_nm``); for a
+        patient who wishes torques, the moment arms the next control step starts from (the
+        state does not change between two steps)."""
+        dense = moment_arms_m(model, data, self.muscle_ids)
         active = self._passive.active_force_n(data)
-        generalised = statics.reduced(self.scene, data,
-                                      moment_arms_m(model, data, ids).T @ active)
+        generalised = statics.reduced(self.scene, data, dense.T @ active)
         self.torque_nm[:] = generalised[self._exercised_dofs]
+        if self._wishes:
+            self._update_moment_arms(data, dense)
