@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_kwargs_object
+from rehabbot.cli.train_batch import BATCH_BACKEND, train_batched_cli
 from rehabbot.envs.registration import ENV_SPECS, env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS, OFF_POLICY
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
@@ -111,6 +112,12 @@ extractors are dropped, nn.ReLU becomes flax.linen.relu, ...): each change is pr
 listed in the manifest (hyperparameters.backend_changes). A resumed or evaluated run uses the
 backend it was trained with (manifest.json: backend, backend_version).
 
+Batched: --backend rsl_rl trains rsl_rl's PPO on the batched env (MuJoCo Warp; pip install
+'rehabbot[gpu]'; a GPU makes it fast), e.g.
+  rehabbot train rehab-reach-v2 --algo ppo --backend rsl_rl --num-envs 4096
+It writes the same run folder (the actor as policy.npz, which `rehabbot evaluate RUN_DIR` runs
+on the CPU env); --hyperparams takes a YAML mapping of its settings (docs/batch.md).
+
 Hyperparameter files are RL-Zoo-style YAML: env ids (full or short) mapped to hyperparameters,
 or one flat mapping. Keys: the SB3 constructor arguments of the algorithm, plus n_timesteps,
 n_envs, policy, normalize (true or VecNormalize arguments), noise_type (normal |
@@ -147,8 +154,10 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
                              "run's own total)")
     parser.add_argument("--seeds", type=int, nargs="+", metavar="K",
                         help="seeds, trained one after the other (default: 0)")
-    parser.add_argument("--n-envs", type=_positive_count, metavar="K",
-                        help="parallel training envs (default: the file's n_envs, else 1)")
+    parser.add_argument("--n-envs", "--num-envs", dest="n_envs", type=_positive_count,
+                        metavar="K",
+                        help="parallel training envs (default: the file's n_envs, else 1); "
+                             "with --backend rsl_rl, batched worlds (default 4096)")
     parser.add_argument("--vec", choices=("dummy", "subproc"), default="dummy",
                         help="vector env: in-process (dummy, default) or one process per env "
                              "(started with 'spawn': safe after rendering or with threads)")
@@ -177,11 +186,13 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
                              f"{DEFAULT_EVAL_EPISODES})")
     parser.add_argument("--no-progress", action="store_true",
                         help="no progress bar")
-    parser.add_argument("--backend", choices=BACKEND_CHOICES, default=DEFAULT_BACKEND,
-                        type=str.lower,
+    parser.add_argument("--backend", choices=(*BACKEND_CHOICES, BATCH_BACKEND),
+                        default=DEFAULT_BACKEND, type=str.lower,
                         help="library that trains: sbx (JAX) if installed, else sb3 (auto, "
                              "default); sb3 (Stable-Baselines3, PyTorch); sbx (fails if "
-                             "sbx-rl is not installed)")
+                             "sbx-rl is not installed); rsl_rl: PPO of rsl_rl on the batched "
+                             "env (MuJoCo Warp, thousands of worlds; pip install "
+                             "'rehabbot[gpu]'; docs/batch.md)")
     parser.add_argument("--demos", type=_non_negative_count, metavar="N",
                         help="run the scripted expert for N episodes of the training env "
                              "(seeds: run seed + 20000 + i) and add every transition to the "
@@ -209,6 +220,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from rehabbot.rl import runs
     from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
 
+    if args.backend == BATCH_BACKEND:
+        return train_batched_cli(args, DEFAULT_SEEDS)
     hyperparams, demos = args.hyperparams, args.demos
     shipped = hyperparams is None and not args.resume
     if shipped:

@@ -112,9 +112,11 @@ def model_file(spec: str | Path) -> Path:
     """The zip file a model spec names (SB3 accepts the path without ``.zip``)."""
     path = Path(spec)
     if path.is_dir():
-        if (path / runs.MODEL_NAME).is_file():
-            return path / runs.MODEL_NAME
-        raise PolicyError(f"{str(path)!r} is a directory without a model.zip")
+        for name in (runs.MODEL_NAME, runs.BATCH_POLICY_NAME):
+            if (path / name).is_file():
+                return path / name
+        raise PolicyError(f"{str(path)!r} is a directory without a model.zip (or the "
+                          f"{runs.BATCH_POLICY_NAME} of a batched run)")
     if path.is_file():
         return path
     with_zip = path.with_name(path.name + ".zip")
@@ -158,7 +160,10 @@ def _load_normalizer(run_dir: Path | None) -> VecNormalizeStats | None:
 
 
 def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
-    """A model (SB3, sb3-contrib or SBX) from ``path``, checked against ``env``."""
+    """A model (SB3, sb3-contrib or SBX, or the actor a batched run exported) from ``path``,
+    checked against ``env``."""
+    if path.suffix == ".npz":
+        return _load_exported_actor(path, env)
     algo, backend = detect_model(path)
     run_dir = runs.find_run_dir(path)
     manifest = _manifest(run_dir)
@@ -186,6 +191,23 @@ def load_model(path: Path, env: gym.Env) -> LoadedPolicy:
                         model_path=path,
                         run_dir=run_dir, manifest=manifest,
                         vecnormalize=_load_normalizer(run_dir))
+
+
+def _load_exported_actor(path: Path, env: gym.Env) -> LoadedPolicy:
+    """The ``policy.npz`` of a batched run (``--backend rsl_rl``): the deterministic actor in
+    the zoo's format, run with NumPy (:mod:`rehabbot.rl.batch_training`)."""
+    try:
+        policy = zoo.ZooPolicy.from_file(path)
+    except zoo.ZooError as err:
+        raise PolicyError(str(err)) from err
+    check_spaces(policy.observation_space, policy.action_space, env, f"model {str(path)!r}")
+    run_dir = runs.find_run_dir(path)
+    manifest = _manifest(run_dir)
+    algo = policy.algo or str(manifest.get("algo", "ppo"))
+    return LoadedPolicy(policy=policy, label=model_label(algo, manifest.get("seed"), path),
+                        kind="model", algo=algo,
+                        backend=str(policy.metadata.get("backend") or manifest.get("backend")),
+                        model_path=path, run_dir=run_dir, manifest=manifest)
 
 
 def model_label(algo: str, seed: Any, path: Path) -> str:

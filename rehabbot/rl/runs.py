@@ -12,6 +12,9 @@
                                            only, for SAC/TD3;
                                            + rl_model_vecnormalize_<n>_steps.json)
         model.zip                          the final model (once the run has finished)
+        policy.npz                         instead of model.zip, for a batched run
+                                           (--backend rsl_rl): its actor in the zoo format
+                                           (see rehabbot.rl.batch_training for its files)
         vecnormalize.json                  the final VecNormalize statistics (if normalized;
                                            JSON, :mod:`rehabbot.rl.vecnormalize_io`)
         evaluation/<policy>/               what ``rehabbot evaluate`` wrote for the run's model
@@ -42,6 +45,9 @@ from rehabbot.envs.registration import env_short_name
 
 MANIFEST_NAME = "manifest.json"
 MODEL_NAME = "model.zip"
+# A batched run (``--backend rsl_rl``, :mod:`rehabbot.rl.batch_training`) exports its actor here
+# (the zoo's format) instead of a model.zip.
+BATCH_POLICY_NAME = "policy.npz"
 VECNORMALIZE_NAME = "vecnormalize.json"
 LEGACY_VECNORMALIZE_NAME = "vecnormalize.pkl"  # pickled: refused, see vecnormalize_io
 LOCK_NAME = ".lock"

@@ -242,16 +242,23 @@ class ZooPolicy:
             unknown = [name for name in names if name not in OP_PARAMS]
             if unknown:
                 raise ValueError(f"unknown ops {unknown}")
-            self._ops = []
+            self._ops, self._params = [], []
             for k, name in enumerate(names):
                 params = {key: np.asarray(arrays[f"op{k}.{key}"])
                           for key in OP_PARAMS[name]}
+                self._params.append(params)
                 self._ops.append(_op(name, params))
         except KeyError as err:
             raise ZooError(f"{where} is not a valid zoo file: it lacks {err}") from err
         except ValueError as err:
             raise ZooError(f"{where} is not a valid zoo file: {err}") from err
         self.ops = tuple(names)
+
+    def program(self) -> list[tuple[str, dict[str, np.ndarray]]]:
+        """The actor's steps as ``(name, params)`` pairs, as :func:`write_zoo_file` takes
+        them (to write the same actor again with other metadata)."""
+        return [(name, dict(params)) for name, params in zip(self.ops, self._params,
+                                                              strict=True)]
 
     @classmethod
     def from_file(cls, path: str | Path) -> ZooPolicy:

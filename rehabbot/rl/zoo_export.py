@@ -242,6 +242,11 @@ def load_source(model_or_run_dir: Any, algo: str | None = None,
             raise UsageError(f"{str(path)!r} holds a {loaded.algo} model, not {algo}")
         model, algo, manifest, stats = (loaded.policy, loaded.algo, loaded.manifest,
                                         loaded.vecnormalize)
+        if isinstance(model, ZooPolicy):  # a batched run's actor, already in the zoo format
+            return model.program(), model, {
+                "algo": loaded.algo, "backend": loaded.backend, "seed": manifest.get("seed"),
+                "training_steps": manifest.get("timesteps_done"),
+                **_manifest_metadata(manifest)}
     else:
         model = model_or_run_dir
         algo = algo or check_algo(type(model).__name__)
@@ -311,6 +316,10 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
     meta.update(dict(metadata or {}))
     out_path = Path(out_path) if out_path is not None else zoo_path(
         meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs")))
+    if full and isinstance(model, ZooPolicy):
+        raise ExportError("--full ships a Stable-Baselines3/SBX model zip; a batched run "
+                          "keeps its networks in model.pt (rsl_rl), which the zoo does not "
+                          "ship")
     if full:
         if not isinstance(model_or_run_dir, (str, Path)):
             raise UsageError("full=True needs the model's zip or run folder, not a model object")

@@ -1,0 +1,104 @@
+"""``rehabbot train ID --algo ppo --backend rsl_rl --num-envs N``: PPO on the batched env
+(:mod:`rehabbot.rl.batch_training`), one run per seed."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+from pathlib import Path
+from typing import Any
+
+from rehabbot.cli.errors import EXIT_OK, CliError
+from rehabbot.common.errors import UsageError
+from rehabbot.envs.registration import env_short_name, resolve_env_id
+
+BATCH_BACKEND = "rsl_rl"
+DEFAULT_BATCH_TIMESTEPS = 50_000_000
+# Options of the CPU trainers that a batched run has no use for: (attribute, flag).
+CPU_ONLY_OPTIONS = (("eval_freq", "--eval-freq"), ("eval_episodes", "--eval-episodes"),
+                    ("demos", "--demos"), ("bc", "--bc"))
+
+
+def read_settings(path: str | None, env_id: str) -> dict[str, Any]:
+    """rsl_rl PPO settings from a YAML file: a mapping of
+    :class:`~rehabbot.rl.batch_training.RslPpoSettings` fields, or of env ids (with or without
+    ``rehabbot/``) to such mappings; {} without a file."""
+    if path is None:
+        return {}
+    import yaml
+
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as err:
+        raise UsageError(f"cannot read --hyperparams {path!r}: {err}") from err
+    if not isinstance(data, dict):
+        raise UsageError(f"--hyperparams {path!r} must hold a mapping of rsl_rl PPO settings")
+    for key in (env_id, env_short_name(env_id)):
+        if isinstance(data.get(key), dict):
+            return dict(data[key])
+    return data
+
+
+def _resume_command(args: argparse.Namespace, env_id: str, seeds: list[int],
+                    total: int) -> str:
+    return shlex.join(["rehabbot", "train", env_short_name(env_id), "--algo", "ppo",
+                       "--backend", BATCH_BACKEND, "--num-envs", str(args.n_envs),
+                       "--timesteps", str(total), "--seeds", *map(str, seeds), "--out",
+                       str(args.out), "--resume"])
+
+
+def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...]) -> int:
+    """Train every seed of ``args`` on the batched env; 0 when done, 130/143 interrupted."""
+    from rehabbot.rl.batch_training import (
+        DEFAULT_NUM_ENVS,
+        BatchRunPlan,
+        BatchTrainingInterrupted,
+        RslPpoSettings,
+        train_batched,
+    )
+
+    if args.algo.lower() != "ppo":
+        raise UsageError(f"--backend {BATCH_BACKEND} trains PPO only, not {args.algo!r}")
+    for attr, flag in CPU_ONLY_OPTIONS:
+        if getattr(args, attr, None) not in (None, False):
+            raise UsageError(f"{flag} is not used by --backend {BATCH_BACKEND} (evaluate the "
+                             "run with `rehabbot evaluate RUN_DIR` on the CPU env)")
+    if args.vec != "dummy":
+        raise UsageError(f"--vec {args.vec}: --backend {BATCH_BACKEND} steps its worlds on "
+                         "MuJoCo Warp, not in a Gymnasium vector env")
+    env_id = resolve_env_id(args.env)
+    settings = RslPpoSettings.from_mapping(read_settings(args.hyperparams, env_id))
+    args.n_envs = args.n_envs or DEFAULT_NUM_ENVS
+    seeds = list(args.seeds or default_seeds)
+    total = args.timesteps or DEFAULT_BATCH_TIMESTEPS
+    kwargs = {} if args.checkpoint_freq is None else {"checkpoint_freq": args.checkpoint_freq}
+    for seed in seeds:
+        plan = BatchRunPlan(env_id, seed=seed, total_timesteps=total, out_dir=Path(args.out),
+                            num_envs=args.n_envs, env_kwargs=dict(args.env_kwargs or {}),
+                            settings=settings, resume=args.resume, overwrite=args.overwrite,
+                            **kwargs)
+        print(f"{plan.run_dir}: {'resuming' if plan.resume else 'training'} ppo on {env_id} "
+              f"({BATCH_BACKEND}, MuJoCo Warp), seed {seed}, to {total} steps ({plan.num_envs} "
+              f"worlds, {plan.steps_per_iteration} steps per PPO iteration)", flush=True)
+
+        def report(row: dict[str, Any]) -> None:
+            if args.no_progress:
+                return
+            rate = row["success_rate"]
+            success = "-" if rate is None else f"{100 * rate:.0f} %"
+            print(f"  iteration {row['iteration']}: {row['timesteps']} steps, "
+                  f"{row['episodes']} episodes ended, success {success}, "
+                  f"{row['wall_clock_s']:.0f} s", flush=True)
+
+        try:
+            run_dir = train_batched(plan, report)
+        except BatchTrainingInterrupted as err:
+            command = _resume_command(args, env_id, seeds, total)
+            print(f"{err.run_dir}: interrupted at {err.timesteps_done} steps, checkpoint "
+                  f"{err.checkpoint}; resume with: {command}", flush=True)
+            return err.exit_code
+        except KeyboardInterrupt as err:
+            raise CliError(f"{plan.run_dir}: interrupted before a checkpoint could be saved",
+                           130) from err
+        print(f"{run_dir}: done; evaluate with: rehabbot evaluate {run_dir}", flush=True)
+    return EXIT_OK
