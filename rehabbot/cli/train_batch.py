@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 from pathlib import Path
 from typing import Any
@@ -49,6 +50,9 @@ def _resume_command(args: argparse.Namespace, env_id: str, seeds: list[int],
 
 def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...]) -> int:
     """Train every seed of ``args`` on the batched env; 0 when done, 130/143 interrupted."""
+    # JAX and PyTorch share the GPU here: JAX must not take 75 % of its memory at start (its
+    # default), or PyTorch's learner runs out. A user's own setting is kept.
+    os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
     from rehabbot.rl.batch_training import (
         DEFAULT_NUM_ENVS,
         BatchRunPlan,

@@ -71,8 +71,10 @@ LOG_FIELDS = ("iteration", "timesteps", "wall_clock_s", "episodes", "mean_return
 
 @dataclass(frozen=True)
 class RslPpoSettings:
-    """rsl_rl PPO's settings (its own defaults, as Isaac Lab's and mjlab's manipulation tasks
-    use them), with our network sizes."""
+    """rsl_rl PPO's settings: its own defaults (as Isaac Lab's and mjlab's tasks use them),
+    with our network sizes and the initial action noise of the shipped PPO settings
+    (``log_std_init=-1``: a standard deviation of e^-1 = 0.37 of the unit action; at 1.0 most
+    exploratory actions would be clipped at the bounds)."""
 
     num_steps_per_env: int = 24
     num_learning_epochs: int = 5
@@ -86,7 +88,7 @@ class RslPpoSettings:
     clip_param: float = 0.2
     value_loss_coef: float = 1.0
     max_grad_norm: float = 1.0
-    init_noise_std: float = 1.0
+    init_noise_std: float = 0.37
     actor_hidden_dims: tuple[int, ...] = (256, 256, 128)
     critic_hidden_dims: tuple[int, ...] = (256, 256, 128)
     activation: str = "elu"
