@@ -180,7 +180,8 @@ def test_train_interrupt_resume_evaluate_ship(tmp_path, monkeypatch):
     hidden = bt.RslPpoSettings().actor_hidden_dims
     actor = MLPModel(TensorDict({"policy": torch.zeros(1, obs.shape[1])}, batch_size=[1]),
                      {"actor": ["policy"]}, "actor", cpu.action_space.shape[0],
-                     hidden_dims=hidden, activation="elu", obs_normalization=True,
+                     hidden_dims=hidden, activation="elu",
+                     obs_normalization=bt.RslPpoSettings().obs_normalization,
                      distribution_cfg={"class_name":
                                        "rsl_rl.modules.distribution.GaussianDistribution"})
     actor.load_state_dict(state["actor_state_dict"])
@@ -201,3 +202,27 @@ def test_train_interrupt_resume_evaluate_ship(tmp_path, monkeypatch):
     assert np.array_equal(shipped.predict(obs)[0], policy.policy.predict(obs)[0])
     assert main(["zoo", "export", str(run_dir), "--full", "--out",
                  str(tmp_path / "full.npz")]) == 2
+
+
+def test_cli_passes_its_options_to_the_plan(tmp_path, monkeypatch, capsys):
+    plans = []
+
+    def fake_train(plan, report=None):
+        plans.append(plan)
+        return plan.run_dir
+
+    monkeypatch.setattr(bt, "train_batched", fake_train)
+    settings = tmp_path / "ppo.yml"
+    settings.write_text("rehab-reach-v2:\n  num_mini_batches: 8\n  gamma: 0.98\n")
+    code = main(["train", "rehab-reach-v2", "--algo", "ppo", "--backend", "rsl_rl",
+                 "--num-envs", "64", "--timesteps", "5000", "--seeds", "3", "4",
+                 "--env-kwargs", '{"max_episode_steps": 20}', "--hyperparams", str(settings),
+                 "--checkpoint-freq", "1000", "--out", str(tmp_path / "runs")])
+    assert code == 0
+    assert [p.seed for p in plans] == [3, 4]
+    plan = plans[0]
+    assert plan.env_kwargs == {"max_episode_steps": 20} and plan.num_envs == 64
+    assert plan.total_timesteps == 5000 and plan.checkpoint_freq == 1000
+    assert plan.settings.num_mini_batches == 8 and plan.settings.gamma == 0.98
+    assert plan.settings.num_learning_epochs == bt.RslPpoSettings().num_learning_epochs
+    assert "64 worlds" in capsys.readouterr().out

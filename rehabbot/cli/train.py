@@ -221,7 +221,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
 
     if args.backend == BATCH_BACKEND:
-        return train_batched_cli(args, DEFAULT_SEEDS)
+        return train_batched_cli(args, DEFAULT_SEEDS, parse_env_kwargs(args.env_kwargs))
     hyperparams, demos = args.hyperparams, args.demos
     shipped = hyperparams is None and not args.resume
     if shipped:

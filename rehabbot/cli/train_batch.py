@@ -48,7 +48,8 @@ def _resume_command(args: argparse.Namespace, env_id: str, seeds: list[int],
                        str(args.out), "--resume"])
 
 
-def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...]) -> int:
+def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
+                      env_kwargs: dict[str, Any] | None) -> int:
     """Train every seed of ``args`` on the batched env; 0 when done, 130/143 interrupted."""
     # JAX and PyTorch share the GPU here: JAX must not take 75 % of its memory at start (its
     # default), or PyTorch's learner runs out. A user's own setting is kept.
@@ -78,7 +79,7 @@ def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...]) 
     kwargs = {} if args.checkpoint_freq is None else {"checkpoint_freq": args.checkpoint_freq}
     for seed in seeds:
         plan = BatchRunPlan(env_id, seed=seed, total_timesteps=total, out_dir=Path(args.out),
-                            num_envs=args.n_envs, env_kwargs=dict(args.env_kwargs or {}),
+                            num_envs=args.n_envs, env_kwargs=dict(env_kwargs or {}),
                             settings=settings, resume=args.resume, overwrite=args.overwrite,
                             **kwargs)
         print(f"{plan.run_dir}: {'resuming' if plan.resume else 'training'} ppo on {env_id} "

@@ -74,7 +74,11 @@ class RslPpoSettings:
     """rsl_rl PPO's settings: its own defaults (as Isaac Lab's and mjlab's tasks use them),
     with our network sizes and the initial action noise of the shipped PPO settings
     (``log_std_init=-1``: a standard deviation of e^-1 = 0.37 of the unit action; at 1.0 most
-    exploratory actions would be clipped at the bounds)."""
+    exploratory actions would be clipped at the bounds), and no observation normalisation:
+    the ``-v2`` observation is already scaled (every entry within [-2, 2]), and rsl_rl's
+    running normalisation divided the near-constant entries (joint speeds at rest) by
+    ``std + 0.01``, so that small weight changes moved the policy far, and the adaptive
+    learning rate fell to its floor (1e-5) in the first iteration and stayed there."""
 
     num_steps_per_env: int = 24
     num_learning_epochs: int = 5
@@ -92,7 +96,7 @@ class RslPpoSettings:
     actor_hidden_dims: tuple[int, ...] = (256, 256, 128)
     critic_hidden_dims: tuple[int, ...] = (256, 256, 128)
     activation: str = "elu"
-    obs_normalization: bool = True
+    obs_normalization: bool = False
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> RslPpoSettings:
