@@ -2,7 +2,8 @@
 patient profile: the per-cell table and, per env and algorithm, the IQM over seeds with a 95 %
 percentile-bootstrap interval (rliable's recommendation, :mod:`rehabbot.analysis.aggregate`).
 
-Each run folder (``.../<env>/<algo>/seed<k>/`` with a ``model.zip``) is evaluated with
+Each run folder (``.../<env>/<algo>/seed<k>/`` with a ``model.zip``, or a batched run's
+``policy.npz``) is evaluated with
 deterministic actions on ``--per-cell`` episodes of every cell: each exercise of the id, each
 weight level 0..4 and each of three profiles (the 1.75 m, 75 kg man the runs trained on, and two
 held out: a 1.60 m, 60 kg woman and a 1.85 m, 90 kg man). Episode seeds start at ``--seed``
@@ -113,7 +114,7 @@ def find_runs(roots: Sequence[Path]) -> list[Path]:
     found = []
     for root in roots:
         found += [m.parent for m in sorted(Path(root).rglob(runs.MANIFEST_NAME))
-                  if (m.parent / runs.MODEL_NAME).is_file()]
+                  if runs.final_model(m.parent) is not None]
     return found
 
 
@@ -186,6 +187,11 @@ def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
 def training_text(manifest: dict) -> str:
     """How a run trained, from its manifest: library, policy, steps, demonstrations."""
     hp = manifest.get("hyperparameters") or {}
+    if manifest.get("backend") == "rsl_rl":  # a batched run (rehabbot.rl.batch_training)
+        hidden = "-".join(map(str, hp.get("actor_hidden_dims", [])))
+        return (f"rsl_rl PPO on MuJoCo Warp, {hidden} {hp.get('activation')} MLPs, "
+                f"{manifest.get('n_envs')} worlds x {hp.get('num_steps_per_env')} steps per "
+                f"update, {manifest.get('timesteps_done')} steps")
     demos = (manifest.get("demos") or {}).get("episodes", 0)
     n_steps = (hp.get("kwargs") or {}).get("n_steps")
     if not n_steps:
@@ -217,9 +223,11 @@ def skrl_run(data: dict, path: str) -> tuple[str, dict]:
 
 def row_label(algo: str, run: dict) -> str:
     """Runs of one algorithm are one row, apart from those that trained with expert
-    episodes in their buffer (``+ demos``) or from an actor cloned from them (``+ bc``): rows
-    of their own."""
+    episodes in their buffer (``+ demos``), from an actor cloned from them (``+ bc``), or on
+    the batched env (``(rsl_rl)``): rows of their own."""
     training = run.get("training", "")
+    if training.startswith("rsl_rl") and not algo.endswith(" (rsl_rl)"):
+        return f"{algo} (rsl_rl)"
     if "in the buffer" in training and not algo.endswith(" + demos"):
         return f"{algo} + demos"
     if "actor cloned from" in training and not algo.endswith(" + bc"):
@@ -468,7 +476,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         env_id, algo = manifest["env_id"], manifest["algo"]
         env_kwargs = manifest.get("env_kwargs") or {}
         refused: list[dict] = []
-        episodes = evaluate_cells(str(run_dir / runs.MODEL_NAME), env_id, env_kwargs,
+        episodes = evaluate_cells(str(runs.final_model(run_dir)), env_id, env_kwargs,
                                   args.per_cell, args.seed, refused, profiles)
         run = {"run_dir": str(run_dir), "train_seed": manifest.get("seed"),
                "env_kwargs": env_kwargs, "timesteps": manifest.get("timesteps_done"),

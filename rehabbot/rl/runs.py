@@ -90,6 +90,15 @@ def read_manifest(run_dir: Path) -> dict[str, Any] | None:
     return manifest
 
 
+def final_model(run_dir: Path) -> Path | None:
+    """The final model of a finished run: ``model.zip``, or a batched run's ``policy.npz``
+    (None while neither is there)."""
+    for name in (MODEL_NAME, BATCH_POLICY_NAME):
+        if (Path(run_dir) / name).is_file():
+            return Path(run_dir) / name
+    return None
+
+
 def find_run_dir(path: Path) -> Path | None:
     """The run directory a model file belongs to (its own folder, or its parent for
     ``checkpoints/``), recognised by its manifest; None for a loose model file."""
