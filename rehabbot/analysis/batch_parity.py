@@ -30,12 +30,13 @@ def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int |
     """One CPU episode from ``reset(seed=0, options=START)``: the scripted expert's
     (``actions`` None) or a constant action's, to its end or ``max_steps``. Arrays per step:
     ``actions``, ``obs`` (the reset's first), ``rewards``, ``index`` (the target index, the
-    reset's first); ``violation`` (the stop's rule or None) and ``robot_work_j`` at the end."""
+    reset's first); ``violation`` (the stop's rule or None), ``robot_work_j`` and
+    ``patient_work_j`` at the end."""
     env = gym.make(env_id, **kwargs).unwrapped
     obs, info = env.reset(seed=0, options=START)
     expert = ScriptedExpert(env) if actions is None else None
     out: dict[str, Any] = {"actions": [], "obs": [obs], "rewards": [], "index": [0],
-                           "violation": None, "robot_work_j": 0.0}
+                           "violation": None, "robot_work_j": 0.0, "patient_work_j": 0.0}
     for _ in range(max_steps or env.max_episode_steps):
         action = np.asarray(expert.predict(obs)[0] if expert else actions, np.float32)
         obs, reward, terminated, _truncated, info = env.step(action)
@@ -44,6 +45,7 @@ def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int |
         out["rewards"].append(reward)
         out["index"].append(info["target_index"])
         out["robot_work_j"] = info["robot_work_j"]
+        out["patient_work_j"] = info["patient_work_j"]
         if terminated:
             out["violation"] = info["safety_violation"]
             break
@@ -52,8 +54,8 @@ def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int |
 
 
 def batched_rollout(env_id: str, actions: np.ndarray, **kwargs: Any) -> dict:
-    """Every world's observations, rewards, dones, target indices, safety rules and robot
-    work for the actions ``(steps, worlds, n)``, from the same start as :func:`cpu_episode`
+    """Every world's observations, rewards, dones, target indices, safety rules, robot and
+    patient work for the actions ``(steps, worlds, n)``, from the same start as :func:`cpu_episode`
     (no auto-reset: a stopped world stays stopped)."""
     import jax
     import jax.numpy as jp
@@ -68,12 +70,12 @@ def batched_rollout(env_id: str, actions: np.ndarray, **kwargs: Any) -> dict:
             state = jax.vmap(env.step)(state, action)
             m = state.metrics
             return state, (state.obs, state.reward, state.done, m["target_index"],
-                           m["safety_violation"], m["robot_work_j"])
+                           m["safety_violation"], m["robot_work_j"], m["patient_work_j"])
         return jax.lax.scan(body, state, action_seq)
 
     state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
     _, out = jax.jit(run)(state, jp.asarray(actions))
-    names = ("obs", "rewards", "done", "index", "violation", "robot_work_j")
+    names = ("obs", "rewards", "done", "index", "violation", "robot_work_j", "patient_work_j")
     return {"reset_obs": np.asarray(state.obs),
             **{k: np.asarray(v) for k, v in zip(names, out, strict=True)}}
 
@@ -83,15 +85,16 @@ def switches(index: np.ndarray) -> list[int]:
     return np.flatnonzero(np.diff(index)).tolist()
 
 
-def replay_expert(env_id: str, other_world_offset: float = 0.3) -> dict:
+def replay_expert(env_id: str, other_world_offset: float = 0.3, **kwargs: Any) -> dict:
     """The CPU scripted expert's episode replayed in world 0 of two (world 1 acts the same
     actions plus ``other_world_offset``, so that its contacts and constraints would show if
-    they reached world 0); what each env gave."""
-    cpu = cpu_episode(env_id)
+    they reached world 0); what each env gave. ``kwargs``: both envs' keyword arguments (a
+    ``condition``, for example)."""
+    cpu = cpu_episode(env_id, **kwargs)
     steps = len(cpu["actions"])
     actions = np.repeat(cpu["actions"][:, None], 2, axis=1)
     actions[:, 1] = np.clip(actions[:, 1] + other_world_offset, -1, 1)
-    out = batched_rollout(env_id, actions)
+    out = batched_rollout(env_id, actions, **kwargs)
     done = np.flatnonzero(out["done"][:, 0])
     return {
         "id": env_id, "start": START, "steps": steps,
@@ -106,6 +109,8 @@ def replay_expert(env_id: str, other_world_offset: float = 0.3) -> dict:
         "reward_error": float(np.abs(out["rewards"][:steps, 0] - cpu["rewards"]).max()),
         "robot_work_cpu_j": float(cpu["robot_work_j"]),
         "robot_work_batched_j": float(out["robot_work_j"][steps - 1, 0]),
+        "patient_work_cpu_j": float(cpu["patient_work_j"]),
+        "patient_work_batched_j": float(out["patient_work_j"][steps - 1, 0]),
     }
 
 
