@@ -28,11 +28,10 @@ def test_import_rehabbot_loads_neither_batch_nor_jax():
 @pytest.mark.parametrize(("env_id", "kwargs", "named"), [
     ("rehabbot/rehab-bilateral-v2", {}, "rehab-bilateral-v2"),
     ("rehabbot/rehab-reach-v1", {}, "rehab-reach-v1"),
-    ("rehabbot/rehab-reach-spastic-v2", {}, "rehab-reach-spastic-v2"),
+    ("rehabbot/rehab-reach-myo-v2", {}, "rehab-reach-myo-v2"),
     ("rehabbot/rehab-reach-population-v2", {}, "rehab-reach-population-v2"),
     ("rehabbot/rehab-reach-v2", {"control_mode": "joint_velocity"},
      "control_mode='joint_velocity'"),
-    ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "2"}}, "spasticity_mas"),
     ("rehabbot/rehab-reach-v2", {"reward": {"design": "progress", "effort_weight": 0.1}},
      "effort_weight=0.1"),
     ("rehabbot/rehab-reach-v2", {"naconmax": 0}, "naconmax=0"),

@@ -36,7 +36,7 @@ from mujoco import mjx
 from rehabbot.batch.patient import BatchedPatientDrive
 from rehabbot.batch.patient_tables import read_patient_tables
 from rehabbot.batch.state import State
-from rehabbot.batch.tables import RULE_CODES, EnvTables, read_tables
+from rehabbot.batch.tables import RULE_CODES, EnvTables, check_id, read_tables
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
 CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
@@ -94,6 +94,7 @@ class BatchedRehabEnv:
         for name, value in (("naconmax", naconmax), ("njmax", njmax)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}={value!r} must be a positive integer")
+        check_id(env_id)
         cpu = gym.make(env_id, **kwargs).unwrapped
         model_fields = {field.name for field in dataclasses.fields(mjx.Model)}
         self.tables: EnvTables = read_tables(env_id, cpu, model_fields)

@@ -114,14 +114,20 @@ class EnvTables:
     progress_index: int
 
 
-def check_supported(env_id: str, env: Any) -> None:
-    """``ValueError`` (naming the value) for what the batched env does not build yet."""
+def check_id(env_id: str) -> None:
+    """``ValueError`` (naming it) for an id the batched env does not build yet: checked before
+    the CPU env is made (a ``-myo-`` id would need MyoSuite's models first)."""
     if env_id in BILATERAL_IDS:
         raise ValueError(f"env_id={env_id!r}: the bilateral env is not batched yet")
     if env_id not in SUPPORTED_IDS + CONDITION_IDS:
         kind = "a -v2 id that" if env_id in V2_IDS else "an id that"
         raise ValueError(f"env_id={env_id!r} is {kind} the batched env does not build yet; "
                          f"it builds {list(SUPPORTED_IDS + CONDITION_IDS)}")
+
+
+def check_supported(env_id: str, env: Any) -> None:
+    """``ValueError`` (naming the value) for what the batched env does not build yet."""
+    check_id(env_id)
     config = env.config
     checks = (
         ("observation", config.observation, "agent"),
