@@ -2,12 +2,14 @@
 ``impl="warp"`` (MuJoCo Warp), in MuJoCo Playground's interface: ``reset(rng) -> State`` and
 ``step(state, action) -> State``, both ``jax.jit``- and ``jax.vmap``-able.
 
-Every number comes from the CPU env (:mod:`rehabbot.batch.tables`); one step does what
-:meth:`rehabbot.envs.core.RehabEnvCore.step` does for a healthy patient:
+Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
+:mod:`rehabbot.batch.patient_tables`); one step does what
+:meth:`rehabbot.envs.core.RehabEnvCore.step` does:
 
 1. the unit action is clipped to [-1, 1], mapped onto the controller's box and added to the
    servo setpoints, which are clipped to the setpoint bounds (``joint_delta``);
-2. ``frame_skip`` MuJoCo Warp steps (``jax.lax.scan``);
+2. ``frame_skip`` MuJoCo Warp steps (``jax.lax.scan``), each after the patient's torques of
+   its condition (:mod:`rehabbot.batch.patient`; none for a healthy patient);
 3. the safety rules in the CPU order: instability (judged from the values, since MuJoCo
    Warp neither warns nor resets on a bad acceleration: a non-finite state, a joint faster
    than the blow-up speed, a non-finite or blow-up cuff force, or a paper observation

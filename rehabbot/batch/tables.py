@@ -21,7 +21,8 @@ from rehabbot.sim.physics import BLOWUP_FORCE_N, BLOWUP_SPEED_RAD_S, RULES
 from rehabbot.sim.scene import WEIGHT_LEVELS
 from rehabbot.tasks.reward import STOP_MARGIN
 
-# The ids the batched env builds: the single-arm -v2 base ids (healthy patient).
+# The ids the batched env builds: the single-arm -v2 base ids (a healthy patient, or any
+# rigid patient's condition=), and their condition variants (CONDITION_IDS).
 SUPPORTED_IDS: tuple[str, ...] = (
     "rehabbot/rehab-reach-v2",
     "rehabbot/rehab-reach-l-v2",
