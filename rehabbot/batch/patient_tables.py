@@ -20,8 +20,8 @@ from rehabbot.sim.patient_drive import PatientDrive
 
 @dataclass(frozen=True)
 class ReflexTable:
-    """The stretch reflex of the condition's MAS grade (:class:`~rehabbot.sim.conditions.
-    SpasticReflex`), its threshold in rad/s."""
+    """The stretch reflex of the condition's MAS grade
+    (:class:`~rehabbot.sim.conditions.SpasticReflex`), its threshold in rad/s."""
 
     gain_scale: float
     threshold_rad_s: float
