@@ -47,7 +47,10 @@ relative, robot work within 1e-3 relative; `tests/test_batch_conditions.py` asse
 the patient's work within 1e-3 relative, for three of the conditions below. The tremor draws
 its random numbers from JAX keys in the batched env and from `np_random` on the CPU, so it is
 compared by its statistics: the robot holds still and batched world k starts its tremor where
-CPU seed k drew it."""
+CPU seed k drew it. In the conditions' table, `rehab-reach-tremor-v2` therefore runs on
+different random streams in the two envs: its switches, termination and return agree, its
+observations and work need not. In `rehab-hip-spastic-v2` the expert moves too slowly for the
+grade-2 reflex to fire (no patient work)."""
 
 # (kwargs, unit actions held side by side): the cuff force both ways; with the highest cuff
 # limit, unintended contact and range of motion.
