@@ -152,3 +152,26 @@ def test_only_conditions_that_apply_torques_get_a_drive(kwargs, drive):
 def test_refuses_conditions_that_are_not_batched(env_id, kwargs, named):
     with pytest.raises(ValueError, match=named):
         batch.make(env_id, **kwargs)
+
+
+@pytest.mark.slow
+def test_auto_reset_starts_the_patient_drive_afresh():
+    """A world that is done starts its drive's delay lines, work and tremor afresh; a running
+    world keeps them."""
+    env = batch.make("rehabbot/rehab-reach-tremor-v2", naconmax=32)
+    start = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), 2))
+    info = dict(start.info)
+    for key in ("patient_velocities", "patient_work_j", "patient_positive_work_j"):
+        info[key] = info[key] + 1.0
+    info["patient_substep"] = info["patient_substep"] + 7
+    info["patient_goal_index"] = info["patient_goal_index"] + 2
+    used = start.replace(info=info, done=jax.numpy.asarray([1.0, 0.0]))
+    restarted = jax.jit(jax.vmap(env.restart_done))(used)
+    for key in ("patient_velocities", "patient_work_j", "patient_substep",
+                "patient_goal_index"):
+        fresh, kept = np.asarray(restarted.info[key]), np.asarray(info[key])
+        assert (fresh[0] == 0).all(), key
+        assert np.array_equal(fresh[1], kept[1]), key
+    phases = np.asarray(restarted.info["tremor_phase"])
+    assert not np.array_equal(phases[0], np.asarray(start.info["tremor_phase"])[0])
+    assert np.array_equal(phases[1], np.asarray(start.info["tremor_phase"])[1])
