@@ -28,11 +28,10 @@ def test_import_rehabbot_loads_neither_batch_nor_jax():
 @pytest.mark.parametrize(("env_id", "kwargs", "named"), [
     ("rehabbot/rehab-bilateral-v2", {}, "rehab-bilateral-v2"),
     ("rehabbot/rehab-reach-v1", {}, "rehab-reach-v1"),
-    ("rehabbot/rehab-reach-spastic-v2", {}, "rehab-reach-spastic-v2"),
+    ("rehabbot/rehab-reach-myo-v2", {}, "rehab-reach-myo-v2"),
     ("rehabbot/rehab-reach-population-v2", {}, "rehab-reach-population-v2"),
     ("rehabbot/rehab-reach-v2", {"control_mode": "joint_velocity"},
      "control_mode='joint_velocity'"),
-    ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "2"}}, "spasticity_mas"),
     ("rehabbot/rehab-reach-v2", {"reward": {"design": "progress", "effort_weight": 0.1}},
      "effort_weight=0.1"),
     ("rehabbot/rehab-reach-v2", {"naconmax": 0}, "naconmax=0"),
@@ -64,14 +63,19 @@ def test_jit_vmap_reset_and_step_draw_exercises_per_world():
 def test_gymnasium_vector_door():
     import gymnasium as gym
 
-    env_id = "rehabbot/rehab-hip-v2"
-    before = gym.registry[env_id].vector_entry_point
+    env_id, condition_id = "rehabbot/rehab-hip-v2", "rehabbot/rehab-knee-weak-v2"
+    before = {name: gym.registry[name].vector_entry_point for name in gym.registry}
     batch.register_vector_entry_points()
     try:
         vec = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point",
                            exercise=0, weight_level=0)
+        # A condition id gets its registered condition, and its patient drive.
+        weak = gym.make_vec(condition_id, num_envs=2, vectorization_mode="vector_entry_point")
     finally:
-        gym.registry[env_id].vector_entry_point = before
+        for name, entry_point in before.items():
+            gym.registry[name].vector_entry_point = entry_point
+    assert isinstance(weak, batch.BatchedVectorEnv) and weak.env.patient is not None
+    assert weak.env.cpu_env.config.condition == gym.make(condition_id).unwrapped.config.condition
     assert isinstance(vec, batch.BatchedVectorEnv)
     obs, info = vec.reset(seed=0)
     assert obs in vec.observation_space

@@ -1,6 +1,8 @@
 """The batched env (``rehabbot.batch``, MuJoCo Warp on Warp's CPU device) against the CPU env:
-the scripted expert's episode of every batched id replayed in both, and safety stops forced by
-constant actions, with what each env gave (the figures of ``docs/batch.md``).
+the scripted expert's episode of every batched id replayed in both (the healthy ids, then the
+condition ids and a grade-4 spastic arm), safety stops forced by constant actions, and the
+tremor's statistics while the robot holds still, with what each env gave (the figures of
+``docs/batch.md``).
 
     python benchmarks/results/batch_parity.py [--page docs/results/batch-parity]
 
@@ -25,7 +27,14 @@ from benchmarks.common.documents import (
     write_page,
 )
 from benchmarks.common.machine import describe_machine
-from rehabbot.analysis.batch_parity import START, replay_expert, replay_stops
+from rehabbot.analysis.batch_parity import (
+    START,
+    band_rms,
+    hold_still,
+    replay_expert,
+    replay_stops,
+    tremor_spectrum,
+)
 
 INTRO = """The batched env (`rehabbot.batch`: MJX with `impl="warp"`, float32) against the CPU env
 (MuJoCo, float64), on Warp's CPU device. Each id's scripted-expert episode from
@@ -34,13 +43,59 @@ INTRO = """The batched env (`rehabbot.batch`: MJX with `impl="warp"`, float32) a
 hold a constant unit action in each world of one batch, and alone on the CPU. Steps are
 0-based. `tests/test_batch_parity.py` asserts the same comparisons: equal switches,
 termination steps and rules, observations within 1e-3 per entry, returns within 1e-4
-relative, robot work within 1e-3 relative."""
+relative, robot work within 1e-3 relative; `tests/test_batch_conditions.py` asserts them, and
+the patient's work within 1e-3 relative, for three of the conditions below. The tremor draws
+its random numbers from JAX keys in the batched env and from `np_random` on the CPU, so it is
+compared by its statistics: the robot holds still and batched world k starts its tremor where
+CPU seed k drew it. In the conditions' table, `rehab-reach-tremor-v2` therefore runs on
+different random streams in the two envs: its switches, termination and return agree, its
+observations and work need not. In `rehab-hip-spastic-v2` the expert moves too slowly for the
+grade-2 reflex to fire (no patient work)."""
 
 # (kwargs, unit actions held side by side): the cuff force both ways; with the highest cuff
 # limit, unintended contact and range of motion.
 STOPS = (({}, ([1, 0, 0, 0, 0, 0], [-1, 0, 0, 0, 0, 0])),
          ({"cuff_force_limit_n": 880.0}, ([1, 0, 0, -1, -1, -1], [1, 0, -1, 1, 1, -1])))
 STOP_ID = "rehabbot/rehab-reach-v2"
+# The condition replays: the strongest stretch reflex (MAS 4) on the arm through condition=,
+# then every batched condition id (rehabbot.batch.tables.CONDITION_IDS).
+MAS4_CASE = ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "4"}})
+TREMOR_ID, TREMOR_STEPS, TREMOR_SEEDS = "rehabbot/rehab-reach-tremor-v2", 200, tuple(range(8))
+
+
+def tremor_rows() -> tuple[list[list], dict]:
+    """The tremor hold: per env, the spectral peak and the RMS of the joint angles in the
+    tremor band; the data."""
+    import gymnasium as gym
+
+    condition = gym.make(TREMOR_ID).unwrapped.config.condition
+    hold = hold_still(TREMOR_ID, TREMOR_STEPS, TREMOR_SEEDS)
+    hz, dt_s = condition.tremor_hz, hold["dt_s"]
+    rows, data = [], {"tremor_hz": hz, "steps": TREMOR_STEPS, "seeds": list(TREMOR_SEEDS)}
+    for name in ("cpu", "batched"):
+        freqs, power = tremor_spectrum(hold[name], dt_s)
+        peak = float(freqs[freqs > 1.0][power[freqs > 1.0].argmax()])
+        band = band_rms(hold[name], dt_s, hz - 1.0, hz + 1.0)
+        runs = [band_rms(hold[name][:, k:k + 1], dt_s, hz - 1.0, hz + 1.0)
+                for k in range(len(TREMOR_SEEDS))]
+        rows.append([name, f"{peak:.2f}", f"{1e3 * band:.3f}",
+                     f"{1e3 * min(runs):.3f} - {1e3 * max(runs):.3f}"])
+        data[name] = {"peak_hz": peak, "band_rms_rad": band, "run_band_rms_rad": runs}
+    return rows, data
+
+
+def condition_row(r: dict) -> list:
+    """A row of the conditions' table."""
+    condition = r.get("kwargs", {}).get("condition")
+    name = r["id"].split("/")[1] + (f" ({', '.join(f'{k}={v}' for k, v in condition.items())})"
+                                    if condition else "")
+    return [name, r["steps"],
+            f"{len(r['switches_cpu'])}, " + ("the same" if r["switches_cpu"] ==
+                                             r["switches_batched"] else "DIFFERENT"),
+            f"{r['end_cpu']} / {r['end_batched']}",
+            f"{r['return_cpu']:.6f} / {r['return_batched']:.6f}", f"{r['obs_error']:.1e}",
+            f"{r['patient_work_cpu_j']:.4f} / {r['patient_work_batched_j']:.4f}",
+            f"{r['robot_work_cpu_j']:.4f} / {r['robot_work_batched_j']:.4f}"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="write STEM.json and its page STEM.md (docs/results/batch-parity)")
     args = parser.parse_args(argv)
     import rehabbot.batch as batch  # needs the [gpu] extra: fail here, with its message
+    from rehabbot.batch.tables import CONDITION_IDS
+
+    cases = (MAS4_CASE, *((env_id, {}) for env_id in CONDITION_IDS))
 
     command = command_line(__file__, argv if argv is not None else sys.argv[1:])
     print(f"command: {command}", flush=True)
@@ -80,7 +138,23 @@ def main(argv: list[str] | None = None) -> int:
           f"{r['stop_cpu']} / {r['stop_batched']}", f"{r['rule_cpu']} / {r['rule_batched']}",
           f"{r['last_reward_cpu']:.4f} / {r['last_reward_batched']:.4f}",
           f"{r['return_cpu']:.4f} / {r['return_batched']:.4f}"] for r in stops])
-    tables = [expert_table, stop_table]
+    conditions = []
+    for env_id, kwargs in cases:
+        conditions.append({**replay_expert(env_id, **kwargs), "kwargs": kwargs})
+        print(conditions[-1], flush=True)
+    condition_table = make_table(
+        "conditions", "Patient conditions: the scripted expert's episode, CPU against batched",
+        ["id (condition)", "steps", "target switches", "termination step (CPU / batched)",
+         "return (CPU / batched)", "max obs difference", "patient work [J] (CPU / batched)",
+         "robot work [J] (CPU / batched)"], [condition_row(r) for r in conditions])
+    rows, tremor = tremor_rows()
+    tremor_table = make_table(
+        "tremor", f"Tremor ({TREMOR_ID.split('/')[1]}, {tremor['tremor_hz']:g} Hz): the "
+        f"patient's joint angles while the robot holds still {TREMOR_STEPS} steps, "
+        f"{len(TREMOR_SEEDS)} runs",
+        ["env", "spectral peak [Hz]", "RMS in tremor_hz +- 1 Hz [mrad]",
+         "RMS per run [mrad], lowest - highest"], rows)
+    tables = [expert_table, stop_table, condition_table, tremor_table]
     for table in tables:
         print(table_markdown(table), flush=True)
     if args.page is not None:
@@ -89,9 +163,13 @@ def main(argv: list[str] | None = None) -> int:
             command=command, generated_by=__file__, tables=tables,
             machine=describe_machine(), seeds={"reset": 0, "start": START},
             settings={"ids": list(batch.SUPPORTED_IDS), "stop_id": STOP_ID,
+                      "conditions": [{"id": i, "kwargs": k} for i, k in cases],
+                      "tremor": {"id": TREMOR_ID, "steps": TREMOR_STEPS,
+                                 "seeds": list(TREMOR_SEEDS)},
                       "stops": [{"kwargs": k, "unit_actions": [list(a) for a in u]}
                                 for k, u in STOPS]},
-            data={"expert": replays, "stops": stops}), args.page)
+            data={"expert": replays, "stops": stops, "conditions": conditions,
+                  "tremor": tremor}), args.page)
     return 0
 
 

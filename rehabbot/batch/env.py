@@ -2,12 +2,14 @@
 ``impl="warp"`` (MuJoCo Warp), in MuJoCo Playground's interface: ``reset(rng) -> State`` and
 ``step(state, action) -> State``, both ``jax.jit``- and ``jax.vmap``-able.
 
-Every number comes from the CPU env (:mod:`rehabbot.batch.tables`); one step does what
-:meth:`rehabbot.envs.core.RehabEnvCore.step` does for a healthy patient:
+Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
+:mod:`rehabbot.batch.patient_tables`); one step does what
+:meth:`rehabbot.envs.core.RehabEnvCore.step` does:
 
 1. the unit action is clipped to [-1, 1], mapped onto the controller's box and added to the
    servo setpoints, which are clipped to the setpoint bounds (``joint_delta``);
-2. ``frame_skip`` MuJoCo Warp steps (``jax.lax.scan``);
+2. ``frame_skip`` MuJoCo Warp steps (``jax.lax.scan``), each after the patient's torques of
+   its condition (:mod:`rehabbot.batch.patient`; none for a healthy patient);
 3. the safety rules in the CPU order: instability (judged from the values, since MuJoCo
    Warp neither warns nor resets on a bad acceleration: a non-finite state, a joint faster
    than the blow-up speed, a non-finite or blow-up cuff force, or a paper observation
@@ -33,8 +35,10 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from rehabbot.batch.patient import BatchedPatientDrive
+from rehabbot.batch.patient_tables import read_patient_tables
 from rehabbot.batch.state import State
-from rehabbot.batch.tables import RULE_CODES, EnvTables, read_tables
+from rehabbot.batch.tables import RULE_CODES, EnvTables, check_id, read_tables
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
 CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
@@ -92,9 +96,13 @@ class BatchedRehabEnv:
         for name, value in (("naconmax", naconmax), ("njmax", njmax)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}={value!r} must be a positive integer")
+        check_id(env_id)
         cpu = gym.make(env_id, **kwargs).unwrapped
         model_fields = {field.name for field in dataclasses.fields(mjx.Model)}
         self.tables: EnvTables = read_tables(env_id, cpu, model_fields)
+        patient = read_patient_tables(cpu)
+        # The condition's torques on the patient's joints (None: it applies none).
+        self.patient = BatchedPatientDrive(patient) if patient is not None else None
         self.cpu_env = cpu
         self.mj_model: mujoco.MjModel = physics_model(cpu.model, self.tables)
         self.mjx_model = mjx.put_model(self.mj_model, impl="warp")
@@ -165,13 +173,19 @@ class BatchedRehabEnv:
                 "robot_positive_work_j": meter["robot_positive_work_j"]
                 + jp.maximum(work, 0.0)}
 
-    @staticmethod
-    def _work_metrics(meter: dict) -> dict[str, jax.Array]:
-        """The work entries of the CPU env's ``info`` for a healthy patient, who does no work
-        (so the robot's share of the positive work, the assistance ratio, is 1)."""
-        return {"robot_work_j": meter["robot_work_j"],
-                "patient_work_j": jp.zeros((), jp.float32),
-                "assistance_ratio": jp.ones((), jp.float32)}
+    def _work_metrics(self, meter: dict) -> dict[str, jax.Array]:
+        """The work entries of the CPU env's ``info``: a patient without a drive does no work
+        (so the robot's share of the positive work, the assistance ratio, is 1); with one,
+        also the last physics step's ``patient_torque_nm``."""
+        if self.patient is None:
+            return {"robot_work_j": meter["robot_work_j"],
+                    "patient_work_j": jp.zeros((), jp.float32),
+                    "assistance_ratio": jp.ones((), jp.float32)}
+        robot, patient = meter["robot_positive_work_j"], meter["patient_positive_work_j"]
+        ratio = jp.where(patient > 0.0, robot / jp.maximum(robot + patient, 1e-30), 1.0)
+        return {"robot_work_j": meter["robot_work_j"], "patient_work_j": meter["patient_work_j"],
+                "assistance_ratio": ratio,
+                "patient_torque_nm": self.patient.exercised_torque(meter)}
 
     def _hold_travel(self, setpoint: jax.Array, theta: jax.Array,
                      speed: jax.Array) -> jax.Array:
@@ -236,6 +250,17 @@ class BatchedRehabEnv:
         progress = jp.where(count > 1, 2.0 * index / jp.maximum(count - 1, 1) - 1.0, 1.0)
         return v.at[t.progress_index].set(progress).astype(jp.float32)
 
+    def _patient_begin(self, info: dict, exercise: jax.Array,
+                       index: jax.Array) -> tuple[dict, jax.Array | None, jax.Array]:
+        """The patient drive's state, goal and the world's next key at the start of a
+        control step (no drive: nothing, and the key unchanged)."""
+        if self.patient is None:
+            return {}, None, info["rng"]
+        rng, key = jax.random.split(info["rng"])
+        state = {k: v for k, v in info.items() if k.startswith(("patient_", "tremor_"))}
+        state, goal = self.patient.begin_step(state, exercise, index, key)
+        return state, goal, rng
+
     # -- API ---------------------------------------------------------------------------------
     def _draw(self, rng: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
         """The episode's exercise and weight level (the config's, or drawn uniformly, as the
@@ -270,6 +295,9 @@ class BatchedRehabEnv:
             + t.progress_weight * self._hold_travel(setpoint, theta, speed),
             "rng": rng, "truncation": zero, **self._meter_start(data),
         }
+        if self.patient is not None:
+            info["rng"], key = jax.random.split(rng)
+            info.update(self.patient.start(key))
         metrics = {"interaction_force_n": force, "cost": zero,
                    "safety_violation": jp.int32(0), "is_success": zero,
                    "target_index": index, "action_clipped": jp.int32(0),
@@ -337,22 +365,27 @@ class BatchedRehabEnv:
 
         level = info["weight_level"]
         model = self._model(level)
+        exercise, index = info["exercise"], info["target_index"]
+        patient, goal, rng = self._patient_begin(info, exercise, index)
 
         def physics_step(carry: tuple, _: None) -> tuple[tuple, None]:
-            d, meter = carry
+            d, meter, patient = carry
+            if self.patient is not None:
+                patient, d, q = self.patient.apply(patient, d, goal)
             d = mjx.step(model, d)
-            return (d, self._meter_after_step(meter, d)), None
+            if self.patient is not None:
+                patient = self.patient.count_work(patient, d, q)
+            return (d, self._meter_after_step(meter, d), patient), None
 
         meter = {k: info[k] for k in METER_KEYS}
-        (data, meter), _ = jax.lax.scan(physics_step, (data, meter), None,
-                                        length=t.frame_skip)
+        (data, meter, patient), _ = jax.lax.scan(physics_step, (data, meter, patient), None,
+                                                 length=t.frame_skip)
 
         # Safety rules, in the CPU env's order.
         force = self._cuff_force(data)
         speed = jp.max(jp.abs(data.qvel))
         unstable = (~jp.all(jp.isfinite(data.qpos)) | ~(force <= t.blowup_force_n)
                     | ~(speed <= t.blowup_speed_rad_s))
-        exercise, index = info["exercise"], info["target_index"]
         theta, dynamic = self._dynamic(data)
         before = self._paper(exercise, index, dynamic, level)
         outside = ~jp.all((before >= self._box_low) & (before <= self._box_high))
@@ -400,15 +433,15 @@ class BatchedRehabEnv:
         obs = self._agent_obs(paper, exercise, new_index, setpoint, data.qvel[self._dof],
                               self._cuff_force(data))
         f32 = jp.float32
-        new_info = {**info, **meter, "setpoint": setpoint, "target_index": new_index,
-                    "steps": steps,
+        new_info = {**info, **meter, **patient, "rng": rng, "setpoint": setpoint,
+                    "target_index": new_index, "steps": steps,
                     "theta": theta, "healthy": dynamic, "path_left": after, "hold_gap": gap,
                     "truncation": truncated.astype(f32)}
         metrics = {"interaction_force_n": force, "cost": (violation > 0).astype(f32),
                    "safety_violation": violation,
                    "is_success": (reached & last).astype(f32),
                    "target_index": new_index, "action_clipped": clipped,
-                   **self._work_metrics(meter),
+                   **self._work_metrics({**meter, **patient}),
                    "reward_progress": progress, "reward_bonus": bonus,
                    "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety}
         return State(data, obs, reward.astype(f32), (terminated | truncated).astype(f32),

@@ -21,10 +21,13 @@ class State:
             limit: ``info["truncation"]`` says which), else 0.0.
         metrics: per-step readings (``interaction_force_n``, ``cost``, ``safety_violation``
             (0 none, else 1 + the index of the rule in :data:`rehabbot.sim.physics.RULES`),
-            ``is_success``, ``target_index``, the reward terms ``reward_*``).
+            ``is_success``, ``target_index``, the work entries, the reward terms
+            ``reward_*``).
         info: the episode's own state the next step needs (setpoints, target index, exercise,
             steps, the reward's path left and hold gap, the last healthy joint angles and
-            observation fields, the random key, ``truncation``).
+            observation fields, the random key, ``truncation``; with a condition that applies
+            torques, the patient drive's delay lines, tremor and work:
+            :class:`rehabbot.batch.patient.BatchedPatientDrive`).
     """
 
     data: Any

@@ -15,18 +15,25 @@ from typing import Any
 import numpy as np
 
 from rehabbot.envs.control import TORQUE_HOLD_BRAKE_S, TORQUE_HOLD_SAG_RAD
-from rehabbot.envs.registration import BILATERAL_IDS, V2_IDS
+from rehabbot.envs.registration import BILATERAL_IDS, CONDITION_VARIANTS, V2_IDS
+from rehabbot.sim.patient_drive import PatientDrive
 from rehabbot.sim.physics import BLOWUP_FORCE_N, BLOWUP_SPEED_RAD_S, RULES
 from rehabbot.sim.scene import WEIGHT_LEVELS
 from rehabbot.tasks.reward import STOP_MARGIN
 
-# The ids the batched env builds: the single-arm -v2 base ids (healthy patient).
+# The ids the batched env builds: the single-arm -v2 base ids (a healthy patient, or any
+# rigid patient's condition=), and their condition variants (CONDITION_IDS).
 SUPPORTED_IDS: tuple[str, ...] = (
     "rehabbot/rehab-reach-v2",
     "rehabbot/rehab-reach-l-v2",
     "rehabbot/rehab-hip-v2",
     "rehabbot/rehab-knee-v2",
 )
+# The condition variants of those ids (rigid patient: rehabbot.batch.patient): spastic,
+# tremor, active, weak, stiff and resistive limbs.
+CONDITION_IDS: tuple[str, ...] = tuple(
+    env_id for env_id, (base_id, _condition, _text) in CONDITION_VARIANTS.items()
+    if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
 # The control modes the batched env builds.
 CONTROL_MODES: tuple[str, ...] = ("joint_delta", "torque")
 # The safety rules' codes in the batched state: 0 for none, then RULES in order (1-based).
@@ -108,14 +115,20 @@ class EnvTables:
     progress_index: int
 
 
-def check_supported(env_id: str, env: Any) -> None:
-    """``ValueError`` (naming the value) for what the batched env does not build yet."""
+def check_id(env_id: str) -> None:
+    """``ValueError`` (naming it) for an id the batched env does not build yet: checked before
+    the CPU env is made (a ``-myo-`` id would need MyoSuite's models first)."""
     if env_id in BILATERAL_IDS:
         raise ValueError(f"env_id={env_id!r}: the bilateral env is not batched yet")
-    if env_id not in SUPPORTED_IDS:
+    if env_id not in SUPPORTED_IDS + CONDITION_IDS:
         kind = "a -v2 id that" if env_id in V2_IDS else "an id that"
         raise ValueError(f"env_id={env_id!r} is {kind} the batched env does not build yet; "
-                         f"it builds {list(SUPPORTED_IDS)}")
+                         f"it builds {list(SUPPORTED_IDS + CONDITION_IDS)}")
+
+
+def check_supported(env_id: str, env: Any) -> None:
+    """``ValueError`` (naming the value) for what the batched env does not build yet."""
+    check_id(env_id)
     config = env.config
     checks = (
         ("observation", config.observation, "agent"),
@@ -135,9 +148,9 @@ def check_supported(env_id: str, env: Any) -> None:
         raise ValueError(f"control_mode={config.control_mode!r} is not batched yet (only "
                          f"{list(CONTROL_MODES)})")
     physics = env._physics
-    if physics.drive is not None or physics.muscles is not None:
-        raise ValueError(f"condition={config.condition!r}: patient conditions that act "
-                         "(spasticity, tremor, effort, weakness) are not batched yet")
+    if physics.muscles is not None or not isinstance(physics.drive, PatientDrive | None):
+        raise ValueError(f"condition={config.condition!r}: only the rigid patient's "
+                         "conditions are batched (not muscles' excitations)")
     if len(env.handles) != 1:
         raise ValueError(f"{len(env.handles)} robots: only one-arm scenes are batched yet")
     # The contact rule reads the contacts through their constraint rows, which MuJoCo Warp

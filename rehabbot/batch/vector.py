@@ -23,7 +23,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from rehabbot.batch.env import BatchedRehabEnv
-from rehabbot.batch.tables import SUPPORTED_IDS
+from rehabbot.batch.tables import CONDITION_IDS, SUPPORTED_IDS
 
 CONTACTS_PER_WORLD = 16  # MuJoCo Warp's contact slots per world (naconmax = this x worlds)
 
@@ -109,7 +109,7 @@ def _creator(env_id: str):
 # One creator per id, by name (Gymnasium passes a vector entry point the number of envs and
 # the id's keyword arguments, not the id).
 VECTOR_ENTRY_POINTS: dict[str, str] = {}
-for _env_id in SUPPORTED_IDS:
+for _env_id in SUPPORTED_IDS + CONDITION_IDS:
     _name = "vector_" + _env_id.split("/")[-1].replace("-", "_")
     globals()[_name] = _creator(_env_id)
     VECTOR_ENTRY_POINTS[_env_id] = f"{__name__}:{_name}"
