@@ -222,3 +222,23 @@ def test_torque_mode_zeroes_the_servo_gains():
         assert error[:, transient].max() < TORQUE_TRANSIENT_TOL
         assert abs(out["rewards"][:n, world].sum() - cpu["rewards"].sum()) <= \
             RETURN_RTOL * abs(cpu["rewards"].sum())
+
+
+@pytest.mark.parametrize("mode", ["joint_position", "joint_velocity"])
+def test_setpoint_control_modes_follow_the_cpu(mode):
+    """``joint_position`` (the unit action is the setpoint, within the setpoint bounds) and
+    ``joint_velocity`` (setpoint speeds over one control step): the scripted expert's first
+    80 steps in world 0 of two follow the CPU env's; the same actions read as ``joint_delta``
+    increments do not."""
+    env_id, steps = "rehabbot/rehab-reach-v2", 80
+    cpu = cpu_episode(env_id, max_steps=steps, control_mode=mode)
+    actions = np.repeat(cpu["actions"][:, None], 2, axis=1)
+    actions[:, 1] = np.clip(actions[:, 1] + 0.3, -1, 1)
+    out = batched_rollout(env_id, actions, control_mode=mode)
+    assert np.abs(out["obs"][:, 0] - cpu["obs"][1:]).max() < OBS_TOL
+    assert abs(out["rewards"][:, 0].sum() - cpu["rewards"].sum()) \
+        < RETURN_RTOL * max(1.0, abs(cpu["rewards"].sum()))
+    assert not out["done"][:, 0].any()
+    if mode == "joint_position":  # as increments, the same actions move the arm elsewhere
+        wrong = batched_rollout(env_id, actions[:, :1], control_mode="joint_delta")
+        assert np.abs(wrong["obs"][:, 0] - cpu["obs"][1:]).max() > 100 * OBS_TOL

@@ -7,7 +7,9 @@ Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
 :meth:`rehabbot.envs.core.RehabEnvCore.step` does:
 
 1. the unit action is clipped to [-1, 1], mapped onto the controller's box and added to the
-   servo setpoints, which are clipped to the setpoint bounds (``joint_delta``);
+   servo setpoints (``joint_delta``), made the setpoints (``joint_position``) or their speeds
+   (``joint_velocity``), which are clipped to the setpoint bounds; or motor torques
+   (``torque``);
 2. ``frame_skip`` MuJoCo Warp steps (``jax.lax.scan``), each after the patient's torques of
    its condition (:mod:`rehabbot.batch.patient`; none for a healthy patient);
 3. the safety rules in the CPU order: instability (judged from the values, since MuJoCo
@@ -358,8 +360,14 @@ class BatchedRehabEnv:
         if t.control_mode == "torque":  # motor torques; the servos are off
             setpoint = info["setpoint"]
             ctrl = state.data.ctrl.at[self._motor].set(self._torque_limit * native)
-        else:  # joint_delta: the setpoints move
-            setpoint = jp.clip(info["setpoint"] + native, self._low, self._high)
+        else:  # the servos follow setpoints, clipped to the setpoint bounds
+            if t.control_mode == "joint_position":  # the action is the setpoint
+                wanted = native
+            elif t.control_mode == "joint_velocity":  # setpoint speeds over one control step
+                wanted = info["setpoint"] + t.controller_dt_s * native
+            else:  # joint_delta: setpoint increments
+                wanted = info["setpoint"] + native
+            setpoint = jp.clip(wanted, self._low, self._high)
             ctrl = state.data.ctrl.at[self._servo].set(setpoint)
         data = state.data.replace(ctrl=ctrl)
 

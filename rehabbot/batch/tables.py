@@ -35,7 +35,7 @@ CONDITION_IDS: tuple[str, ...] = tuple(
     env_id for env_id, (base_id, _condition, _text) in CONDITION_VARIANTS.items()
     if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
 # The control modes the batched env builds.
-CONTROL_MODES: tuple[str, ...] = ("joint_delta", "torque")
+CONTROL_MODES: tuple[str, ...] = ("joint_delta", "joint_position", "joint_velocity", "torque")
 # The safety rules' codes in the batched state: 0 for none, then RULES in order (1-based).
 RULE_CODES: dict[str, int] = {rule: k + 1 for k, rule in enumerate(RULES)}
 
@@ -56,8 +56,9 @@ class EnvTables:
     # per weight level (row l = level l): the MjModel fields the level changes (masses,
     # inertias and what mj_setConst derives from them), by name
     level_fields: dict[str, np.ndarray]
-    # the controller (joint_delta or torque) and the -v2 unit actions
+    # the controller (every control mode) and the -v2 unit actions
     control_mode: str
+    controller_dt_s: float  # joint_velocity: setpoint += this x the native action
     torque_limit_nm: np.ndarray  # (n,) torque mode: motor torque = limit x native action
     hold_sag_rad: float  # torque mode: what a hold may still travel, at rest ...
     hold_brake_s: float  # ... plus the joints' speed times this
@@ -219,7 +220,7 @@ def read_tables(env_id: str, env: Any, model_fields: set[str]) -> EnvTables:
         env_id=env_id, frame_skip=int(config.frame_skip),
         max_episode_steps=int(env.max_episode_steps), weight_level=config.weight_level,
         exercise=config.exercise, level_fields=level_fields,
-        control_mode=config.control_mode,
+        control_mode=config.control_mode, controller_dt_s=float(controller.dt_s),
         torque_limit_nm=np.asarray(controller.robot.torque_limits(), dtype=float),
         hold_sag_rad=float(TORQUE_HOLD_SAG_RAD), hold_brake_s=float(TORQUE_HOLD_BRAKE_S),
         servo_ids=np.asarray(handle.servo_ids, dtype=int),
