@@ -88,8 +88,15 @@ def test_gymnasium_vector_door():
     assert info["safety_violation"].tolist() == [0, 0]
     with pytest.raises(ValueError, match=r"shape \(6,\)"):
         vec.step(np.zeros(6, np.float32))
-    with pytest.raises(ValueError, match="options"):
-        vec.reset(options={"exercise": 1})
+    # Reset options, as the CPU env's: every world's first episode.
+    obs, _ = vec.reset(seed=1, options={"exercise": 1, "weight_level": 3})
+    cpu_obs, _ = gym.make(env_id).reset(seed=0, options={"exercise": 1, "weight_level": 3})
+    assert np.abs(obs - cpu_obs).max() < 1e-3
+    assert np.abs(obs - vec.reset(seed=1)[0]).max() > 1e-2  # the options took effect
+    for options, named in (({"exercise": 9}, "exercise=9"), ({"weight_level": 7}, "7"),
+                           ({"speed": 1}, "speed")):
+        with pytest.raises(ValueError, match=named):
+            vec.reset(options=options)
 
 
 @pytest.mark.slow

@@ -306,14 +306,44 @@ class BatchedRehabEnv:
                    **self._work_metrics(info), **dict.fromkeys(REWARD_TERMS, zero)}
         return State(data, obs, zero, zero, metrics, info)
 
-    def reset(self, rng: jax.Array) -> State:
+    def reset(self, rng: jax.Array, exercise: jax.Array | int = -1,
+              weight_level: jax.Array | int = -1) -> State:
         """A new episode at home: the exercise and the weight level are the config's, or drawn
-        from ``rng``."""
-        exercise, level, rng = self._draw(rng)
+        from ``rng``; an ``exercise`` or ``weight_level`` >= 0 overrides them for this episode
+        (the CPU env's reset ``options``; checked by :meth:`check_reset_options`, since a
+        jitted function cannot raise). Both are drawn every reset, as on the CPU, so that the
+        draws do not depend on the options."""
+        drawn_exercise, drawn_level, rng = self._draw(rng)
+        exercise = jp.where(jp.asarray(exercise) >= 0, jp.asarray(exercise, jp.int32),
+                            drawn_exercise)
+        level = jp.where(jp.asarray(weight_level) >= 0, jp.asarray(weight_level, jp.int32),
+                         drawn_level)
         data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.naconmax,
                              njmax=self.njmax)
         data = data.replace(qpos=self._home_qpos, ctrl=self._home_ctrl[level])
         return self._start(mjx.forward(self._model(level), data), exercise, level, rng)
+
+    def check_reset_options(self, options: dict | None) -> tuple[int, int]:
+        """``(exercise, weight_level)`` of the CPU env's reset ``options`` (-1: not given), or
+        ``ValueError`` naming a bad one, as the CPU env does."""
+        from rehabbot.common.checks import check_options
+        from rehabbot.envs.env_base import RESET_OPTIONS
+        from rehabbot.sim.scene import check_weight_level
+        from rehabbot.tasks import feasibility
+
+        options = check_options(options, RESET_OPTIONS)
+        exercise = options.get("exercise", -1)
+        count = int(self._targets.shape[0])
+        if "exercise" in options and (isinstance(exercise, bool)
+                                      or exercise not in range(count)):
+            raise ValueError(f"exercise={exercise!r} is not one of {list(range(count))}")
+        level = options.get("weight_level", -1)
+        if "weight_level" in options:
+            level = check_weight_level(level)
+            unusable = getattr(self.cpu_env, "_unusable_levels", {})
+            if level in unusable:
+                feasibility.refuse(unusable, WEIGHT_LEVELS, level)
+        return int(exercise), int(level)
 
     def restart_done(self, state: State) -> State:
         """Auto-reset: a world whose episode ended (``state.done``) starts a new one (a new

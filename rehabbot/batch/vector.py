@@ -58,14 +58,16 @@ class BatchedVectorEnv(VectorEnv):
         self._state = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Every world starts an episode (exercise drawn per world unless the config fixes
-        it). ``options`` are not supported yet (``ValueError``)."""
-        if options:
-            raise ValueError(f"options={options!r}: reset options are not batched yet "
-                             "(fix the exercise with make_vec(..., exercise=e))")
+        """Every world starts an episode (exercise and weight level drawn per world unless
+        the config fixes them). ``options`` are the CPU env's (``exercise``,
+        ``weight_level``), for every world's first episode; the worlds' later episodes draw
+        again, as the CPU env's do."""
+        exercise, level = self.env.check_reset_options(options)
         super().reset(seed=seed)
         key = jax.random.key(int(self.np_random.integers(2**31)))
-        self._state = self._reset(jax.random.split(key, self.num_envs))
+        fill = np.full(self.num_envs, 0, np.int32)
+        self._state = self._reset(jax.random.split(key, self.num_envs), fill + exercise,
+                                  fill + level)
         return np.asarray(self._state.obs), self._info(self._state)
 
     def step(self, actions):
