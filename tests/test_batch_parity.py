@@ -242,3 +242,32 @@ def test_setpoint_control_modes_follow_the_cpu(mode):
     if mode == "joint_position":  # as increments, the same actions move the arm elsewhere
         wrong = batched_rollout(env_id, actions[:, :1], control_mode="joint_delta")
         assert np.abs(wrong["obs"][:, 0] - cpu["obs"][1:]).max() > 100 * OBS_TOL
+
+
+def test_readings_match_the_cpu_info():
+    """``metrics`` carry the CPU env's ``info`` readings: the robot's actuator torques on its
+    joints, the patient's joint angles, the exercise and the weight level, step by step."""
+    env_id, steps, start = "rehabbot/rehab-hip-v2", 30, {"exercise": 1, "weight_level": 2}
+    cpu = gym.make(env_id).unwrapped
+    obs, info = cpu.reset(seed=0, options=start)
+    expert = ScriptedExpert(cpu)
+    actions, infos = [], []
+    for _ in range(steps):
+        actions.append(np.asarray(expert.predict(obs)[0], np.float32))
+        obs, _r, _term, _trunc, info = cpu.step(actions[-1])
+        infos.append(info)
+    env = batch.make(env_id, naconmax=32, **start)
+    step = jax.jit(jax.vmap(env.step))
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), 2))
+    limit = np.asarray(cpu.controller.robot.torque_limits())
+    moved = 0.0
+    for k in range(steps):
+        state = step(state, jp.asarray(np.stack([actions[k], np.zeros_like(actions[k])])))
+        m = {name: np.asarray(value)[0] for name, value in state.metrics.items()}
+        assert m["exercise"] == 1 and m["weight_level"] == 2
+        assert np.abs(m["patient_qpos"] - infos[k]["patient_qpos"]).max() < 5e-5
+        # 1e-3 of each joint's torque limit (the servo torque is float32 there).
+        assert (np.abs(m["robot_torque_nm"] - infos[k]["robot_torque_nm"]) < 1e-3 * limit).all()
+        moved = max(moved, float(np.abs(infos[k]["patient_qpos"]
+                                        - infos[0]["patient_qpos"]).max()))
+    assert moved > 0.01  # the comparison follows a moving patient

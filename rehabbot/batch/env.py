@@ -303,8 +303,18 @@ class BatchedRehabEnv:
         metrics = {"interaction_force_n": force, "cost": zero,
                    "safety_violation": jp.int32(0), "is_success": zero,
                    "target_index": index, "action_clipped": jp.int32(0),
+                   **self._readings(data, exercise, level),
                    **self._work_metrics(info), **dict.fromkeys(REWARD_TERMS, zero)}
         return State(data, obs, zero, zero, metrics, info)
+
+    def _readings(self, data: Any, exercise: jax.Array, level: jax.Array
+                  ) -> dict[str, jax.Array]:
+        """The CPU env's ``info`` readings of the robot and the patient: the robot's actuator
+        torques on its joints, the patient's joint angles, the exercise and weight level."""
+        return {"robot_torque_nm": data.qfrc_actuator[self._dof],
+                "patient_qpos": data.qpos[self._patient],
+                "exercise": jp.asarray(exercise, jp.int32),
+                "weight_level": jp.asarray(level, jp.int32)}
 
     def reset(self, rng: jax.Array, exercise: jax.Array | int = -1,
               weight_level: jax.Array | int = -1) -> State:
@@ -479,6 +489,7 @@ class BatchedRehabEnv:
                    "safety_violation": violation,
                    "is_success": (reached & last).astype(f32),
                    "target_index": new_index, "action_clipped": clipped,
+                   **self._readings(data, exercise, level),
                    **self._work_metrics({**meter, **patient}),
                    "reward_progress": progress, "reward_bonus": bonus,
                    "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety}
