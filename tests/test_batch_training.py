@@ -197,7 +197,7 @@ def test_train_interrupt_resume_evaluate_ship(tmp_path, monkeypatch):
 
     monkeypatch.setenv("REHABBOT_ZOO_DIR", str(tmp_path / "zoo"))
     assert main(["zoo", "export", str(run_dir), "--episodes", "1"]) == 0
-    shipped = zoo.load(ENV, "ppo")
+    shipped = zoo.load(ENV, "ppo-rsl_rl")  # beside, not instead of, the CPU-trained ppo
     assert shipped.metadata["backend"] == "rsl_rl" and shipped.metadata["training_steps"] == total
     assert np.array_equal(shipped.predict(obs)[0], policy.policy.predict(obs)[0])
     assert main(["zoo", "export", str(run_dir), "--full", "--out",

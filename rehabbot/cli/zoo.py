@@ -76,7 +76,8 @@ def cmd_zoo_export(args: argparse.Namespace) -> int:
     meta = export_policy(args.source, args.env, args.algo, args.out, metadata=args.note,
                          episodes=args.episodes, seed=args.seed, full=args.full)
     out = args.out or zoo.zoo_path(meta["env_id"],
-                                   zoo.agent_name(meta["algo"], meta.get("env_kwargs")))
+                                   zoo.agent_name(meta["algo"], meta.get("env_kwargs"),
+                                                  meta.get("backend")))
     print(f"wrote {out}: {meta['env_id']} {meta['algo']} ({meta['backend']}), success rate "
           f"{meta.get('success_rate')} on {args.episodes} episodes, sha256 "
           f"{meta['weights_sha256'][:12]}")

@@ -78,6 +78,9 @@ ZOO_PREFIX = "zoo:"
 SUFFIX = ".npz"
 FORMAT_VERSION = 1
 METADATA_KEY = "metadata"
+# Backends whose agents trained on the batched env (rehabbot.rl.batch_training): their zoo
+# names say so (agent_name).
+BATCHED_BACKENDS = ("rsl_rl",)
 DEFAULT_EPISODES = 20
 DEFAULT_SEED = 1000
 # op name -> the parameters it needs
@@ -355,13 +358,16 @@ def zoo_path(env_id: str, algo: str, root: Path | None = None) -> Path:
     return base / env / f"{name}{SUFFIX}"
 
 
-def agent_name(algo: str, env_kwargs: Mapping[str, Any] | None = None) -> str:
+def agent_name(algo: str, env_kwargs: Mapping[str, Any] | None = None,
+               backend: str | None = None) -> str:
     """The zoo's name of an agent: its algorithm (``sac``), followed by the robot for one
     trained with another robot than the ids' UR5e (``sac-fr3``: ``zoo:rehab-hip-v2/sac-fr3``,
-    trained and run with ``robot="fr3"``)."""
+    trained and run with ``robot="fr3"``), and by ``rsl_rl`` for one trained on the batched
+    env (``ppo-rsl_rl``), so that it never takes the place of the CPU-trained agent."""
     robot = (env_kwargs or {}).get("robot")
     name = str(algo).strip().lower()
-    return name if robot in (None, "ur5e") else f"{name}-{robot}"
+    name = name if robot in (None, "ur5e") else f"{name}-{robot}"
+    return f"{name}-{backend}" if backend in BATCHED_BACKENDS else name
 
 
 def available() -> list[tuple[str, str]]:
@@ -396,7 +402,8 @@ def load(env_id: str, algo: str) -> ZooPolicy:
     policy = ZooPolicy.from_file(path)
     if _short(policy.env_id) != _short(env_id):
         raise ZooError(f"{path} holds an agent for {policy.env_id!r}, not {env_id!r}")
-    name = agent_name(policy.algo, policy.metadata.get("env_kwargs"))
+    name = agent_name(policy.algo, policy.metadata.get("env_kwargs"),
+                      policy.metadata.get("backend"))
     if name != path.stem:
         raise ZooError(f"{path} holds the agent {name!r} (algorithm {policy.algo!r}, env kwargs "
                        f"{policy.metadata.get('env_kwargs')}), not {path.stem!r}")
@@ -454,7 +461,8 @@ def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
     from rehabbot.rl.safe_load import load_safely
 
     meta = load(env_id, algo).metadata
-    path = full_model_path(meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs")))
+    path = full_model_path(meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs"),
+                                                      meta.get("backend")))
     if not path.is_file():
         raise UsageError(f"the zoo keeps only the actor of {_short(meta['env_id'])}/"
                          f"{path.stem} (no {path.name}); load(...) gives the actor")

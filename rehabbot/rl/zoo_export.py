@@ -315,7 +315,7 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
     meta.update(env_id=f"{NAMESPACE}/{env_short_name(env_id)}", rehabbot_version=VERSION)
     meta.update(dict(metadata or {}))
     out_path = Path(out_path) if out_path is not None else zoo_path(
-        meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs")))
+        meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs"), meta.get("backend")))
     if full and isinstance(model, ZooPolicy):
         raise ExportError("--full ships a Stable-Baselines3/SBX model zip; a batched run "
                           "keeps its networks in model.pt (rsl_rl), which the zoo does not "
