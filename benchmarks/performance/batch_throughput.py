@@ -45,7 +45,6 @@ from benchmarks.common.machine import describe_machine
 from rehabbot.envs.registration import resolve_env_id
 
 DEFAULT_WORLDS = (1, 16, 256, 1024, 4096, 8192)
-CONTACTS_PER_WORLD = 16
 INTRO = """Env steps per second of the batched env (`rehabbot.batch`, MJX with `impl="warp"`)
 against the number of worlds stepped together, and of the CPU env (`gym.make`, one process)
 on the same machine in the same run. Physics steps/s = env steps/s x frame_skip (10 MuJoCo
@@ -79,6 +78,7 @@ def time_batched(env_id: str, worlds: int, steps: int, rounds: int, seed: int
     import jax
 
     import rehabbot.batch as batch
+    from rehabbot.batch.vector import CONTACTS_PER_WORLD
 
     env = batch.make(env_id, naconmax=CONTACTS_PER_WORLD * worlds)
     reset = jax.jit(jax.vmap(env.reset))

@@ -25,11 +25,9 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from rehabbot.batch.env import BatchedRehabEnv
+from rehabbot.batch.vector import CONTACTS_PER_WORLD
 
 OBS_GROUP = "policy"
-# Contact slots per world (MuJoCo Warp shares one array among all worlds); the scenes use a
-# few at most, and the batched env's contact rule reads each world's own rows.
-CONTACTS_PER_WORLD = 16
 
 
 def to_torch(array: jax.Array) -> torch.Tensor:
