@@ -2,18 +2,20 @@
 ordinary run folder written by :func:`rehabbot.rl.training.train_run` (:func:`run_sweep`).
 
 The sweep's file is read and checked by :mod:`rehabbot.rl.sweep_config`; docs/sweeps.md
-describes it. Ray runs one trial per CPU by default (``resources_per_trial``), on a local
-Ray started for the sweep or on an existing cluster (``address``). Each trial calls
-``train_run`` in its Ray worker.
+describes it. Ray runs one trial per CPU by default (``resources_per_trial``; ``gpu: 1``
+gives a trial a GPU of its own), on a local Ray started for the sweep or on an existing cluster
+(``address``). Each trial calls ``train_run`` in its Ray worker, or, for ``backend: rsl_rl``,
+:func:`~rehabbot.rl.batch_training.train_batched` (rsl_rl's PPO on the batched env), which
+writes the same run folder.
 
 **Resuming is our own, not Ray's.** Before Ray starts, every trial's run folder is
 inspected (:func:`trial_state`): a finished run that reached its step count is skipped; a run
 with a checkpoint (interrupted, killed, or asked for more steps) is continued with
-``train_run(..., resume=True)``; a folder that holds no checkpoint yet is started again;
-an absent one is started. Each invocation is a fresh Ray Tune experiment of the trials left
-(``Tuner.restore`` is not used): the run folders, written atomically by ``train_run``, are the
-only state, so a sweep resumes after Ctrl-C, a crash of the driver, a lost Ray cluster or an
-edited sweep file (more seeds, more steps) alike.
+``train_run(..., resume=True)`` (a batched run: ``BatchRunPlan(resume=True)``); a folder that
+holds no checkpoint yet is started again; an absent one is started. Each invocation is a fresh
+Ray Tune experiment of the trials left (``Tuner.restore`` is not used): the run folders,
+written atomically by ``train_run``, are the only state, so a sweep resumes after Ctrl-C, a
+crash of the driver, a lost Ray cluster or an edited sweep file (more seeds, more steps) alike.
 
 Ray Tune's files go to ``OUT/_ray/<experiment>`` (its ``storage_path``; never
 ``~/ray_results``), with a copy of the trials' stdout/stderr in ``logs/`` for a local Ray; the
