@@ -20,8 +20,10 @@ import yaml
 from benchmarks.common.sweeps import KEY_FIELDS, row_key, sweep_keys
 from rehabbot.common.errors import UsageError
 from rehabbot.rl import batch_training as bt
+from rehabbot.rl.algorithms import BackendUnavailableError
 from rehabbot.rl.sweep import (
     SweepUsageError,
+    check_batch_modules,
     check_local_resources,
     check_sweep,
     run_sweep,
@@ -232,6 +234,20 @@ def test_resources_a_local_ray_cannot_give_are_refused() -> None:
     with pytest.raises(SweepUsageError, match=r"accelerator: 1 per trial, but the local Ray "
                                               r"has 0$"):
         check_local_resources({"accelerator": 1}, {"CPU": 4.0})
+
+
+def test_a_local_batched_sweep_without_its_modules_is_refused_before_ray(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(bt, "missing_modules", lambda: ["warp", "rsl_rl"])
+    config = parse_sweep_config(_config(tmp_path))
+    with pytest.raises(BackendUnavailableError, match=re.escape(
+            'backend rsl_rl needs warp, rsl_rl, which are not installed (pip install '
+            '"rehabbot[gpu]")')):
+        run_sweep(config, cpus=1, announce=lambda text: None)
+    assert not (tmp_path / "out" / "_ray").exists()
+    # A dry run starts nothing; a cluster's nodes have their own packages.
+    assert run_sweep(config, dry_run=True, announce=lambda text: None).records
+    check_batch_modules([])
 
 
 def test_resources_per_trial_take_gpu_in_either_case(tmp_path: Path) -> None:

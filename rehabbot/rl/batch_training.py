@@ -64,6 +64,9 @@ LOG_NAME = "training_log.csv"
 CHECKPOINT_PREFIX = "rsl_ppo"
 DEFAULT_NUM_ENVS = 4096
 DEFAULT_TIMESTEPS = 50_000_000
+# The modules a batched run imports (all from the `gpu` extra), checked before a sweep starts.
+BATCH_MODULES = ("jax", "warp", "torch", "tensordict", "rsl_rl")
+BATCH_EXTRA_HINT = 'pip install "rehabbot[gpu]"'
 # The packages a batched run depends on, recorded in its manifest.
 BATCH_PACKAGES = ("rsl-rl-lib", "torch", "tensordict", "jax", "jaxlib", "mujoco-mjx",
                   "warp-lang")
@@ -185,6 +188,14 @@ def read_settings(path: str | Path | None, env_id: str,
         if isinstance(data.get(key), dict):
             return dict(data[key])
     return data
+
+
+def missing_modules() -> list[str]:
+    """The modules of :data:`BATCH_MODULES` that cannot be imported here (found without
+    importing them)."""
+    import importlib.util
+
+    return [name for name in BATCH_MODULES if importlib.util.find_spec(name) is None]
 
 
 def share_gpu_with_torch() -> None:

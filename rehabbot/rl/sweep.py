@@ -43,6 +43,7 @@ from rehabbot.common.provenance import now_iso
 from rehabbot.common.signals import keeping_signal_handlers
 from rehabbot.common.tables import text_table
 from rehabbot.rl import batch_training, runs
+from rehabbot.rl.algorithms import BackendUnavailableError
 from rehabbot.rl.backends import DEFAULT_BACKEND
 from rehabbot.rl.planning import check_demonstrations, find_resume_point, run_is_complete
 from rehabbot.rl.sweep_config import (
@@ -321,6 +322,21 @@ def check_sweep(config: SweepConfig) -> list[Trial]:
     return trials
 
 
+def check_batch_modules(trials: Sequence[Trial]) -> None:
+    """Refuse batched (rsl_rl) trials to run on a local Ray without the modules they import
+    (JAX, Warp, PyTorch, rsl_rl), before Ray starts rather than in every trial.
+
+    Raises:
+        BackendUnavailableError: naming the missing modules and the extra that installs them.
+    """
+    missing = batch_training.missing_modules() if any(t.batched for t in trials) else []
+    if missing:
+        raise BackendUnavailableError(
+            f"backend {batch_training.BACKEND} needs {', '.join(missing)}, which "
+            f"{'is' if len(missing) == 1 else 'are'} not installed "
+            f"({batch_training.BATCH_EXTRA_HINT})")
+
+
 def _init_ray(address: str | None, cpus: int | None) -> tuple[bool, Path | None]:
     """Connect to ``address`` or start a local Ray of ``cpus`` CPUs; returns whether it was
     started here and Ray's session folder (sockets and logs, in Ray's temp folder)."""
@@ -440,8 +456,10 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
 
     Raises:
         SweepConfigError: a bad setting in the sweep file (checked before anything runs).
-        SweepUsageError: ``cpus`` with ``address``, too few CPUs for a trial, nothing to
-            resume.
+        SweepUsageError: ``cpus`` with ``address``, too few CPUs (or GPUs) for a trial,
+            nothing to resume.
+        BackendUnavailableError: batched trials to run on a local Ray without JAX, Warp or
+            rsl_rl installed.
         SweepError: Ray is missing, cannot start or fails.
         OutputError: the output folder cannot be written.
     """
@@ -462,6 +480,8 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
     state = _SweepState(config, trials, command or sys.argv, announce)
     states = {trial.key: trial_state(trial) for trial in trials}
     pending = [trial for trial in trials if states[trial.key] != "complete"]
+    if address is None and not dry_run:
+        check_batch_modules(pending)
     for trial in trials:
         if states[trial.key] == "complete":
             state.update(trial.key, {"action": "skipped"})

@@ -14,7 +14,7 @@ An algorithm with ``backend: rsl_rl`` (PPO only) trains on the batched env inste
 :func:`rehabbot.rl.batch_training.train_batched` per trial, in the same folders: ``n_envs``
 counts its worlds, ``hyperparams`` is a YAML file of
 :class:`~rehabbot.rl.batch_training.RslPpoSettings` fields and ``grid`` crosses those fields;
-the keys of the CPU trainers it has no use for are refused (:func:`_check_batch_keys`).
+the keys of the CPU trainers it has no use for are refused by name.
 
 This module imports neither Ray nor Stable-Baselines3 (nor JAX or PyTorch).
 """
