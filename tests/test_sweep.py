@@ -116,14 +116,19 @@ def test_the_shipped_sweep_files_load() -> None:
     assert steps == {("sac", False): 100_000, ("td3", False): 100_000,
                      ("ppo", False): 1_000_000, ("ppo", True): 300_000}
     assert {t.backend for t in trials} == {"sbx"}
-    # Every grid trains -v2 ids with the libraries' MlpPolicy (the shipped settings).
+    # Every grid trains -v2 ids, with the libraries' MlpPolicy (the shipped settings) or, on
+    # the batched env, rsl_rl's MLPs (tests/test_sweep_batch.py checks those).
     shipped = sorted((ROOT / "sweeps").rglob("*.yaml"))
     for path in shipped:
         config = load_sweep_config(path)
         check_sweep(config)  # the settings load for every id, the env kwargs fit
         assert {t.env_id.rsplit("-", 1)[1] for t in config.trials()} == {"v2"}, path.name
-        assert {t.hyperparams["given"].get("policy") for t in config.trials()} == \
-            {"MlpPolicy"}, path.name
+        cpu = [t for t in config.trials() if not t.batched]
+        assert {t.hyperparams["given"].get("policy") for t in cpu} == \
+            ({"MlpPolicy"} if cpu else set()), path.name
+    assert [path.name for path in shipped
+            if all(t.batched for t in load_sweep_config(path).trials())] == \
+        ["rsl-ppo-reach-v2.yaml"]
     ppo = load_sweep_config(ROOT / "sweeps" / "ppo-v2.yaml").trials()
     assert len(ppo) == 12 and {(t.algo, t.backend, t.demos, t.bc, t.total_timesteps)
                                for t in ppo} == {("ppo", "sbx", 40, True, 300_000)}

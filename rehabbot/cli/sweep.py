@@ -16,12 +16,15 @@ examples:
   rehabbot sweep sweeps/results-v2/sac-knee.yaml --cpus 16  # runs of the -v2 results page
   rehabbot sweep sweeps/example.yaml --dry-run        # what would run, what is done
   rehabbot sweep sweeps/example.yaml --address ray://head:10001   # an existing cluster
+  rehabbot sweep sweeps/rsl-ppo-reach-v2.yaml --cpus 2   # rsl_rl PPO on the batched env
 
 The file lists env ids, algorithms, seeds and optional hyperparameter values to cross
 (docs/sweeps.md). Every trial is an ordinary run folder of `rehabbot train`:
 OUT/<env>/<algo>/seed<k>, or OUT/<variant>/<env>/<algo>/seed<k> for a grid variant; OUT/sweep.json
-lists every trial and its status, OUT/_ray holds Ray Tune's own files. Running the same
-command again skips finished trials and continues interrupted ones from their newest
+lists every trial and its status, OUT/_ray holds Ray Tune's own files. With `backend:
+rsl_rl` a trial is a run of `rehabbot train --algo ppo --backend rsl_rl` (n_envs: its worlds;
+resources_per_trial: {cpu: 2, gpu: 1} on a GPU machine). Running the same command again
+skips finished trials and continues interrupted ones from their newest
 checkpoint (--resume does the same, and insists that OUT holds a sweep). `rehabbot plot OUT`
 and benchmarks/results/results_table.py OUT read the sweep's runs.
 

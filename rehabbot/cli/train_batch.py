@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 from pathlib import Path
 from typing import Any
@@ -14,30 +13,9 @@ from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import env_short_name, resolve_env_id
 
 BATCH_BACKEND = "rsl_rl"
-DEFAULT_BATCH_TIMESTEPS = 50_000_000
 # Options of the CPU trainers that a batched run has no use for: (attribute, flag).
 CPU_ONLY_OPTIONS = (("eval_freq", "--eval-freq"), ("eval_episodes", "--eval-episodes"),
                     ("demos", "--demos"), ("bc", "--bc"))
-
-
-def read_settings(path: str | None, env_id: str) -> dict[str, Any]:
-    """rsl_rl PPO settings from a YAML file: a mapping of
-    :class:`~rehabbot.rl.batch_training.RslPpoSettings` fields, or of env ids (with or without
-    ``rehabbot/``) to such mappings; {} without a file."""
-    if path is None:
-        return {}
-    import yaml
-
-    try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as err:
-        raise UsageError(f"cannot read --hyperparams {path!r}: {err}") from err
-    if not isinstance(data, dict):
-        raise UsageError(f"--hyperparams {path!r} must hold a mapping of rsl_rl PPO settings")
-    for key in (env_id, env_short_name(env_id)):
-        if isinstance(data.get(key), dict):
-            return dict(data[key])
-    return data
 
 
 def _resume_command(args: argparse.Namespace, env_id: str, seeds: list[int],
@@ -51,16 +29,18 @@ def _resume_command(args: argparse.Namespace, env_id: str, seeds: list[int],
 def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
                       env_kwargs: dict[str, Any] | None) -> int:
     """Train every seed of ``args`` on the batched env; 0 when done, 130/143 interrupted."""
-    # JAX and PyTorch share the GPU here: JAX must not take 75 % of its memory at start (its
-    # default), or PyTorch's learner runs out. A user's own setting is kept.
-    os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
     from rehabbot.rl.batch_training import (
         DEFAULT_NUM_ENVS,
+        DEFAULT_TIMESTEPS,
         BatchRunPlan,
         BatchTrainingInterrupted,
         RslPpoSettings,
+        read_settings,
+        share_gpu_with_torch,
         train_batched,
     )
+
+    share_gpu_with_torch()  # JAX and PyTorch share the GPU here
 
     if args.algo.lower() != "ppo":
         raise UsageError(f"--backend {BATCH_BACKEND} trains PPO only, not {args.algo!r}")
@@ -75,7 +55,7 @@ def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
     settings = RslPpoSettings.from_mapping(read_settings(args.hyperparams, env_id))
     args.n_envs = args.n_envs or DEFAULT_NUM_ENVS
     seeds = list(args.seeds or default_seeds)
-    total = args.timesteps or DEFAULT_BATCH_TIMESTEPS
+    total = args.timesteps or DEFAULT_TIMESTEPS
     kwargs = {} if args.checkpoint_freq is None else {"checkpoint_freq": args.checkpoint_freq}
     for seed in seeds:
         plan = BatchRunPlan(env_id, seed=seed, total_timesteps=total, out_dir=Path(args.out),

@@ -33,6 +33,7 @@ import contextlib
 import csv
 import io
 import math
+import os
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -53,6 +54,7 @@ from rehabbot.common.provenance import (
 from rehabbot.common.signals import SignalLatch, handling_signals
 from rehabbot.envs.registration import NAMESPACE, env_short_name, resolve_env_id
 from rehabbot.rl import runs
+from rehabbot.rl.hyperparam_checks import coerce_number
 
 BACKEND = "rsl_rl"
 ALGO = "ppo"
@@ -61,6 +63,10 @@ FULL_MODEL_NAME = "model.pt"
 LOG_NAME = "training_log.csv"
 CHECKPOINT_PREFIX = "rsl_ppo"
 DEFAULT_NUM_ENVS = 4096
+DEFAULT_TIMESTEPS = 50_000_000
+# The modules a batched run imports (all from the `gpu` extra), checked before a sweep starts.
+BATCH_MODULES = ("jax", "warp", "torch", "tensordict", "rsl_rl")
+BATCH_EXTRA_HINT = 'pip install "rehabbot[gpu]"'
 # The packages a batched run depends on, recorded in its manifest.
 BATCH_PACKAGES = ("rsl-rl-lib", "torch", "tensordict", "jax", "jaxlib", "mujoco-mjx",
                   "warp-lang")
@@ -106,7 +112,9 @@ class RslPpoSettings:
         unknown = sorted(set(values) - known)
         if unknown:
             raise UsageError(f"unknown rsl_rl PPO settings {unknown}; known: {sorted(known)}")
-        merged = {**asdict(cls()), **dict(values)}
+        defaults = asdict(cls())
+        merged = {**defaults, **{key: _number_like(value, defaults[key])
+                                 for key, value in values.items()}}
         for key in ("actor_hidden_dims", "critic_hidden_dims"):
             merged[key] = tuple(merged[key])
         settings = cls(**merged)
@@ -147,6 +155,54 @@ class RslPpoSettings:
             "num_steps_per_env": self.num_steps_per_env,
             "multi_gpu": None,
         }
+
+
+def _number_like(value: Any, default: Any) -> Any:
+    """``value``, read as a number where the default is one (PyYAML reads ``3e-4`` as the
+    string ``"3e-4"``)."""
+    if isinstance(default, (int, float)) and not isinstance(default, bool):
+        return coerce_number(value)
+    return value
+
+
+def read_settings(path: str | Path | None, env_id: str,
+                  label: str = "--hyperparams") -> dict[str, Any]:
+    """rsl_rl PPO settings from a YAML file: a mapping of :class:`RslPpoSettings` fields, or
+    of env ids (with or without ``rehabbot/``) to such mappings; {} without a file. ``label``
+    names the file's setting in errors.
+
+    Raises:
+        UsageError: the file cannot be read, is not YAML or holds no mapping.
+    """
+    if path is None:
+        return {}
+    import yaml
+
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as err:
+        raise UsageError(f"cannot read {label} {str(path)!r}: {err}") from err
+    if not isinstance(data, dict):
+        raise UsageError(f"{label} {str(path)!r} must hold a mapping of rsl_rl PPO settings")
+    for key in (env_id, env_short_name(env_id)):
+        if isinstance(data.get(key), dict):
+            return dict(data[key])
+    return data
+
+
+def missing_modules() -> list[str]:
+    """The modules of :data:`BATCH_MODULES` that cannot be imported here (found without
+    importing them)."""
+    import importlib.util
+
+    return [name for name in BATCH_MODULES if importlib.util.find_spec(name) is None]
+
+
+def share_gpu_with_torch() -> None:
+    """Keep JAX from taking 75 % of the GPU's memory when it starts (its default), which
+    PyTorch's learner then lacks; a user's own ``XLA_PYTHON_CLIENT_PREALLOCATE`` is kept.
+    Call before JAX is imported."""
+    os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
 
 @dataclass
@@ -212,6 +268,19 @@ def newest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
         if middle.isdigit():
             found.append((int(middle), path))
     return max(found) if found else None
+
+
+def resume_point(run_dir: Path, manifest: Mapping[str, Any] | None) -> tuple[int, Path] | None:
+    """``(steps, path)`` to resume from: the newest checkpoint, or the final model.pt of a
+    finished run (saved at its end, with the same contents) when that is newer; None when
+    there is neither."""
+    found = newest_checkpoint(run_dir)
+    model = run_dir / FULL_MODEL_NAME
+    if manifest and manifest.get("status") == "finished" and model.is_file():
+        done = int(manifest.get("timesteps_done") or 0)
+        if found is None or done > found[0]:
+            return done, model
+    return found
 
 
 def batch_versions() -> dict[str, str | None]:
@@ -329,7 +398,7 @@ def _plan_start(plan: BatchRunPlan) -> tuple[dict[str, Any] | None, tuple[int, P
             if manifest.get(key) != mine:
                 raise UsageError(f"--resume with {key} {mine!r}, but {run_dir} was trained "
                                  f"with {manifest.get(key)!r}")
-        return manifest, newest_checkpoint(run_dir)
+        return manifest, resume_point(run_dir, manifest)
     if run_dir.is_dir() and runs.has_content(run_dir) and not plan.overwrite:
         raise UsageError(f"{run_dir} already holds a run ({runs.describe(run_dir)}); continue "
                          "it with --resume or start over with --overwrite")

@@ -2,18 +2,20 @@
 ordinary run folder written by :func:`rehabbot.rl.training.train_run` (:func:`run_sweep`).
 
 The sweep's file is read and checked by :mod:`rehabbot.rl.sweep_config`; docs/sweeps.md
-describes it. Ray runs one trial per CPU by default (``resources_per_trial``), on a local
-Ray started for the sweep or on an existing cluster (``address``). Each trial calls
-``train_run`` in its Ray worker.
+describes it. Ray runs one trial per CPU by default (``resources_per_trial``; ``gpu: 1``
+gives a trial a GPU of its own), on a local Ray started for the sweep or on an existing cluster
+(``address``). Each trial calls ``train_run`` in its Ray worker, or, for ``backend: rsl_rl``,
+:func:`~rehabbot.rl.batch_training.train_batched` (rsl_rl's PPO on the batched env), which
+writes the same run folder.
 
 **Resuming is our own, not Ray's.** Before Ray starts, every trial's run folder is
 inspected (:func:`trial_state`): a finished run that reached its step count is skipped; a run
 with a checkpoint (interrupted, killed, or asked for more steps) is continued with
-``train_run(..., resume=True)``; a folder that holds no checkpoint yet is started again;
-an absent one is started. Each invocation is a fresh Ray Tune experiment of the trials left
-(``Tuner.restore`` is not used): the run folders, written atomically by ``train_run``, are the
-only state, so a sweep resumes after Ctrl-C, a crash of the driver, a lost Ray cluster or an
-edited sweep file (more seeds, more steps) alike.
+``train_run(..., resume=True)`` (a batched run: ``BatchRunPlan(resume=True)``); a folder that
+holds no checkpoint yet is started again; an absent one is started. Each invocation is a fresh
+Ray Tune experiment of the trials left (``Tuner.restore`` is not used): the run folders,
+written atomically by ``train_run``, are the only state, so a sweep resumes after Ctrl-C, a
+crash of the driver, a lost Ray cluster or an edited sweep file (more seeds, more steps) alike.
 
 Ray Tune's files go to ``OUT/_ray/<experiment>`` (its ``storage_path``; never
 ``~/ray_results``), with a copy of the trials' stdout/stderr in ``logs/`` for a local Ray; the
@@ -40,7 +42,8 @@ from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
 from rehabbot.common.signals import keeping_signal_handlers
 from rehabbot.common.tables import text_table
-from rehabbot.rl import runs
+from rehabbot.rl import batch_training, runs
+from rehabbot.rl.algorithms import BackendUnavailableError
 from rehabbot.rl.backends import DEFAULT_BACKEND
 from rehabbot.rl.planning import check_demonstrations, find_resume_point, run_is_complete
 from rehabbot.rl.sweep_config import (
@@ -96,11 +99,31 @@ def trial_state(trial: Trial) -> str:
         manifest = runs.read_manifest(run_dir)
     except DataError:
         return "resume"  # train_run names the damaged manifest
+    if trial.batched:
+        return _batch_state(run_dir, manifest, trial.total_timesteps)
     if run_is_complete(run_dir, manifest, trial.total_timesteps):
         return "complete"
     if find_resume_point(run_dir, manifest) is not None:
         return "resume"
     return "restart"
+
+
+def _batch_state(run_dir: Path, manifest: Mapping[str, Any] | None, steps: int) -> str:
+    """:func:`trial_state` of a batched (rsl_rl) run: ``complete`` when its manifest says
+    finished at ``steps`` or more and its actor (policy.npz) and model.pt are written;
+    ``resume`` from its newest checkpoint (or the model.pt of a finished run asked for more
+    steps), and for a run of another backend (which
+    :func:`~rehabbot.rl.batch_training.train_batched` then refuses by name instead of
+    overwriting it); else ``restart``."""
+    if manifest and manifest.get("backend") != batch_training.BACKEND:
+        return "resume"
+    if manifest and manifest.get("status") == "finished" \
+            and int(manifest.get("timesteps_done") or 0) >= steps \
+            and (run_dir / batch_training.POLICY_NAME).is_file() \
+            and (run_dir / batch_training.FULL_MODEL_NAME).is_file():
+        return "complete"
+    found = batch_training.resume_point(run_dir, manifest)
+    return "resume" if found is not None else "restart"
 
 
 def run_status(trial: Trial) -> dict[str, Any]:
@@ -142,14 +165,18 @@ def run_trial(spec: Mapping[str, Any], command: Sequence[str] = ()) -> dict[str,
         if command:
             sys.argv = list(command)
         try:
-            train_run(trial.env_id, trial.algo, trial.seed, trial.total_timesteps,
-                      trial.out_dir, n_envs=trial.n_envs,
-                      hyperparams=trial.build_hyperparameters(), env_kwargs=trial.env_kwargs,
-                      resume=state == "resume", overwrite=state == "restart",
-                      eval_freq=trial.eval_freq, eval_episodes=trial.eval_episodes,
-                      checkpoint_freq=trial.checkpoint_freq, progress_bar=False,
-                      backend=trial.backend or DEFAULT_BACKEND, demos=trial.demos,
-                      bc=bool(trial.bc))
+            if trial.batched:
+                _train_batched_trial(trial, state)
+            else:
+                train_run(trial.env_id, trial.algo, trial.seed, trial.total_timesteps,
+                          trial.out_dir, n_envs=trial.n_envs,
+                          hyperparams=trial.build_hyperparameters(),
+                          env_kwargs=trial.env_kwargs, resume=state == "resume",
+                          overwrite=state == "restart", eval_freq=trial.eval_freq,
+                          eval_episodes=trial.eval_episodes,
+                          checkpoint_freq=trial.checkpoint_freq, progress_bar=False,
+                          backend=trial.backend or DEFAULT_BACKEND, demos=trial.demos,
+                          bc=bool(trial.bc))
         except Exception as err:  # a trial's failure is reported, not raised
             error = " ".join(f"{type(err).__name__}: {err}".split())
         finally:
@@ -162,6 +189,20 @@ def run_trial(spec: Mapping[str, Any], command: Sequence[str] = ()) -> dict[str,
         record.update(status="failed", error=f"{trial.run_dir} did not finish "
                                              f"({runs.describe(trial.run_dir)})")
     return record
+
+
+def _train_batched_trial(trial: Trial, state: str) -> Path:
+    """Train a batched trial with :func:`~rehabbot.rl.batch_training.train_batched`: the run
+    folder ``rehabbot train --backend rsl_rl`` writes, resumed from its newest checkpoint for
+    ``state == "resume"``, started over for ``"restart"``."""
+    batch_training.share_gpu_with_torch()
+    kwargs = {} if trial.checkpoint_freq is None else {"checkpoint_freq": trial.checkpoint_freq}
+    plan = batch_training.BatchRunPlan(
+        trial.env_id, seed=trial.seed, total_timesteps=trial.total_timesteps,
+        out_dir=trial.out_dir, num_envs=trial.n_envs or batch_training.DEFAULT_NUM_ENVS,
+        env_kwargs=dict(trial.env_kwargs or {}), settings=trial.build_rsl_settings(),
+        resume=state == "resume", overwrite=state == "restart", **kwargs)
+    return batch_training.train_batched(plan)
 
 
 def _ray_trial(config: dict[str, Any]) -> None:
@@ -281,6 +322,21 @@ def check_sweep(config: SweepConfig) -> list[Trial]:
     return trials
 
 
+def check_batch_modules(trials: Sequence[Trial]) -> None:
+    """Refuse batched (rsl_rl) trials to run on a local Ray without the modules they import
+    (JAX, Warp, PyTorch, rsl_rl), before Ray starts rather than in every trial.
+
+    Raises:
+        BackendUnavailableError: naming the missing modules and the extra that installs them.
+    """
+    missing = batch_training.missing_modules() if any(t.batched for t in trials) else []
+    if missing:
+        raise BackendUnavailableError(
+            f"backend {batch_training.BACKEND} needs {', '.join(missing)}, which "
+            f"{'is' if len(missing) == 1 else 'are'} not installed "
+            f"({batch_training.BATCH_EXTRA_HINT})")
+
+
 def _init_ray(address: str | None, cpus: int | None) -> tuple[bool, Path | None]:
     """Connect to ``address`` or start a local Ray of ``cpus`` CPUs; returns whether it was
     started here and Ray's session folder (sockets and logs, in Ray's temp folder)."""
@@ -320,6 +376,24 @@ def _keep_worker_logs(session_dir: Path | None, destination: Path) -> None:
             continue
 
 
+def check_local_resources(asked: Mapping[str, float], available: Mapping[str, float]) -> None:
+    """Refuse ``resources_per_trial`` that the local Ray (``ray.cluster_resources()``:
+    ``CPU``, ``GPU``, ``memory``, custom names) cannot give one trial: Ray Tune would wait for
+    them for ever. ``gpu: 1`` on a machine where Ray finds no GPU is the likely case.
+
+    Raises:
+        SweepUsageError: naming the resource, what a trial asks and what the local Ray has.
+    """
+    for name, amount in asked.items():
+        key = name.upper() if name.lower() in ("cpu", "gpu") else name
+        have = float(available.get(key, 0.0))
+        if amount > have:
+            hint = "; Ray finds no GPU here (CUDA_VISIBLE_DEVICES, drivers): remove gpu or " \
+                   "run the sweep on a GPU machine" if key == "GPU" and have == 0 else ""
+            raise SweepUsageError(f"resources_per_trial asks for {name}: {amount:g} per trial, "
+                                  f"but the local Ray has {have:g}{hint}")
+
+
 def _run_on_ray(state: _SweepState, pending: list[Trial], address: str | None,
                 cpus: int | None) -> bool:
     """Run ``pending`` as one Ray Tune experiment; returns whether it was interrupted."""
@@ -338,6 +412,8 @@ def _run_on_ray(state: _SweepState, pending: list[Trial], address: str | None,
     logging.getLogger("ray").setLevel(logging.ERROR)
     interrupted = False
     try:
+        if started and address is None:
+            check_local_resources(resources, ray.cluster_resources())
         tuner = tune.Tuner(
             tune.with_resources(_ray_trial, dict(resources)),
             param_space={"command": state.command,
@@ -380,8 +456,10 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
 
     Raises:
         SweepConfigError: a bad setting in the sweep file (checked before anything runs).
-        SweepUsageError: ``cpus`` with ``address``, too few CPUs for a trial, nothing to
-            resume.
+        SweepUsageError: ``cpus`` with ``address``, too few CPUs (or GPUs) for a trial,
+            nothing to resume.
+        BackendUnavailableError: batched trials to run on a local Ray without JAX, Warp or
+            rsl_rl installed.
         SweepError: Ray is missing, cannot start or fails.
         OutputError: the output folder cannot be written.
     """
@@ -402,6 +480,8 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
     state = _SweepState(config, trials, command or sys.argv, announce)
     states = {trial.key: trial_state(trial) for trial in trials}
     pending = [trial for trial in trials if states[trial.key] != "complete"]
+    if address is None and not dry_run:
+        check_batch_modules(pending)
     for trial in trials:
         if states[trial.key] == "complete":
             state.update(trial.key, {"action": "skipped"})

@@ -10,7 +10,13 @@ A sweep crosses env ids × algorithms × seeds, and optionally hyperparameter va
   overrides (``learning_rate=0.001,batch_size=128``) and the run's hyperparameter source reads
   ``<file> [<variant>]``, so the results table keeps variants apart.
 
-This module imports neither Ray nor Stable-Baselines3.
+An algorithm with ``backend: rsl_rl`` (PPO only) trains on the batched env instead, one run of
+:func:`rehabbot.rl.batch_training.train_batched` per trial, in the same folders: ``n_envs``
+counts its worlds, ``hyperparams`` is a YAML file of
+:class:`~rehabbot.rl.batch_training.RslPpoSettings` fields and ``grid`` crosses those fields;
+the keys of the CPU trainers it has no use for are refused by name.
+
+This module imports neither Ray nor Stable-Baselines3 (nor JAX or PyTorch).
 """
 
 from __future__ import annotations
@@ -29,8 +35,12 @@ from typing import Any
 from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import env_short_name, resolve_env_id
 from rehabbot.rl import runs
-from rehabbot.rl.algorithms import ALGORITHMS, check_algo
-from rehabbot.rl.backends import DEFAULT_BACKEND, check_backend_choice, resolve_backend
+from rehabbot.rl.algorithms import ALGORITHMS, check_algo, one_of
+from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND, resolve_backend
+from rehabbot.rl.batch_training import BACKEND as BATCH_BACKEND
+from rehabbot.rl.batch_training import DEFAULT_NUM_ENVS as DEFAULT_BATCH_ENVS
+from rehabbot.rl.batch_training import DEFAULT_TIMESTEPS as DEFAULT_BATCH_TIMESTEPS
+from rehabbot.rl.batch_training import RslPpoSettings, read_settings
 from rehabbot.rl.hyperparam_checks import as_count
 from rehabbot.rl.hyperparams import (
     Hyperparameters,
@@ -46,6 +56,13 @@ SWEEP_KEYS = ("out", "envs", "algos", "seeds", "timesteps", "hyperparams", "grid
               "env_kwargs", "eval_freq", "eval_episodes", "checkpoint_freq", "n_envs",
               "backend", "demos", "bc", "resources_per_trial")
 REQUIRED_KEYS = ("envs", "algos", "seeds")
+SWEEP_BACKENDS = (*BACKEND_CHOICES, BATCH_BACKEND)
+# Keys of the CPU trainers that a batched (rsl_rl) trial has no use for; 0 or false is allowed,
+# as `rehabbot train --backend rsl_rl` allows --eval-freq 0.
+CPU_ONLY_KEYS = ("eval_freq", "eval_episodes", "demos", "bc")
+# Keys a sweep file may not hold, with what to write instead.
+MISNAMED_KEYS = {"num_envs": "n_envs (the batched worlds of backend rsl_rl, as "
+                             "`rehabbot train --num-envs` is --n-envs)"}
 DEFAULT_OUT = "runs/sweep"
 DEFAULT_RESOURCES: dict[str, float] = {"cpu": 1}
 RAY_DIR = "_ray"
@@ -90,8 +107,13 @@ class Trial:
     bc: bool | None = None
 
     @property
+    def batched(self) -> bool:
+        """Whether the trial trains rsl_rl's PPO on the batched env."""
+        return self.backend == BATCH_BACKEND
+
+    @property
     def run_dir(self) -> Path:
-        """The run folder :func:`train_run` writes."""
+        """The run folder :func:`train_run` (or :func:`train_batched`) writes."""
         return runs.run_directory(self.out_dir, self.env_id, self.algo, self.seed)
 
     @property
@@ -102,12 +124,21 @@ class Trial:
 
     def build_hyperparameters(self) -> Hyperparameters:
         """The run's settings: the file's entry with the variant's overrides on top, read
-        for the backend that trains it here."""
+        for the backend that trains it here (not for a batched trial:
+        :meth:`build_rsl_settings`)."""
+        if self.batched:
+            raise UsageError(f"{self.key} trains on the {BATCH_BACKEND} backend: its settings "
+                             "are build_rsl_settings()")
         return hyperparameters_from_mapping(self.hyperparams["given"], self.algo,
                                             source=self.hyperparams["source"],
                                             entry=self.hyperparams["entry"],
                                             backend=resolve_backend(self.backend or
                                                                     DEFAULT_BACKEND, self.algo))
+
+    def build_rsl_settings(self) -> RslPpoSettings:
+        """A batched trial's rsl_rl PPO settings: the file's with the variant's overrides on
+        top (:class:`UsageError` naming a bad one)."""
+        return RslPpoSettings.from_mapping(self.hyperparams["given"])
 
     def to_json(self) -> dict[str, Any]:
         """The trial as JSON-able data (the Ray trial's config, an entry of sweep.json)."""
@@ -159,6 +190,9 @@ class SweepConfig:
         trials: list[Trial] = []
         for env_id in self.envs:
             for algo in self.algos:
+                if self.backend[algo] == BATCH_BACKEND:
+                    trials += self._batch_trials(env_id, algo)
+                    continue
                 with naming(f"{self.source}: backend of {algo}"):
                     backend = resolve_backend(self.backend[algo] or DEFAULT_BACKEND, algo)
                 with naming(f"{self.source}: hyperparams of {algo} on {env_short_name(env_id)}"):
@@ -185,6 +219,34 @@ class SweepConfig:
                       checkpoint_freq=self.checkpoint_freq, backend=self.backend[algo],
                       demos=self.demos[algo], bc=self.bc[algo])
                 for seed in self.seeds]
+
+
+    def _batch_trials(self, env_id: str, algo: str) -> list[Trial]:
+        """The trials of a ``backend: rsl_rl`` algorithm on ``env_id``: its settings file (or
+        rsl_rl's defaults of :class:`RslPpoSettings`) with each grid variant on top, checked
+        here."""
+        path = self.hyperparams[algo]
+        where = f"{self.source}: hyperparams of {algo} on {env_short_name(env_id)}"
+        with naming(where):
+            base = read_settings(path, env_id, label="rsl_rl PPO settings file")
+            RslPpoSettings.from_mapping(base)
+        file_source = path if path is not None else "rsl_rl PPO defaults"
+        trials: list[Trial] = []
+        for variant, overrides in variants(self.grid.get(algo, {})):
+            given = {**jsonable(base), **jsonable(overrides)}
+            with naming(f"{self.source}: grid of {algo} on {env_short_name(env_id)}"):
+                RslPpoSettings.from_mapping(given)
+            source = file_source if variant is None else f"{file_source} [{variant}]"
+            trials += [Trial(env_id=env_id, algo=algo, seed=seed,
+                             total_timesteps=self.timesteps[algo] or DEFAULT_BATCH_TIMESTEPS,
+                             out_dir=self.out / variant if variant else self.out,
+                             variant=variant, overrides=dict(overrides),
+                             hyperparams={"source": source, "entry": None, "given": given},
+                             env_kwargs=self.env_kwargs,
+                             n_envs=self.n_envs[algo] or DEFAULT_BATCH_ENVS,
+                             checkpoint_freq=self.checkpoint_freq, backend=BATCH_BACKEND)
+                       for seed in self.seeds]
+        return trials
 
 
 def variant_name(overrides: Mapping[str, Any]) -> str:
@@ -272,7 +334,7 @@ def _settings_name(value: Any, where: str) -> str:
 
 def _backend_choice(value: Any, where: str) -> str:
     with naming(where):
-        return check_backend_choice(value)
+        return one_of(value, SWEEP_BACKENDS, "backend")
 
 
 def _flag(value: Any, where: str) -> bool:
@@ -337,8 +399,36 @@ def _resources(value: Any, where: str) -> dict[str, float]:
                 or not isinstance(number, (int, float)) or number < 0:
             raise SweepConfigError(f"{where}: resources_per_trial.{name} must be a number >= 0, "
                                    f"got {amount!r}")
-        parsed[name] = number
+        parsed[name.lower() if name.lower() in ("cpu", "gpu") else name] = number
     return parsed
+
+
+def _is_set(value: Any) -> bool:
+    """Whether a CPU trainer's key asks for something (0 and false ask for nothing)."""
+    return value is not None and value is not False and value != 0
+
+
+def _check_batch_keys(config: SweepConfig) -> None:
+    """Refuse, by name, what a ``backend: rsl_rl`` algorithm cannot do: an algorithm other
+    than PPO, and the keys of the CPU trainers (evaluation during training, expert episodes,
+    behaviour cloning), which the batched trainer would otherwise ignore."""
+    for algo in config.algos:
+        if config.backend[algo] != BATCH_BACKEND:
+            continue
+        if algo != "ppo":
+            raise SweepConfigError(f"{config.source}: backend: {BATCH_BACKEND} trains ppo only, "
+                                   f"not {algo!r} (give {algo} another backend: "
+                                   f"{{backend: {{ppo: {BATCH_BACKEND}, {algo}: auto}}}})")
+        asked = {"eval_freq": config.eval_freq, "eval_episodes": config.eval_episodes,
+                 "demos": config.demos[algo], "bc": config.bc[algo]}
+        for key in CPU_ONLY_KEYS:
+            if _is_set(asked[key]):
+                raise SweepConfigError(
+                    f"{config.source}: {key}={asked[key]!r} is not used by backend "
+                    f"{BATCH_BACKEND} of {algo} (the batched trainer neither evaluates during "
+                    "training nor learns from expert episodes; evaluate its runs with "
+                    "`rehabbot evaluate RUN_DIR`): remove it, or sweep the other algorithms "
+                    "in a file of their own")
 
 
 def parse_sweep_config(data: Any, source: str = "sweep config") -> SweepConfig:
@@ -354,6 +444,10 @@ def parse_sweep_config(data: Any, source: str = "sweep config") -> SweepConfig:
     if not isinstance(data, Mapping):
         raise SweepConfigError(f"{source} must hold a mapping of settings, not "
                                f"{type(data).__name__}")
+    misnamed = [key for key in data if key in MISNAMED_KEYS]
+    if misnamed:
+        raise SweepConfigError(f"{source}: unknown key {misnamed[0]!r}: write "
+                               f"{MISNAMED_KEYS[misnamed[0]]}")
     unknown = [key for key in data if key not in SWEEP_KEYS]
     if unknown:
         raise SweepConfigError(f"{source}: unknown key {unknown[0]!r} (valid keys: "
@@ -373,7 +467,7 @@ def parse_sweep_config(data: Any, source: str = "sweep config") -> SweepConfig:
     out = data.get("out", DEFAULT_OUT)
     if not isinstance(out, str) or not out:
         raise SweepConfigError(f"{source}: out must be a folder path, got {out!r}")
-    return SweepConfig(
+    config = SweepConfig(
         source=source, out=Path(out).expanduser().absolute(),
         envs=tuple(dict.fromkeys(envs)), algos=algos, seeds=tuple(dict.fromkeys(seeds)),
         timesteps=_per_algo(data, "timesteps", algos, source,
@@ -393,6 +487,8 @@ def parse_sweep_config(data: Any, source: str = "sweep config") -> SweepConfig:
         resources_per_trial=_resources(data.get("resources_per_trial"), source),
         raw=jsonable(dict(data)),
     )
+    _check_batch_keys(config)
+    return config
 
 
 def load_sweep_config(path: str | Path) -> SweepConfig:
