@@ -29,7 +29,7 @@ def test_import_rehabbot_loads_neither_batch_nor_jax():
     ("rehabbot/rehab-bilateral-v2", {}, "rehab-bilateral-v2"),
     ("rehabbot/rehab-reach-v1", {}, "rehab-reach-v1"),
     ("rehabbot/rehab-reach-myo-v2", {}, "rehab-reach-myo-v2"),
-    ("rehabbot/rehab-reach-population-v2", {}, "rehab-reach-population-v2"),
+    ("rehabbot/rehab-reach-population-v1", {}, "rehab-reach-population-v1"),
     ("rehabbot/rehab-reach-v2", {"action_scale": "native"}, "action_scale='native'"),
     ("rehabbot/rehab-reach-v2", {"reward": {"design": "progress", "effort_weight": 0.1}},
      "effort_weight=0.1"),

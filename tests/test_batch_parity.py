@@ -196,21 +196,30 @@ def test_weight_levels_drawn_per_world():
         assert error < OBS_TOL, (world, levels[world], error)
 
 
-def test_torque_mode_zeroes_the_servo_gains():
+@pytest.mark.parametrize("condition", [None, {"spasticity_mas": "3"},
+                                       {"effort": "active_assisted", "strength_fraction": 0.5}],
+                         ids=["healthy", "mas3", "active"])
+def test_torque_mode_zeroes_the_servo_gains(condition):
     """``control_mode="torque"``: MuJoCo Warp ignores ``opt.disableactuator``, so the batched
-    model has zero servo gains instead. World 0 holds zero torque and sags into the cuff-force
-    stop; world 1 pushes the shoulder and elbow and runs on: both as on the CPU."""
-    env_id, steps, kwargs = "rehabbot/rehab-reach-v2", 60, {"control_mode": "torque"}
+    model has zero servo gains instead. World 0 holds zero torque (a healthy arm sags into the
+    cuff-force stop); world 1 pushes the shoulder and elbow: both as on the CPU, for a healthy
+    arm and with a condition whose drive acts on the limb in the same physics steps."""
+    env_id, steps = "rehabbot/rehab-reach-v2", 60
+    kwargs = {"control_mode": "torque", **({"condition": condition} if condition else {})}
     unit_actions = ([0, 0, 0, 0, 0, 0], [0, -0.1, 0.1, 0, 0, 0])
     cpus = [cpu_episode(env_id, np.asarray(a, np.float32), max_steps=steps, **kwargs)
             for a in unit_actions]
-    assert cpus[0]["violation"] == "cuff_force" and cpus[1]["violation"] is None
+    if condition is None:
+        assert cpus[0]["violation"] == "cuff_force" and cpus[1]["violation"] is None
     actions = np.repeat(np.asarray(unit_actions, np.float32)[None], steps, axis=0)
     out = batched_rollout(env_id, actions, **kwargs)
-    stop = len(cpus[0]["actions"]) - 1
-    assert first_stop(out["done"][:, 0]) == stop
-    assert out["violation"][stop, 0] == batch.RULE_CODES["cuff_force"]
-    assert not out["done"][:, 1].any()
+    for world, cpu in enumerate(cpus):
+        if cpu["violation"] is None:
+            assert not out["done"][:, world].any()
+        else:
+            stop = len(cpu["actions"]) - 1
+            assert first_stop(out["done"][:, world]) == stop
+            assert out["violation"][stop, world] == batch.RULE_CODES[cpu["violation"]]
     layout = gym.make(env_id, **kwargs).unwrapped.agent_layout
     transient = np.zeros(layout.size, bool)
     for name in ("joint_velocity", "cuff_force"):
@@ -222,6 +231,10 @@ def test_torque_mode_zeroes_the_servo_gains():
         assert error[:, transient].max() < TORQUE_TRANSIENT_TOL
         assert abs(out["rewards"][:n, world].sum() - cpu["rewards"].sum()) <= \
             RETURN_RTOL * abs(cpu["rewards"].sum())
+        assert out["patient_work_j"][n - 1, world] == pytest.approx(
+            cpu["patient_work_j"], rel=WORK_RTOL, abs=1e-6)
+    if condition is not None:  # the drive does work in the pushed world
+        assert abs(cpus[1]["patient_work_j"]) > 1e-3
 
 
 @pytest.mark.parametrize("mode", ["joint_position", "joint_velocity"])

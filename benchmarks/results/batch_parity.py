@@ -32,6 +32,7 @@ from rehabbot.analysis.batch_parity import (
     band_rms,
     hold_still,
     replay_expert,
+    replay_population,
     replay_stops,
     tremor_spectrum,
 )
@@ -50,7 +51,13 @@ compared by its statistics: the robot holds still and batched world k starts its
 CPU seed k drew it. In the conditions' table, `rehab-reach-tremor-v2` therefore runs on
 different random streams in the two envs: its switches, termination and return agree, its
 observations and work need not. In `rehab-hip-spastic-v2` the expert moves too slowly for the
-grade-2 reflex to fire (no patient work)."""
+grade-2 reflex to fire (no patient work).
+
+The populations' table replays every patient of both shipped populations of each population
+id at once, patient k in world k of one batch, each world its own patient's CPU episode from
+`reset(seed=0, options={"exercise": 0, "weight_level": 0, "patient": k})`. Its differences
+are the largest over the population's patients without tremor (a tremor patient's random
+streams differ, as above; its switches and termination are counted with the others)."""
 
 # (kwargs, unit actions held side by side): the cuff force both ways; with the highest cuff
 # limit, unintended contact and range of motion.
@@ -61,6 +68,37 @@ STOP_ID = "rehabbot/rehab-reach-v2"
 # then every batched condition id (rehabbot.batch.tables.CONDITION_IDS).
 MAS4_CASE = ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "4"}})
 TREMOR_ID, TREMOR_STEPS, TREMOR_SEEDS = "rehabbot/rehab-reach-tremor-v2", 200, tuple(range(8))
+POPULATION_NAMES = ("train", "test")
+
+
+def population_replays(env_id: str, name: str) -> dict:
+    """Every patient of population ``name`` of ``env_id`` replayed side by side."""
+    import gymnasium as gym
+
+    population = gym.make(env_id, patients=name).unwrapped.population
+    rows = replay_population(env_id, range(len(population.patients)), patients=name)
+    tremor = [k for k, (_profile, condition) in enumerate(population.patients)
+              if condition.tremor_hz > 0 and condition.tremor_amplitude_nm > 0]
+    return {"id": env_id, "population": name, "tremor_patients": tremor,
+            "conditions": [c.describe() for c in population.conditions],
+            "profiles_m": [p.height_m for p in population.profiles], "rows": rows}
+
+
+def population_row(result: dict) -> list:
+    """A row of the populations' table."""
+    rows, tremor = result["rows"], set(result["tremor_patients"])
+    same = sum(r["switches_cpu"] == r["switches_batched"] and r["end_cpu"] == r["end_batched"]
+               and r["stop_batched"] == (r["stop_cpu"] or 0) for r in rows)
+    steady = [r for r in rows if r["patient"] not in tremor]
+    work_error = max(abs(r["patient_work_batched_j"] - r["patient_work_cpu_j"]) for r in steady)
+    return [result["id"].split("/")[1], result["population"],
+            f"{len(result['profiles_m'])} x {len(result['conditions'])} = {len(rows)}",
+            f"{same} of {len(rows)}",
+            f"{min(r['end_cpu'] for r in rows)} - {max(r['end_cpu'] for r in rows)}",
+            f"{max(r['obs_error'] for r in steady):.1e}",
+            f"{max(abs(r['return_batched'] / r['return_cpu'] - 1) for r in steady):.1e}",
+            f"{work_error:.1e}",
+            f"{max(abs(r['patient_work_cpu_j']) for r in steady):.2f}"]
 
 
 def tremor_rows() -> tuple[list[list], dict]:
@@ -104,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="write STEM.json and its page STEM.md (docs/results/batch-parity)")
     args = parser.parse_args(argv)
     import rehabbot.batch as batch  # needs the [gpu] extra: fail here, with its message
-    from rehabbot.batch.tables import CONDITION_IDS
+    from rehabbot.batch.tables import CONDITION_IDS, POPULATION_IDS
 
     cases = (MAS4_CASE, *((env_id, {}) for env_id in CONDITION_IDS))
 
@@ -147,6 +185,19 @@ def main(argv: list[str] | None = None) -> int:
         ["id (condition)", "steps", "target switches", "termination step (CPU / batched)",
          "return (CPU / batched)", "max obs difference", "patient work [J] (CPU / batched)",
          "robot work [J] (CPU / batched)"], [condition_row(r) for r in conditions])
+    populations = []
+    for env_id in POPULATION_IDS:
+        for name in POPULATION_NAMES:
+            populations.append(population_replays(env_id, name))
+            print(population_row(populations[-1]), flush=True)
+    population_table = make_table(
+        "populations", "Populations: every patient's scripted-expert episode, CPU against "
+        "batched, all patients of a population side by side in one batch",
+        ["id", "population", "patients (profiles x conditions)",
+         "same switches, termination and stop", "termination steps (CPU)",
+         "max obs difference", "max return difference (relative)",
+         "max patient work difference [J]", "largest patient work [J]"],
+        [population_row(p) for p in populations])
     rows, tremor = tremor_rows()
     tremor_table = make_table(
         "tremor", f"Tremor ({TREMOR_ID.split('/')[1]}, {tremor['tremor_hz']:g} Hz): the "
@@ -154,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{len(TREMOR_SEEDS)} runs",
         ["env", "spectral peak [Hz]", "RMS in tremor_hz +- 1 Hz [mrad]",
          "RMS per run [mrad], lowest - highest"], rows)
-    tables = [expert_table, stop_table, condition_table, tremor_table]
+    tables = [expert_table, stop_table, condition_table, population_table, tremor_table]
     for table in tables:
         print(table_markdown(table), flush=True)
     if args.page is not None:
@@ -164,12 +215,14 @@ def main(argv: list[str] | None = None) -> int:
             machine=describe_machine(), seeds={"reset": 0, "start": START},
             settings={"ids": list(batch.SUPPORTED_IDS), "stop_id": STOP_ID,
                       "conditions": [{"id": i, "kwargs": k} for i, k in cases],
+                      "populations": {"ids": list(POPULATION_IDS),
+                                      "names": list(POPULATION_NAMES)},
                       "tremor": {"id": TREMOR_ID, "steps": TREMOR_STEPS,
                                  "seeds": list(TREMOR_SEEDS)},
                       "stops": [{"kwargs": k, "unit_actions": [list(a) for a in u]}
                                 for k, u in STOPS]},
             data={"expert": replays, "stops": stops, "conditions": conditions,
-                  "tremor": tremor}), args.page)
+                  "populations": populations, "tremor": tremor}), args.page)
     return 0
 
 

@@ -55,10 +55,11 @@ def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int |
 
 
 def batched_rollout(env_id: str, actions: np.ndarray, start: dict | None = None,
-                    **kwargs: Any) -> dict:
+                    world_patients: Sequence[int] | None = None, **kwargs: Any) -> dict:
     """Every world's observations, rewards, dones, target indices, safety rules, robot and
     patient work for the actions ``(steps, worlds, n)``, from the same start as :func:`cpu_episode`
-    (no auto-reset: a stopped world stays stopped)."""
+    (no auto-reset: a stopped world stays stopped). ``world_patients``: a population id's
+    patient of each world (drawn when None)."""
     import jax
     import jax.numpy as jp
 
@@ -75,7 +76,10 @@ def batched_rollout(env_id: str, actions: np.ndarray, start: dict | None = None,
                            m["safety_violation"], m["robot_work_j"], m["patient_work_j"])
         return jax.lax.scan(body, state, action_seq)
 
-    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.key(0), worlds))
+    chosen = jp.asarray(world_patients if world_patients is not None else [-1] * worlds,
+                        jp.int32)
+    state = jax.jit(jax.vmap(env.reset, in_axes=(0, None, None, 0)))(
+        jax.random.split(jax.random.key(0), worlds), -1, -1, chosen)
     _, out = jax.jit(run)(state, jp.asarray(actions))
     names = ("obs", "rewards", "done", "index", "violation", "robot_work_j", "patient_work_j")
     return {"reset_obs": np.asarray(state.obs),
@@ -117,6 +121,41 @@ def replay_expert(env_id: str, other_world_offset: float = 0.3, start: dict | No
         "patient_work_cpu_j": float(cpu["patient_work_j"]),
         "patient_work_batched_j": float(out["patient_work_j"][steps - 1, 0]),
     }
+
+
+def replay_population(env_id: str, world_patients: Sequence[int], start: dict | None = None,
+                      **kwargs: Any) -> list[dict]:
+    """The CPU population env's scripted-expert episode of each patient of ``world_patients``
+    (from ``reset(seed=0, options={**start, "patient": k})``), all replayed at once: patient
+    ``world_patients[i]`` in world ``i`` of one batch, each world with its own patient's
+    model fields and tables. What each env gave, per patient (as :func:`replay_expert`);
+    ``kwargs``: both envs' keyword arguments (``patients="test"``, for example)."""
+    start = start or START
+    cpus = [cpu_episode(env_id, start={**start, "patient": k}, **kwargs)
+            for k in world_patients]
+    steps = max(len(c["actions"]) for c in cpus)
+    actions = np.zeros((steps, len(cpus), cpus[0]["actions"].shape[1]), np.float32)
+    for world, cpu in enumerate(cpus):
+        actions[:len(cpu["actions"]), world] = cpu["actions"]
+    out = batched_rollout(env_id, actions, start=start, world_patients=world_patients, **kwargs)
+    rows = []
+    for world, (patient, cpu) in enumerate(zip(world_patients, cpus, strict=True)):
+        n = len(cpu["actions"])
+        done = np.flatnonzero(out["done"][:, world])
+        rows.append({
+            "id": env_id, "patient": int(patient), "start": start, "steps": n,
+            "switches_cpu": switches(cpu["index"]),
+            "switches_batched": switches(np.r_[0, out["index"][:n, world]]),
+            "end_cpu": n - 1, "end_batched": int(done[0]) if done.size else None,
+            "stop_cpu": cpu["violation"], "stop_batched": int(out["violation"][:n, world].max()),
+            "return_cpu": float(cpu["rewards"].sum()),
+            "return_batched": float(out["rewards"][:n, world].sum()),
+            "reset_obs_error": float(np.abs(out["reset_obs"][world] - cpu["obs"][0]).max()),
+            "obs_error": float(np.abs(out["obs"][:n, world] - cpu["obs"][1:]).max()),
+            "patient_work_cpu_j": float(cpu["patient_work_j"]),
+            "patient_work_batched_j": float(out["patient_work_j"][n - 1, world]),
+        })
+    return rows
 
 
 def replay_stops(env_id: str, unit_actions: Sequence[Sequence[float]],

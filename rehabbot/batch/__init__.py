@@ -1,4 +1,4 @@
-"""The batched backend (issue 29, first part): the ``-v2`` ids as functional JAX envs on
+"""The batched backend (issue 29): the ``-v2`` ids as functional JAX envs on
 MuJoCo Warp (through MJX, ``impl="warp"``), in MuJoCo Playground's interface.
 
 ``import rehabbot`` never imports this package (nor JAX or Warp); it needs the ``[gpu]``
@@ -34,7 +34,7 @@ with dropping_stderr_lines(NO_CUDA_DRIVER_WARNING):
 
 from rehabbot.batch.env import BatchedRehabEnv  # noqa: E402
 from rehabbot.batch.state import State  # noqa: E402
-from rehabbot.batch.tables import RULE_CODES, SUPPORTED_IDS  # noqa: E402
+from rehabbot.batch.tables import BATCHED_IDS, RULE_CODES, SUPPORTED_IDS  # noqa: E402
 from rehabbot.batch.vector import BatchedVectorEnv, make_vec, register_vector_entry_points  # noqa: E402
 
 
@@ -48,5 +48,5 @@ def make(env_id: str, **kwargs: Any) -> BatchedRehabEnv:
     return BatchedRehabEnv(env_id, **kwargs)
 
 
-__all__ = ["RULE_CODES", "SUPPORTED_IDS", "BatchedRehabEnv", "BatchedVectorEnv", "State", "make",
-           "make_vec", "register_vector_entry_points"]
+__all__ = ["BATCHED_IDS", "RULE_CODES", "SUPPORTED_IDS", "BatchedRehabEnv", "BatchedVectorEnv",
+           "State", "make", "make_vec", "register_vector_entry_points"]

@@ -27,7 +27,6 @@ contact), which belong to this world only, whatever ``vmap`` does.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -39,8 +38,9 @@ from mujoco import mjx
 
 from rehabbot.batch.patient import BatchedPatientDrive
 from rehabbot.batch.patient_tables import read_patient_tables
+from rehabbot.batch.patients import PatientStack, stack_patients
 from rehabbot.batch.state import State
-from rehabbot.batch.tables import RULE_CODES, EnvTables, check_id, read_tables
+from rehabbot.batch.tables import POPULATION_IDS, RULE_CODES, EnvTables, check_id, read_tables
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
 CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
@@ -85,6 +85,16 @@ class BatchedRehabEnv:
     """A ``-v2`` id as a functional env (module docstring); make it with
     :func:`rehabbot.batch.make`.
 
+    A population id (:data:`~rehabbot.batch.tables.POPULATION_IDS`) holds every patient of
+    its population (:mod:`rehabbot.batch.patients`): each world draws its patient at every
+    reset, and ``info["patient"]`` and ``metrics["patient"]`` name it (an index into
+    ``cpu_env.population.patients``, as the CPU env's ``info["patient"]``).
+
+    Attributes:
+        tables: the first patient's tables (the fields every patient shares, and that
+            patient's own); ``patients.arrays`` holds every patient's.
+        patient_envs: the CPU env of every patient (one for a single-patient id).
+
     Args:
         env_id: the registered id.
         naconmax: contact slots of all worlds together (MuJoCo Warp shares them between the
@@ -100,14 +110,23 @@ class BatchedRehabEnv:
                 raise ValueError(f"{name}={value!r} must be a positive integer")
         check_id(env_id)
         cpu = gym.make(env_id, **kwargs).unwrapped
-        model_fields = {field.name for field in dataclasses.fields(mjx.Model)}
-        self.tables: EnvTables = read_tables(env_id, cpu, model_fields)
-        patient = read_patient_tables(cpu)
-        # The condition's torques on the patient's joints (None: it applies none).
-        self.patient = BatchedPatientDrive(patient) if patient is not None else None
+        if env_id in POPULATION_IDS:
+            envs = [cpu.patient_env(k) for k in range(len(cpu.population.patients))]
+        else:
+            envs = [cpu]
+        tables = [read_tables(env_id, env) for env in envs]
+        self.patients: PatientStack = stack_patients(
+            tables, envs, lambda env: physics_model(env.model, tables[0]))
+        self.tables: EnvTables = self.patients.shared
+        self.is_population = env_id in POPULATION_IDS
+        drives = [read_patient_tables(env) for env in envs]
+        # The conditions' torques on the patient's joints (None: no patient applies any).
+        self.patient = BatchedPatientDrive(drives) \
+            if any(d is not None for d in drives) else None
         self.cpu_env = cpu
-        self.mj_model: mujoco.MjModel = physics_model(cpu.model, self.tables)
-        self.mjx_model = mjx.put_model(self.mj_model, impl="warp")
+        self.patient_envs = envs
+        self.mj_model: mujoco.MjModel = physics_model(envs[0].model, self.tables)
+        self.mjx_model = self.patients.models.base
         self.naconmax, self.njmax = naconmax, njmax
         self.action_size = int(cpu.action_space.shape[0])
         self.observation_size = int(cpu.observation_space.shape[0])
@@ -118,37 +137,53 @@ class BatchedRehabEnv:
         self._servo, self._dof, self._qpos = _i32(t.servo_ids), _i32(t.dof_adr), _i32(t.qpos_adr)
         self._motor, self._torque_limit = _i32(t.motor_ids), _f32(t.torque_limit_nm)
         self._center, self._half = _f32(t.action_center), _f32(t.action_half)
-        self._low, self._high = _f32(t.setpoint_low_rad), _f32(t.setpoint_high_rad)
-        self._home_qpos = _f32(t.home_qpos)
-        home_ctrl = np.zeros((len(WEIGHT_LEVELS), self.mj_model.nu))
-        home_ctrl[:, t.servo_ids] = t.home_setpoints_rad
-        self._home_ctrl = _f32(home_ctrl)  # per weight level
-        self._level_fields = {
-            name: jp.asarray(rows, dtype=getattr(self.mjx_model, name).dtype)
-            for name, rows in t.level_fields.items()}
-        self._base, self._rot_t = _f32(t.base_pos_m), _f32(t.base_rot_t)
+        self._rot_t = _f32(t.base_rot_t)
         self._phi = _i32(t.phi_adr)
-        self._box_low, self._box_high = jp.asarray(t.healthy_low), jp.asarray(t.healthy_high)
-        self._targets, self._tools = _f32(t.targets_rad), _f32(t.tool_targets_m)
-        self._count, self._rests = _i32(t.num_targets), _f32(t.rests_rad)
-        self._patient = _i32(t.patient_qpos_adr)
-        self._rom_low, self._rom_high = _f32(t.rom_low_rad), _f32(t.rom_high_rad)
+        self._patient_qpos = _i32(t.patient_qpos_adr)
         self._is_robot, self._is_other = jp.asarray(t.is_robot_geom), jp.asarray(t.is_other_geom)
-        self._matrix = _f32(t.agent_matrix)
         self._bounded_low, self._bounded_high = _f32(t.bounded_low), _f32(t.bounded_high)
         self._contact_types = _i32(CONTACT_CONSTRAINTS)
+        # Per patient (leading axis): the tables a profile or a condition changes.
+        a = self.patients.arrays
+        home_ctrl = np.zeros((*a["home_setpoints_rad"].shape[:2], self.mj_model.nu))
+        home_ctrl[:, :, t.servo_ids] = a["home_setpoints_rad"]
+        self._per_patient = {
+            "low": _f32(a["setpoint_low_rad"]), "high": _f32(a["setpoint_high_rad"]),
+            "home_qpos": _f32(a["home_qpos"]), "home_ctrl": _f32(home_ctrl),  # [p, level]
+            "base": _f32(a["base_pos_m"]),
+            "box_low": jp.asarray(a["healthy_low"]), "box_high": jp.asarray(a["healthy_high"]),
+            "targets": _f32(a["targets_rad"]), "tools": _f32(a["tool_targets_m"]),
+            "count": _i32(a["num_targets"]), "rests": _f32(a["rests_rad"]),
+            "rom_low": _f32(a["rom_low_rad"]), "rom_high": _f32(a["rom_high_rad"]),
+            "matrix": _f32(a["agent_matrix"]),
+        }
+        # [patient, level]: the MJX model leaves a patient or a weight level changes.
+        models = self.patients.models
+        self._model_leaves = jax.tree_util.tree_leaves(models.base)
+        self._model_rows = {i: jp.asarray(rows, dtype=self._model_leaves[i].dtype)
+                            for i, rows in models.rows.items()}
+        # [patient, level]: what a fresh MjData holds from the model and no step recomputes.
+        self._data_rows = {name: jp.asarray(rows, dtype=np.float32 if rows.dtype.kind == "f"
+                                            else rows.dtype)
+                           for name, rows in models.data_rows.items()}
+
+    def _of(self, patient: jax.Array) -> dict[str, jax.Array]:
+        """The per-patient tables of the world's ``patient``."""
+        return {name: rows[patient] for name, rows in self._per_patient.items()}
 
     # -- pieces ------------------------------------------------------------------------------
-    def _model(self, level: jax.Array) -> Any:
-        """The MJX model at weight ``level``; under ``jax.vmap`` its level fields are per world
-        (MuJoCo Warp's batched model fields)."""
-        return self.mjx_model.replace(**{name: rows[level]
-                                         for name, rows in self._level_fields.items()})
+    def _model(self, patient: jax.Array, level: jax.Array) -> Any:
+        """The MJX model of ``patient`` at weight ``level``; under ``jax.vmap`` the fields they
+        change are per world (MuJoCo Warp's batched model fields)."""
+        leaves = list(self._model_leaves)
+        for i, rows in self._model_rows.items():
+            leaves[i] = rows[patient, level]
+        return self.patients.models.treedef.unflatten(leaves)
 
-    def _dynamic(self, data: Any) -> tuple[jax.Array, jax.Array]:
+    def _dynamic(self, w: dict, data: Any) -> tuple[jax.Array, jax.Array]:
         """theta (the robot's joint angles) and the paper observation's theta, p, phi."""
         theta = data.qpos[self._qpos]
-        p = self._rot_t @ (data.site_xpos[self.tables.tool_site] - self._base)
+        p = self._rot_t @ (data.site_xpos[self.tables.tool_site] - w["base"])
         return theta, jp.concatenate([theta, p, data.qpos[self._phi]])
 
     def _cuff_rows_force(self, data: Any) -> tuple[jax.Array, jax.Array]:
@@ -182,7 +217,8 @@ class BatchedRehabEnv:
         if self.patient is None:
             return {"robot_work_j": meter["robot_work_j"],
                     "patient_work_j": jp.zeros((), jp.float32),
-                    "assistance_ratio": jp.ones((), jp.float32)}
+                    "assistance_ratio": jp.ones((), jp.float32),
+                    "patient_torque_nm": jp.zeros(self.tables.phi_adr.shape[0], jp.float32)}
         robot, patient = meter["robot_positive_work_j"], meter["patient_positive_work_j"]
         ratio = jp.where(patient > 0.0, robot / jp.maximum(robot + patient, 1e-30), 1.0)
         return {"robot_work_j": meter["robot_work_j"], "patient_work_j": meter["patient_work_j"],
@@ -199,15 +235,15 @@ class BatchedRehabEnv:
             return t.hold_sag_rad + t.hold_brake_s * speed
         return jp.linalg.norm(setpoint - theta)
 
-    def _paper(self, exercise: jax.Array, index: jax.Array, dynamic: jax.Array,
+    def _paper(self, w: dict, exercise: jax.Array, index: jax.Array, dynamic: jax.Array,
                level: jax.Array) -> jax.Array:
         """The paper observation (float32), in the CPU layout's order."""
         t = self.tables
-        fields = {"theta_star": self._targets[exercise, index],
-                  "p_star": self._tools[exercise, index],
+        fields = {"theta_star": w["targets"][exercise, index],
+                  "p_star": w["tools"][exercise, index],
                   "e": exercise.astype(jp.float32)[None],
                   "l": level.astype(jp.float32)[None]}
-        paper = jp.zeros(self._box_low.shape[0], jp.float32)
+        paper = jp.zeros(w["box_low"].shape[0], jp.float32)
         for name, values in fields.items():
             start, stop = t.paper_slices[name]
             paper = paper.at[start:stop].set(values)
@@ -233,18 +269,19 @@ class BatchedRehabEnv:
         deep = impl.contact__dist[cid] < -self.tables.contact_tolerance_m
         return jp.any(contact_row & hit & deep)
 
-    def _agent_obs(self, paper: jax.Array, exercise: jax.Array, index: jax.Array,
+    def _agent_obs(self, w: dict, paper: jax.Array, exercise: jax.Array, index: jax.Array,
                    setpoint: jax.Array, qvel: jax.Array, force: jax.Array) -> jax.Array:
         t = self.tables
-        count = self._count[exercise]
+        count = w["count"][exercise]
         has_next = index + 1 < count
-        following = self._targets[exercise, jp.minimum(index + 1, self._targets.shape[1] - 1)]
+        targets = w["targets"]
+        following = targets[exercise, jp.minimum(index + 1, targets.shape[1] - 1)]
         theta_star = paper[t.paper_slices["theta_star"][0]:t.paper_slices["theta_star"][1]]
         x = jp.concatenate([paper, jp.where(has_next, following, theta_star), setpoint,
                             jp.where(jp.isfinite(qvel), qvel, 0.0),
                             jp.where(jp.isfinite(force), force, NONFINITE_FORCE_N)[None],
                             jp.ones(1, jp.float32)])
-        v = self._matrix @ x
+        v = w["matrix"] @ x
         bounded = slice(t.bounded_start, t.bounded_start + self._bounded_low.shape[0])
         v = v.at[:t.tanh_stop].set(jp.tanh(v[:t.tanh_stop]))
         v = v.at[bounded].set(jp.clip(v[bounded], self._bounded_low, self._bounded_high))
@@ -260,39 +297,45 @@ class BatchedRehabEnv:
             return {}, None, info["rng"]
         rng, key = jax.random.split(info["rng"])
         state = {k: v for k, v in info.items() if k.startswith(("patient_", "tremor_"))}
-        state, goal = self.patient.begin_step(state, exercise, index, key)
+        state, goal = self.patient.begin_step(state, info["patient"], exercise, index, key)
         return state, goal, rng
 
     # -- API ---------------------------------------------------------------------------------
-    def _draw(self, rng: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-        """The episode's exercise and weight level (the config's, or drawn uniformly, as the
-        CPU env draws them) and the key for the next draw."""
+    def _draw(self, rng: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+        """The episode's patient (drawn uniformly from a population, as the CPU population
+        env draws it; 0 otherwise), exercise and weight level (the config's, or drawn
+        uniformly, as the CPU env draws them), and the key for the next draw."""
+        patient = jp.int32(0)
+        if self.patients.count > 1:
+            rng, patient_key = jax.random.split(rng)
+            patient = jax.random.randint(patient_key, (), 0, self.patients.count, jp.int32)
         rng, exercise_key, level_key = jax.random.split(rng, 3)
         t = self.tables
         exercise = jp.int32(t.exercise) if t.exercise is not None else jax.random.randint(
-            exercise_key, (), 0, self._targets.shape[0], jp.int32)
+            exercise_key, (), 0, self.patients.arrays["targets_rad"].shape[1], jp.int32)
         level = jp.int32(t.weight_level) if t.weight_level is not None else \
             jax.random.randint(level_key, (), 0, len(WEIGHT_LEVELS), jp.int32)
-        return exercise, level, rng
+        return patient, exercise, level, rng
 
-    def _start(self, data: Any, exercise: jax.Array, level: jax.Array,
+    def _start(self, data: Any, patient: jax.Array, exercise: jax.Array, level: jax.Array,
                rng: jax.Array) -> State:
-        """The state of an episode of ``exercise`` at weight ``level`` starting at ``data``
-        (the home state, after ``mjx.forward``)."""
-        t = self.tables
-        theta, dynamic = self._dynamic(data)
-        setpoint = self._home_ctrl[level][self._servo]
+        """The state of ``patient``'s episode of ``exercise`` at weight ``level`` starting at
+        ``data`` (the home state, after ``mjx.forward``)."""
+        t, w = self.tables, self._of(patient)
+        theta, dynamic = self._dynamic(w, data)
+        setpoint = w["home_ctrl"][level][self._servo]
         index = jp.int32(0)
-        paper = self._paper(exercise, index, dynamic, level)
+        paper = self._paper(w, exercise, index, dynamic, level)
         speed = jp.linalg.norm(data.qvel[self._dof])
         force = self._cuff_force(data)
-        obs = self._agent_obs(paper, exercise, index, setpoint, data.qvel[self._dof], force)
+        obs = self._agent_obs(w, paper, exercise, index, setpoint, data.qvel[self._dof], force)
         zero = jp.zeros((), jp.float32)
         info = {
             "setpoint": setpoint, "target_index": index, "exercise": exercise,
-            "weight_level": level, "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
-            "path_left": jp.linalg.norm(theta - self._targets[exercise, 0])
-            + self._rests[exercise, 0],
+            "weight_level": level, "patient": jp.asarray(patient, jp.int32),
+            "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
+            "path_left": jp.linalg.norm(theta - w["targets"][exercise, 0])
+            + w["rests"][exercise, 0],
             "hold_gap": jp.float32(t.max_episode_steps * t.time_cost)
             + t.progress_weight * self._hold_travel(setpoint, theta, speed),
             "rng": rng, "truncation": zero, **self._meter_start(data),
@@ -303,57 +346,76 @@ class BatchedRehabEnv:
         metrics = {"interaction_force_n": force, "cost": zero,
                    "safety_violation": jp.int32(0), "is_success": zero,
                    "target_index": index, "action_clipped": jp.int32(0),
-                   **self._readings(data, exercise, level),
+                   **self._readings(data, patient, exercise, level),
                    **self._work_metrics(info), **dict.fromkeys(REWARD_TERMS, zero)}
         return State(data, obs, zero, zero, metrics, info)
 
-    def _readings(self, data: Any, exercise: jax.Array, level: jax.Array
+    def _readings(self, data: Any, patient: jax.Array, exercise: jax.Array, level: jax.Array
                   ) -> dict[str, jax.Array]:
         """The CPU env's ``info`` readings of the robot and the patient: the robot's actuator
-        torques on its joints, the patient's joint angles, the exercise and weight level."""
-        return {"robot_torque_nm": data.qfrc_actuator[self._dof],
-                "patient_qpos": data.qpos[self._patient],
-                "exercise": jp.asarray(exercise, jp.int32),
-                "weight_level": jp.asarray(level, jp.int32)}
+        torques on its joints, the patient's joint angles, the exercise and weight level (and
+        a population's patient)."""
+        readings = {"robot_torque_nm": data.qfrc_actuator[self._dof],
+                    "patient_qpos": data.qpos[self._patient_qpos],
+                    "exercise": jp.asarray(exercise, jp.int32),
+                    "weight_level": jp.asarray(level, jp.int32)}
+        if self.is_population:
+            readings["patient"] = jp.asarray(patient, jp.int32)
+        return readings
 
     def reset(self, rng: jax.Array, exercise: jax.Array | int = -1,
-              weight_level: jax.Array | int = -1) -> State:
-        """A new episode at home: the exercise and the weight level are the config's, or drawn
-        from ``rng``; an ``exercise`` or ``weight_level`` >= 0 overrides them for this episode
-        (the CPU env's reset ``options``; checked by :meth:`check_reset_options`, since a
-        jitted function cannot raise). Both are drawn every reset, as on the CPU, so that the
-        draws do not depend on the options."""
-        drawn_exercise, drawn_level, rng = self._draw(rng)
-        exercise = jp.where(jp.asarray(exercise) >= 0, jp.asarray(exercise, jp.int32),
-                            drawn_exercise)
-        level = jp.where(jp.asarray(weight_level) >= 0, jp.asarray(weight_level, jp.int32),
-                         drawn_level)
+              weight_level: jax.Array | int = -1, patient: jax.Array | int = -1) -> State:
+        """A new episode at home: the patient (of a population), the exercise and the weight
+        level are the config's, or drawn from ``rng``; an ``exercise``, ``weight_level`` or
+        ``patient`` >= 0 overrides them for this episode (the CPU env's reset ``options``;
+        checked by :meth:`check_reset_options`, since a jitted function cannot raise). All
+        are drawn every reset, as on the CPU, so that the draws do not depend on the
+        options."""
+        drawn_patient, drawn_exercise, drawn_level, rng = self._draw(rng)
+
+        def chosen(value: jax.Array | int, drawn: jax.Array) -> jax.Array:
+            return jp.where(jp.asarray(value) >= 0, jp.asarray(value, jp.int32), drawn)
+
+        patient = chosen(patient, drawn_patient)
+        exercise, level = chosen(exercise, drawn_exercise), chosen(weight_level, drawn_level)
+        w = self._of(patient)
         data = mjx.make_data(self.mj_model, impl="warp", naconmax=self.naconmax,
                              njmax=self.njmax)
-        data = data.replace(qpos=self._home_qpos, ctrl=self._home_ctrl[level])
-        return self._start(mjx.forward(self._model(level), data), exercise, level, rng)
+        data = data.replace(qpos=w["home_qpos"], ctrl=w["home_ctrl"][level],
+                            **{name: rows[patient, level]
+                               for name, rows in self._data_rows.items()})
+        return self._start(mjx.forward(self._model(patient, level), data), patient, exercise,
+                           level, rng)
 
-    def check_reset_options(self, options: dict | None) -> tuple[int, int]:
-        """``(exercise, weight_level)`` of the CPU env's reset ``options`` (-1: not given), or
-        ``ValueError`` naming a bad one, as the CPU env does."""
+    def check_reset_options(self, options: dict | None) -> tuple[int, int, int]:
+        """``(exercise, weight_level, patient)`` of the CPU env's reset ``options`` (-1: not
+        given; ``patient`` only for a population id), or ``ValueError`` naming a bad one, as
+        the CPU env does."""
         from rehabbot.common.checks import check_options
         from rehabbot.envs.env_base import RESET_OPTIONS
+        from rehabbot.envs.population import POPULATION_RESET_OPTIONS
         from rehabbot.sim.scene import check_weight_level
         from rehabbot.tasks import feasibility
 
-        options = check_options(options, RESET_OPTIONS)
+        names = POPULATION_RESET_OPTIONS if self.is_population else RESET_OPTIONS
+        options = check_options(options, names)
         exercise = options.get("exercise", -1)
-        count = int(self._targets.shape[0])
+        count = int(self.patients.arrays["targets_rad"].shape[1])
         if "exercise" in options and (isinstance(exercise, bool)
                                       or exercise not in range(count)):
             raise ValueError(f"exercise={exercise!r} is not one of {list(range(count))}")
+        patient = options.get("patient", -1)
+        if "patient" in options:
+            self.cpu_env.patient_env(patient)  # ValueError naming a bad index
         level = options.get("weight_level", -1)
         if "weight_level" in options:
             level = check_weight_level(level)
-            unusable = getattr(self.cpu_env, "_unusable_levels", {})
-            if level in unusable:
-                feasibility.refuse(unusable, WEIGHT_LEVELS, level)
-        return int(exercise), int(level)
+            envs = self.patient_envs if patient < 0 else [self.patient_envs[patient]]
+            for env in envs:
+                unusable = env.unusable_weight_levels
+                if level in unusable:
+                    feasibility.refuse(unusable, WEIGHT_LEVELS, level)
+        return int(exercise), int(level), int(patient)
 
     def restart_done(self, state: State) -> State:
         """Auto-reset: a world whose episode ended (``state.done``) starts a new one (a new
@@ -366,19 +428,23 @@ class BatchedRehabEnv:
         step)."""
         done = state.done > 0
         data = state.data
-        exercise, level, rng = self._draw(state.info["rng"])
+        patient, exercise, level, rng = self._draw(state.info["rng"])
         level = jp.where(done, level, state.info["weight_level"])
+        patient = jp.where(done, patient, state.info["patient"])
+        w = self._of(patient)
 
         def home(value: jax.Array, start: jax.Array | float) -> jax.Array:
             return jp.where(done, jp.broadcast_to(start, value.shape).astype(value.dtype), value)
 
-        data = data.replace(qpos=home(data.qpos, self._home_qpos), qvel=home(data.qvel, 0.0),
-                            ctrl=home(data.ctrl, self._home_ctrl[level]),
+        data = data.replace(qpos=home(data.qpos, w["home_qpos"]), qvel=home(data.qvel, 0.0),
+                            ctrl=home(data.ctrl, w["home_ctrl"][level]),
                             qacc_warmstart=home(data.qacc_warmstart, 0.0),
                             qfrc_applied=home(data.qfrc_applied, 0.0),
-                            time=home(data.time, 0.0))
-        data = mjx.forward(self._model(level), data)
-        fresh = self._start(data, exercise, level, rng)
+                            time=home(data.time, 0.0),
+                            **{name: home(getattr(data, name), rows[patient, level])
+                               for name, rows in self._data_rows.items()})
+        data = mjx.forward(self._model(patient, level), data)
+        fresh = self._start(data, patient, exercise, level, rng)
         info = jax.tree.map(lambda new, old: jp.where(done, new, old), fresh.info, state.info)
         info["truncation"] = state.info["truncation"]
         return State(data, jp.where(done, fresh.obs, state.obs), state.reward, state.done,
@@ -392,6 +458,8 @@ class BatchedRehabEnv:
         """One decision (module docstring). Non-finite action entries act as 0 and, like
         entries outside [-1, 1], count in ``metrics["action_clipped"]``."""
         t, info = self.tables, state.info
+        patient = info["patient"]
+        w = self._of(patient)
         action = jp.asarray(action, jp.float32)
         finite = jp.isfinite(action)
         clipped = jp.sum(~finite | (jp.abs(action) > 1.0)).astype(jp.int32)
@@ -407,39 +475,39 @@ class BatchedRehabEnv:
                 wanted = info["setpoint"] + t.controller_dt_s * native
             else:  # joint_delta: setpoint increments
                 wanted = info["setpoint"] + native
-            setpoint = jp.clip(wanted, self._low, self._high)
+            setpoint = jp.clip(wanted, w["low"], w["high"])
             ctrl = state.data.ctrl.at[self._servo].set(setpoint)
         data = state.data.replace(ctrl=ctrl)
 
         level = info["weight_level"]
-        model = self._model(level)
+        model = self._model(patient, level)
         exercise, index = info["exercise"], info["target_index"]
-        patient, goal, rng = self._patient_begin(info, exercise, index)
+        drive, goal, rng = self._patient_begin(info, exercise, index)
 
         def physics_step(carry: tuple, _: None) -> tuple[tuple, None]:
-            d, meter, patient = carry
+            d, meter, drive = carry
             if self.patient is not None:
-                patient, d, q = self.patient.apply(patient, d, goal)
+                drive, d, q = self.patient.apply(drive, d, info["patient"], goal)
             d = mjx.step(model, d)
             if self.patient is not None:
-                patient = self.patient.count_work(patient, d, q)
-            return (d, self._meter_after_step(meter, d), patient), None
+                drive = self.patient.count_work(drive, d, q)
+            return (d, self._meter_after_step(meter, d), drive), None
 
         meter = {k: info[k] for k in METER_KEYS}
-        (data, meter, patient), _ = jax.lax.scan(physics_step, (data, meter, patient), None,
-                                                 length=t.frame_skip)
+        (data, meter, drive), _ = jax.lax.scan(physics_step, (data, meter, drive), None,
+                                               length=t.frame_skip)
 
         # Safety rules, in the CPU env's order.
         force = self._cuff_force(data)
         speed = jp.max(jp.abs(data.qvel))
         unstable = (~jp.all(jp.isfinite(data.qpos)) | ~(force <= t.blowup_force_n)
                     | ~(speed <= t.blowup_speed_rad_s))
-        theta, dynamic = self._dynamic(data)
-        before = self._paper(exercise, index, dynamic, level)
-        outside = ~jp.all((before >= self._box_low) & (before <= self._box_high))
+        theta, dynamic = self._dynamic(w, data)
+        before = self._paper(w, exercise, index, dynamic, level)
+        outside = ~jp.all((before >= w["box_low"]) & (before <= w["box_high"]))
         unstable = unstable | outside
-        q = data.qpos[self._patient]
-        rom = jp.any((q < self._rom_low) | (q > self._rom_high))
+        q = data.qpos[self._patient_qpos]
+        rom = jp.any((q < w["rom_low"]) | (q > w["rom_high"]))
         cuff = force > t.cuff_force_limit_n
         touch = self._touch(data)
         violation = jp.select([unstable, rom, cuff, touch],
@@ -452,18 +520,19 @@ class BatchedRehabEnv:
 
         # Reward (progress, "hold" penalty) and the target switch.
         steps = info["steps"] + 1
-        error = theta - self._targets[exercise, index]
+        targets, rests = w["targets"], w["rests"]
+        error = theta - targets[exercise, index]
         distance, largest = jp.linalg.norm(error), jp.max(jp.abs(error))
-        count = self._count[exercise]
+        count = w["count"][exercise]
         last = index == count - 1
         stop = (violation > 0) & (t.terminate_on_safety | (violation == INSTABILITY))
         reached = (largest < t.target_tolerance_rad) & ~stop
         switching = reached & ~last
-        following = jp.minimum(index + 1, self._targets.shape[1] - 1)
+        following = jp.minimum(index + 1, targets.shape[1] - 1)
         next_distance = jp.where(
-            switching, jp.linalg.norm(theta - self._targets[exercise, following]), distance)
+            switching, jp.linalg.norm(theta - targets[exercise, following]), distance)
         new_index = jp.where(switching, index + 1, index)
-        after = next_distance + self._rests[exercise, new_index]
+        after = next_distance + rests[exercise, new_index]
         progress = t.progress_weight * (info["path_left"] - after)
         gap = info["hold_gap"]
         safety = jp.where(stop, -(jp.maximum(gap + progress - t.time_cost, 0.0) + t.time_cost
@@ -477,11 +546,11 @@ class BatchedRehabEnv:
         terminated = stop | (reached & last)
         truncated = (steps >= t.max_episode_steps) & ~terminated
 
-        paper = self._paper(exercise, new_index, dynamic, level)
-        obs = self._agent_obs(paper, exercise, new_index, setpoint, data.qvel[self._dof],
+        paper = self._paper(w, exercise, new_index, dynamic, level)
+        obs = self._agent_obs(w, paper, exercise, new_index, setpoint, data.qvel[self._dof],
                               self._cuff_force(data))
         f32 = jp.float32
-        new_info = {**info, **meter, **patient, "rng": rng, "setpoint": setpoint,
+        new_info = {**info, **meter, **drive, "rng": rng, "setpoint": setpoint,
                     "target_index": new_index, "steps": steps,
                     "theta": theta, "healthy": dynamic, "path_left": after, "hold_gap": gap,
                     "truncation": truncated.astype(f32)}
@@ -489,8 +558,8 @@ class BatchedRehabEnv:
                    "safety_violation": violation,
                    "is_success": (reached & last).astype(f32),
                    "target_index": new_index, "action_clipped": clipped,
-                   **self._readings(data, exercise, level),
-                   **self._work_metrics({**meter, **patient}),
+                   **self._readings(data, patient, exercise, level),
+                   **self._work_metrics({**meter, **drive}),
                    "reward_progress": progress, "reward_bonus": bonus,
                    "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety}
         return State(data, obs, reward.astype(f32), (terminated | truncated).astype(f32),

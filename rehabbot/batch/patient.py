@@ -23,7 +23,9 @@ the keys of :meth:`BatchedPatientDrive.start`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import jax
@@ -42,23 +44,84 @@ def _f32(array: Any) -> jax.Array:
     return jp.asarray(np.asarray(array, dtype=np.float32))
 
 
-class BatchedPatientDrive:
-    """The condition's torques (module docstring) for one world; ``jax.vmap`` batches it."""
+_MODES = ("passive", "active_assisted", "resistive")
 
-    def __init__(self, tables: PatientTables) -> None:
-        t = self.tables = tables
-        self.has_tremor = t.tremor_hz > 0.0 and t.tremor_amplitude_nm > 0.0
-        self._dof = jp.asarray(t.dof_adr, jp.int32)
-        self._qpos = jp.asarray(t.qpos_adr, jp.int32)
-        self._low, self._high = _f32(t.low_rad), _f32(t.high_rad)
-        self._span = _f32(t.high_rad - t.low_rad)
-        self._gain = _f32(t.reflex_gain_nms_per_rad)
-        self._available_pos, self._available_neg = _f32(t.available_pos_nm), \
-            _f32(t.available_neg_nm)
-        self._peak_pos, self._peak_neg = _f32(t.peak_pos_nm), _f32(t.peak_neg_nm)
-        self._kp = _f32(t.kp_nm_per_rad)
-        self._goals = _f32(t.goals_rad)
-        control_dt_s = t.frame_skip * t.dt_s
+
+def _neutral(template: PatientTables) -> PatientTables:
+    """The tables of a patient without a drive, shaped as ``template``'s: no reflex, no
+    effort, no tremor, and a zero torque bound, so every torque it applies is 0."""
+    zeros = np.zeros_like(template.low_rad)
+    return dataclasses.replace(
+        template, reflex=None, reflex_gain_nms_per_rad=zeros, mode="passive",
+        available_pos_nm=zeros, available_neg_nm=zeros, peak_pos_nm=zeros, peak_neg_nm=zeros,
+        kp_nm_per_rad=zeros, goals_rad=np.zeros_like(template.goals_rad), tremor_hz=0.0,
+        tremor_amplitude_nm=0.0)
+
+
+def _pad_goals(goals: np.ndarray, count: int) -> np.ndarray:
+    if goals.shape[1] == count:
+        return goals
+    return np.concatenate([goals, np.repeat(goals[:, -1:], count - goals.shape[1], axis=1)],
+                          axis=1)
+
+
+class BatchedPatientDrive:
+    """The conditions' torques (module docstring) for one world; ``jax.vmap`` batches it.
+
+    ``tables`` holds one entry per patient of the env (one for a single-patient id, every
+    patient of a population): a patient's :class:`PatientTables`, or None for a patient
+    whose condition applies no torque. Every parameter is indexed by the world's patient;
+    what sets the state's shapes (the compliant joints, the delay lines) is shared: the
+    joints must be the same, the delay lines are as long as the longest patient's.
+    """
+
+    def __init__(self, tables: Sequence[PatientTables | None]) -> None:
+        driven = [t for t in tables if t is not None]
+        if not driven:
+            raise ValueError("no patient applies torques: the env needs no drive")
+        first = driven[0]
+        for name in ("dof_adr", "qpos_adr", "exercised_index"):
+            if any(not np.array_equal(getattr(t, name), getattr(first, name)) for t in driven):
+                raise ValueError(f"the patients' drives act on different joints ({name})")
+        for name in ("exercised_count", "dt_s", "frame_skip"):
+            if len({getattr(t, name) for t in driven}) != 1:
+                raise ValueError(f"the patients' drives differ in {name}")
+        rows = [t if t is not None else _neutral(first) for t in tables]
+        self.tables = first  # the shared fields (joints, step)
+        self.patients = len(rows)
+        self.reflex_lag = max(t.reflex_lag for t in rows)
+        self.goal_lag = max(t.goal_lag for t in rows)
+        self.has_reflex = any(t.reflex is not None for t in rows)
+        self.modes = tuple(sorted({t.mode for t in rows}, key=_MODES.index))
+        self.has_tremor = any(t.tremor_hz > 0.0 and t.tremor_amplitude_nm > 0.0 for t in rows)
+        self._dof = jp.asarray(first.dof_adr, jp.int32)
+        self._qpos = jp.asarray(first.qpos_adr, jp.int32)
+
+        def stack(values: Sequence[Any]) -> jax.Array:
+            return _f32(np.stack([np.asarray(v, dtype=float) for v in values]))
+
+        self._low, self._high = stack([t.low_rad for t in rows]), stack([t.high_rad for t in rows])
+        self._span = stack([t.high_rad - t.low_rad for t in rows])
+        self._gain = stack([t.reflex_gain_nms_per_rad for t in rows])
+        reflexes = [t.reflex for t in rows]
+        # A patient without spasticity: gain 0 (its reflex torque is 0 wherever it fires).
+        self._reflex_scale = stack([r.gain_scale if r else 0.0 for r in reflexes])
+        self._threshold = stack([r.threshold_rad_s if r else 0.0 for r in reflexes])
+        self._catch = stack([r.catch_at_rest if r else 1.0 for r in reflexes])
+        self._release_to = stack([r.release_to if r else 1.0 for r in reflexes])
+        self._reflex_lag = jp.asarray([t.reflex_lag for t in rows], jp.int32)
+        self._goal_lag = jp.asarray([t.goal_lag for t in rows], jp.int32)
+        self._mode = jp.asarray([_MODES.index(t.mode) for t in rows], jp.int32)
+        self._available_pos = stack([t.available_pos_nm for t in rows])
+        self._available_neg = stack([t.available_neg_nm for t in rows])
+        self._peak_pos = stack([t.peak_pos_nm for t in rows])
+        self._peak_neg = stack([t.peak_neg_nm for t in rows])
+        self._kp = stack([t.kp_nm_per_rad for t in rows])
+        count = max(t.goals_rad.shape[1] for t in rows)
+        self._goals = stack([_pad_goals(t.goals_rad, count) for t in rows])
+        self._tremor_hz = stack([t.tremor_hz for t in rows])
+        self._tremor_nm = stack([t.tremor_amplitude_nm for t in rows])
+        control_dt_s = first.frame_skip * first.dt_s
         self._decay = math.exp(-control_dt_s / TREMOR_CORRELATION_S)
         self._noise = math.sqrt(1.0 - self._decay * self._decay)
 
@@ -69,11 +132,11 @@ class BatchedPatientDrive:
     def start(self, rng: jax.Array) -> dict[str, jax.Array]:
         """The drive's state at the start of an episode (``PatientDrive.reset``): empty delay
         lines, the tremor's phases and processes drawn from ``rng``."""
-        t, m = self.tables, self.joints
+        m = self.joints
         zero = jp.zeros((), jp.float32)
-        state = {"patient_velocities": jp.zeros((t.reflex_lag, m), jp.float32),
+        state = {"patient_velocities": jp.zeros((self.reflex_lag, m), jp.float32),
                  "patient_substep": jp.int32(0),
-                 "patient_goal_index": jp.zeros(t.goal_lag + 1, jp.int32),
+                 "patient_goal_index": jp.zeros(self.goal_lag + 1, jp.int32),
                  "patient_torque_nm": jp.zeros(m, jp.float32),
                  "patient_work_j": zero, "patient_positive_work_j": zero}
         if self.has_tremor:
@@ -85,11 +148,12 @@ class BatchedPatientDrive:
                 jax.random.normal(modulation_key, (), jp.float32), -1.0, 1.0)
         return state
 
-    def begin_step(self, state: dict, exercise: jax.Array, index: jax.Array,
-                   rng: jax.Array) -> tuple[dict, jax.Array]:
+    def begin_step(self, state: dict, patient: jax.Array, exercise: jax.Array,
+                   index: jax.Array, rng: jax.Array) -> tuple[dict, jax.Array]:
         """A control step's start (``PatientDrive.run`` before its physics loop): the active
-        target ``index`` enters the goal delay line, whose oldest entry is the goal (m,); the
-        tremor's drift and modulation take one Ornstein-Uhlenbeck step drawn from ``rng``."""
+        target ``index`` enters the goal delay line; the goal (m,) is the entry of the
+        patient's reaction delay ago. The tremor's drift and modulation take one
+        Ornstein-Uhlenbeck step drawn from ``rng``."""
         line = jp.concatenate([state["patient_goal_index"][1:], index[None]])
         state = {**state, "patient_goal_index": line}
         if self.has_tremor:
@@ -98,26 +162,29 @@ class BatchedPatientDrive:
                 + self._noise * TREMOR_DRIFT_HZ * z_drift
             state["tremor_modulation"] = jp.clip(
                 self._decay * state["tremor_modulation"] + self._noise * z_modulation, -1.0, 1.0)
-        return state, self._goals[exercise, line[0]]
+        noticed = line[self.goal_lag - self._goal_lag[patient]]
+        return state, self._goals[patient, exercise, noticed]
 
-    def apply(self, state: dict, data: Any, goal: jax.Array) -> tuple[dict, Any, jax.Array]:
+    def apply(self, state: dict, data: Any, patient: jax.Array,
+              goal: jax.Array) -> tuple[dict, Any, jax.Array]:
         """One physics step's torques written into ``data.qfrc_applied``; the new state, the
         data and the compliant joints' angles before the step (for :meth:`count_work`)."""
         q, v = data.qpos[self._qpos], data.qvel[self._dof]
-        lag = self.tables.reflex_lag
-        slot = state["patient_substep"] % lag
-        delayed = state["patient_velocities"][slot]  # the velocity of `lag` steps ago
+        slot = state["patient_substep"] % self._reflex_lag[patient]
+        delayed = state["patient_velocities"][slot]  # the velocity of the reflex lag ago
         state = {**state, "patient_velocities": state["patient_velocities"].at[slot].set(v),
                  "patient_substep": state["patient_substep"] + 1}
-        torque = self._reflex(delayed, q) + self._effort(q, v, goal, data.qfrc_bias[self._dof])
+        torque = self._reflex(patient, delayed, q) + self._effort(
+            patient, q, v, goal, data.qfrc_bias[self._dof])
         if self.has_tremor:
-            amplitude = self.tables.tremor_amplitude_nm * (
+            amplitude = self._tremor_nm[patient] * (
                 1.0 + TREMOR_MODULATION * state["tremor_modulation"])
             phase = state["tremor_phase"]
             torque = torque + amplitude * jp.sin(phase)
-            step = TWO_PI * (self.tables.tremor_hz + state["tremor_drift_hz"]) * self.tables.dt_s
+            step = TWO_PI * (self._tremor_hz[patient] + state["tremor_drift_hz"]) \
+                * self.tables.dt_s
             state["tremor_phase"] = jp.mod(phase + step, TWO_PI)
-        torque = jp.clip(torque, -self._peak_neg, self._peak_pos)
+        torque = jp.clip(torque, -self._peak_neg[patient], self._peak_pos[patient])
         state["patient_torque_nm"] = torque
         data = data.replace(qfrc_applied=data.qfrc_applied.at[self._dof].set(torque))
         return state, data, q
@@ -137,33 +204,46 @@ class BatchedPatientDrive:
                 + jp.maximum(work, 0.0)}
 
     # -- the torque laws -------------------------------------------------------------------
-    def _reflex(self, velocity: jax.Array, q: jax.Array) -> jax.Array:
+    def _reflex(self, patient: jax.Array, velocity: jax.Array, q: jax.Array) -> jax.Array:
         """:func:`rehabbot.sim.conditions.reflex_torque_nm` on every joint (``velocity``
         already delayed)."""
-        reflex = self.tables.reflex
-        if reflex is None:
+        if not self.has_reflex:
             return jp.zeros_like(q)
         speed = jp.abs(velocity)
-        excess = speed - reflex.threshold_rad_s
+        excess = speed - self._threshold[patient]
         lengthening = velocity > 0
-        stretch = jp.where(lengthening, q - self._low, self._high - q) / self._span
-        past = stretch - (reflex.catch_at_rest - CATCH_SHIFT_PER_RAD_S * speed)
+        stretch = jp.where(lengthening, q - self._low[patient],
+                           self._high[patient] - q) / self._span[patient]
+        past = stretch - (self._catch[patient] - CATCH_SHIFT_PER_RAD_S * speed)
         build_up = jp.minimum(past / CATCH_RAMP, 1.0)
-        release = reflex.release_to + (1.0 - reflex.release_to) * jp.exp(
+        release_to = self._release_to[patient]
+        release = release_to + (1.0 - release_to) * jp.exp(
             -jp.maximum(past - CATCH_RAMP, 0.0) / RELEASE_WIDTH)
-        magnitude = reflex.gain_scale * self._gain * excess * build_up * release
+        magnitude = self._reflex_scale[patient] * self._gain[patient] * excess * build_up \
+            * release
         fires = (excess > 0.0) & (past > 0.0)
         return jp.where(fires, jp.where(lengthening, -magnitude, magnitude), 0.0)
 
-    def _effort(self, q: jax.Array, v: jax.Array, goal: jax.Array,
+    def _effort(self, patient: jax.Array, q: jax.Array, v: jax.Array, goal: jax.Array,
                 bias: jax.Array) -> jax.Array:
-        """The voluntary torque of the effort mode."""
-        mode = self.tables.mode
-        if mode == "active_assisted":
-            kp = self._kp
-            pull = bias + kp * (goal - q) - ACTIVE_DAMPING_S * kp * v
-            return jp.clip(pull, -self._available_neg, self._available_pos)
-        if mode == "resistive":
-            push = jp.tanh(v / RESIST_VELOCITY_RAD_S)
-            return -push * jp.where(push > 0, self._available_neg, self._available_pos)
-        return jp.zeros_like(q)
+        """The voluntary torque of the patient's effort mode."""
+        laws = {"passive": lambda: jp.zeros_like(q)}
+        if "active_assisted" in self.modes:
+            def pull() -> jax.Array:
+                kp = self._kp[patient]
+                torque = bias + kp * (goal - q) - ACTIVE_DAMPING_S * kp * v
+                return jp.clip(torque, -self._available_neg[patient],
+                               self._available_pos[patient])
+            laws["active_assisted"] = pull
+        if "resistive" in self.modes:
+            def push() -> jax.Array:
+                direction = jp.tanh(v / RESIST_VELOCITY_RAD_S)
+                return -direction * jp.where(direction > 0, self._available_neg[patient],
+                                             self._available_pos[patient])
+            laws["resistive"] = push
+        if len(self.modes) == 1:
+            return laws[self.modes[0]]()
+        torques = [laws[mode]() for mode in self.modes]
+        codes = [_MODES.index(mode) for mode in self.modes]
+        return jp.select([self._mode[patient] == c for c in codes[:-1]], torques[:-1],
+                         torques[-1])

@@ -15,7 +15,12 @@ from typing import Any
 import numpy as np
 
 from rehabbot.envs.control import TORQUE_HOLD_BRAKE_S, TORQUE_HOLD_SAG_RAD
-from rehabbot.envs.registration import BILATERAL_IDS, CONDITION_VARIANTS, V2_IDS
+from rehabbot.envs.registration import (
+    BILATERAL_IDS,
+    CONDITION_VARIANTS,
+    POPULATION_VARIANTS,
+    V2_IDS,
+)
 from rehabbot.sim.patient_drive import PatientDrive
 from rehabbot.sim.physics import BLOWUP_FORCE_N, BLOWUP_SPEED_RAD_S, RULES
 from rehabbot.sim.scene import WEIGHT_LEVELS
@@ -34,6 +39,13 @@ SUPPORTED_IDS: tuple[str, ...] = (
 CONDITION_IDS: tuple[str, ...] = tuple(
     env_id for env_id, (base_id, _condition, _text) in CONDITION_VARIANTS.items()
     if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
+# The population ids of those ids (a patient of a population per world and episode:
+# rehabbot.batch.patients).
+POPULATION_IDS: tuple[str, ...] = tuple(
+    env_id for env_id, base_id in POPULATION_VARIANTS.items()
+    if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
+# Every id the batched env builds.
+BATCHED_IDS: tuple[str, ...] = SUPPORTED_IDS + CONDITION_IDS + POPULATION_IDS
 # The control modes the batched env builds.
 CONTROL_MODES: tuple[str, ...] = ("joint_delta", "joint_position", "joint_velocity", "torque")
 # The safety rules' codes in the batched state: 0 for none, then RULES in order (1-based).
@@ -53,9 +65,6 @@ class EnvTables:
     max_episode_steps: int
     weight_level: int | None  # fixed by the config, or None: drawn at every reset
     exercise: int | None  # fixed by the config, or None: drawn at every reset
-    # per weight level (row l = level l): the MjModel fields the level changes (masses,
-    # inertias and what mj_setConst derives from them), by name
-    level_fields: dict[str, np.ndarray]
     # the controller (every control mode) and the -v2 unit actions
     control_mode: str
     controller_dt_s: float  # joint_velocity: setpoint += this x the native action
@@ -121,10 +130,10 @@ def check_id(env_id: str) -> None:
     the CPU env is made (a ``-myo-`` id would need MyoSuite's models first)."""
     if env_id in BILATERAL_IDS:
         raise ValueError(f"env_id={env_id!r}: the bilateral env is not batched yet")
-    if env_id not in SUPPORTED_IDS + CONDITION_IDS:
+    if env_id not in BATCHED_IDS:
         kind = "a -v2 id that" if env_id in V2_IDS else "an id that"
         raise ValueError(f"env_id={env_id!r} is {kind} the batched env does not build yet; "
-                         f"it builds {list(SUPPORTED_IDS + CONDITION_IDS)}")
+                         f"it builds {list(BATCHED_IDS)}")
 
 
 def check_supported(env_id: str, env: Any) -> None:
@@ -163,24 +172,17 @@ def check_supported(env_id: str, env: Any) -> None:
                          "batched contact rule does not read yet")
 
 
-def _level_tables(env: Any, model_fields: set[str]) -> tuple[dict[str, np.ndarray],
-                                                             np.ndarray]:
-    """Per weight level: the fields of the MJX model that the level changes (the limb's
-    masses and inertias and what ``mj_setConst`` derives from them) and the home setpoints.
-    The CPU env's scene is put back at its config's level afterwards."""
-    scene, model, controller = env.scene, env.model, env.controller
+def _home_setpoints(env: Any) -> np.ndarray:
+    """The home setpoints at every weight level ``(levels, n)``, clipped to the controller's
+    bounds. The CPU env's scene is put back at its level afterwards."""
+    scene, controller = env.scene, env.controller
     start = scene.weight_level
-    rows: list[dict[str, np.ndarray]] = []
     homes = []
     for level in WEIGHT_LEVELS:
         scene.set_weight_level(level)
-        rows.append({name: np.array(getattr(model, name)) for name in sorted(model_fields)
-                     if isinstance(getattr(model, name, None), np.ndarray)})
         homes.append(np.clip(scene.home_setpoints[0], controller.low_rad, controller.high_rad))
     scene.set_weight_level(start)
-    changed = {name: np.stack([row[name] for row in rows]) for name in rows[0]
-               if any(not np.array_equal(row[name], rows[0][name]) for row in rows)}
-    return changed, np.stack(homes)
+    return np.stack(homes)
 
 
 def _rotation_t(frame: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -189,15 +191,17 @@ def _rotation_t(frame: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
     return values[:3], values[3:].reshape(3, 3)
 
 
-def read_tables(env_id: str, env: Any, model_fields: set[str]) -> EnvTables:
+def read_tables(env_id: str, env: Any) -> EnvTables:
     """Every table of the batched env, from the CPU env ``env`` (``gym.make(...).unwrapped``,
-    freshly made: its scene at the config's weight level); ``model_fields`` are the names of
-    the MJX model's fields. Refuses what is not built yet."""
+    freshly made: its scene at the config's weight level), but the model, which
+    :mod:`rehabbot.batch.patients` reads per patient and weight level. Refuses what is not
+    built yet."""
     check_supported(env_id, env)
-    if env.config.weight_level is None and env._unusable_levels:
-        raise ValueError(f"weight levels {sorted(env._unusable_levels)} are unusable for this "
-                         "patient and weight_level=None would draw them; fix weight_level")
-    level_fields, homes = _level_tables(env, model_fields)
+    if env.config.weight_level is None and env.unusable_weight_levels:
+        raise ValueError(f"weight levels {sorted(env.unusable_weight_levels)} are unusable "
+                         "for this patient and weight_level=None would draw them; fix "
+                         "weight_level")
+    homes = _home_setpoints(env)
     config, scene, safety, agent = env.config, env.scene, env.safety, env._agent
     controller, handle, reward = env.controller, env.handles[0], env.reward_function
     n = controller.n_joints
@@ -219,7 +223,7 @@ def read_tables(env_id: str, env: Any, model_fields: set[str]) -> EnvTables:
     return EnvTables(
         env_id=env_id, frame_skip=int(config.frame_skip),
         max_episode_steps=int(env.max_episode_steps), weight_level=config.weight_level,
-        exercise=config.exercise, level_fields=level_fields,
+        exercise=config.exercise,
         control_mode=config.control_mode, controller_dt_s=float(controller.dt_s),
         torque_limit_nm=np.asarray(controller.robot.torque_limits(), dtype=float),
         hold_sag_rad=float(TORQUE_HOLD_SAG_RAD), hold_brake_s=float(TORQUE_HOLD_BRAKE_S),

@@ -23,13 +23,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from rehabbot.batch.env import BatchedRehabEnv
-from rehabbot.batch.tables import CONDITION_IDS, SUPPORTED_IDS
+from rehabbot.batch.tables import BATCHED_IDS
 
 CONTACTS_PER_WORLD = 16  # MuJoCo Warp's contact slots per world (naconmax = this x worlds)
 
 
 class BatchedVectorEnv(VectorEnv):
-    """``num_envs`` worlds of ``env_id`` (a :data:`~rehabbot.batch.tables.SUPPORTED_IDS` id)
+    """``num_envs`` worlds of ``env_id`` (a :data:`~rehabbot.batch.tables.BATCHED_IDS` id)
     on MuJoCo Warp; ``**kwargs`` are the CPU env's keyword arguments (and ``naconmax``,
     ``njmax``: :class:`~rehabbot.batch.env.BatchedRehabEnv`)."""
 
@@ -58,16 +58,16 @@ class BatchedVectorEnv(VectorEnv):
         self._state = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Every world starts an episode (exercise and weight level drawn per world unless
-        the config fixes them). ``options`` are the CPU env's (``exercise``,
-        ``weight_level``), for every world's first episode; the worlds' later episodes draw
-        again, as the CPU env's do."""
-        exercise, level = self.env.check_reset_options(options)
+        """Every world starts an episode (its patient of a population, exercise and weight
+        level drawn per world unless the config fixes them). ``options`` are the CPU env's
+        (``exercise``, ``weight_level``; ``patient`` for a population id), for every world's
+        first episode; the worlds' later episodes draw again, as the CPU env's do."""
+        exercise, level, patient = self.env.check_reset_options(options)
         super().reset(seed=seed)
         key = jax.random.key(int(self.np_random.integers(2**31)))
         fill = np.full(self.num_envs, 0, np.int32)
         self._state = self._reset(jax.random.split(key, self.num_envs), fill + exercise,
-                                  fill + level)
+                                  fill + level, fill + patient)
         return np.asarray(self._state.obs), self._info(self._state)
 
     def step(self, actions):
@@ -111,7 +111,7 @@ def _creator(env_id: str):
 # One creator per id, by name (Gymnasium passes a vector entry point the number of envs and
 # the id's keyword arguments, not the id).
 VECTOR_ENTRY_POINTS: dict[str, str] = {}
-for _env_id in SUPPORTED_IDS + CONDITION_IDS:
+for _env_id in BATCHED_IDS:
     _name = "vector_" + _env_id.split("/")[-1].replace("-", "_")
     globals()[_name] = _creator(_env_id)
     VECTOR_ENTRY_POINTS[_env_id] = f"{__name__}:{_name}"

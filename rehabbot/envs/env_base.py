@@ -140,6 +140,12 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt_s)}
         self._unusable_levels = parts.unusable_levels
 
+    @property
+    def unusable_weight_levels(self) -> dict:
+        """The weight levels this patient cannot do the exercises at, each with the reason
+        (empty for most patients); a reset at one is refused."""
+        return dict(self._unusable_levels)
+
     def paper_observation(self) -> np.ndarray:
         """The paper's observation of the current state (a copy; its fields in
         :attr:`layout`), whatever the id's ``observation``."""

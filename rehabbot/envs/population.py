@@ -121,6 +121,15 @@ class PopulationEnv(MakeTimeLimit, gym.Env):
         """The episode's patient: an index into ``population.patients``."""
         return self._patient
 
+    def patient_env(self, k: int) -> RehabEnv:
+        """Patient ``k``'s env (an index into ``population.patients``), built now if it was
+        not yet (``ValueError`` for a bad index, or a patient who cannot do the exercises)."""
+        if isinstance(k, bool) or k not in range(len(self.population.patients)):
+            raise ValueError(f"patient={k!r} is not one of "
+                             f"{list(range(len(self.population.patients)))} "
+                             f"(population {self.population.name!r})")
+        return self._env_of(int(k))
+
     def build_all(self) -> None:
         """Build every patient's env now (``ValueError`` for one who cannot do the
         exercises)."""
