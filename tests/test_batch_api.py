@@ -31,8 +31,8 @@ def test_import_rehabbot_loads_neither_batch_nor_jax():
     ("rehabbot/rehab-reach-myo-v2", {}, "rehab-reach-myo-v2"),
     ("rehabbot/rehab-reach-population-v1", {}, "rehab-reach-population-v1"),
     ("rehabbot/rehab-reach-v2", {"action_scale": "native"}, "action_scale='native'"),
-    ("rehabbot/rehab-reach-v2", {"reward": {"design": "progress", "effort_weight": 0.1}},
-     "effort_weight=0.1"),
+    ("rehabbot/rehab-reach-v2", {"reward": {"design": "progress", "safety_penalty_steps": 100}},
+     "safety_penalty_steps=100"),
     ("rehabbot/rehab-reach-v2", {"naconmax": 0}, "naconmax=0"),
 ])
 def test_refuses_what_is_not_built_yet(env_id, kwargs, named):
@@ -133,7 +133,7 @@ def test_tables_follow_the_cpu_env_kwargs():
     np.testing.assert_array_equal(t.home_setpoints_rad[3], cpu.controller.setpoint_rad)
     np.testing.assert_array_equal(t.targets_rad[1, :len(cpu.target_sequence.robot_rad)],
                                   cpu.target_sequence.robot_rad)
-    np.testing.assert_array_equal(t.agent_matrix, cpu._agent.matrix)
+    np.testing.assert_array_equal(t.agent_matrix, cpu.agent_observation_map.matrix)
 
 
 def test_the_batched_env_prints_nothing():

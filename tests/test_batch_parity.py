@@ -74,6 +74,26 @@ def test_expert_episode_replays_on_warp(env_id):
         (batched_return, cpu_return)
 
 
+# The optional reward terms switched on: the native action's change and the robot's effort.
+SMOOTH_EFFORT = {"design": "progress", "smoothness_weight": 2.0, "effort_weight": 1.0}
+
+
+def test_smoothness_and_effort_terms_follow_the_cpu():
+    """With ``smoothness_weight`` and ``effort_weight`` on, the expert's episode pays the same
+    on both envs; the terms cost more than 100x the return's bound, so a term left out or
+    mis-scaled fails it."""
+    env_id = "rehabbot/rehab-reach-v2"
+    replay = replay_expert(env_id, reward=SMOOTH_EFFORT)
+    assert replay["switches_batched"] == replay["switches_cpu"]
+    assert replay["end_batched"] == replay["end_cpu"]
+    assert replay["obs_error"] < OBS_TOL
+    batched_return, cpu_return = replay["return_batched"], replay["return_cpu"]
+    assert abs(batched_return - cpu_return) <= RETURN_RTOL * abs(cpu_return), \
+        (batched_return, cpu_return)
+    plain = cpu_episode(env_id)["rewards"].sum()
+    assert abs(plain - cpu_return) > 100 * RETURN_RTOL * abs(cpu_return)
+
+
 def first_stop(done: np.ndarray) -> int:
     stops = np.flatnonzero(done)
     assert stops.size, "the batched world never stopped"
@@ -86,6 +106,8 @@ def first_stop(done: np.ndarray) -> int:
     # with the highest cuff limit (880 N): unintended contact in world 0, range of motion in
     # world 1 (which stops first and keeps moving: its contacts share MuJoCo Warp's array)
     ({"cuff_force_limit_n": 880.0}, ([1, 0, 0, -1, -1, -1], [1, 0, -1, 1, 1, -1])),
+    # the cuff-force stop's penalty with the optional terms in the hold cost
+    ({"reward": SMOOTH_EFFORT}, ([1, 0, 0, 0, 0, 0],)),
 ])
 def test_safety_stops_match(kwargs, unit_actions):
     for row in replay_stops("rehabbot/rehab-reach-v2", unit_actions, **kwargs):

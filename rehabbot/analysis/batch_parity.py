@@ -205,7 +205,7 @@ def hold_still(env_id: str, steps: int, seeds: Sequence[int], **kwargs: Any) -> 
     for seed in seeds:
         env = gym.make(env_id, **kwargs).unwrapped
         env.reset(seed=seed, options=START)
-        tremor = env._physics.drive._tremor
+        tremor = env.physics.drive.tremor
         starts.append((list(tremor.phase), tremor.drift_hz, tremor.modulation))
         adr, rows = env.scene.exercised_qpos_adr, []
         for _ in range(steps):

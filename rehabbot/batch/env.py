@@ -16,8 +16,8 @@ Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
    Warp neither warns nor resets on a bad acceleration: a non-finite state, a joint faster
    than the blow-up speed, a non-finite or blow-up cuff force, or a paper observation
    outside the healthy box), range of motion, cuff force, unintended contact;
-4. the progress reward with the ``"hold"`` safety penalty (its hold gap in the state), and
-   the target switch;
+4. the progress reward with the ``"hold"`` safety penalty (its hold gap in the state) and its
+   optional smoothness and effort terms, and the target switch;
 5. the agent observation: ``tanh`` or a clip of the CPU env's affine map.
 
 MuJoCo Warp keeps one contact array for all worlds. The contact rule therefore reads the
@@ -51,7 +51,8 @@ NONFINITE_FORCE_N = 1e9
 INSTABILITY = RULE_CODES["instability"]
 METER_KEYS = ("meter_pos", "meter_force", "meter_has_force", "robot_work_j",
               "robot_positive_work_j")
-REWARD_TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety")
+REWARD_TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety",
+                "reward_smoothness", "reward_effort")
 
 
 def physics_model(model: mujoco.MjModel, tables: EnvTables) -> mujoco.MjModel:
@@ -143,6 +144,10 @@ class BatchedRehabEnv:
         self._is_robot, self._is_other = jp.asarray(t.is_robot_geom), jp.asarray(t.is_other_geom)
         self._bounded_low, self._bounded_high = _f32(t.bounded_low), _f32(t.bounded_high)
         self._contact_types = _i32(CONTACT_CONSTRAINTS)
+        self._action_range = _f32(t.reward_action_range)
+        self._reward_torque_limit = _f32(t.reward_torque_limit_nm)
+        # A step's hold cost: the time cost and the optional terms' largest losses.
+        self._hold_step = t.time_cost + t.smoothness_weight + t.effort_weight
         # Per patient (leading axis): the tables a profile or a condition changes.
         a = self.patients.arrays
         home_ctrl = np.zeros((*a["home_setpoints_rad"].shape[:2], self.mj_model.nu))
@@ -224,6 +229,24 @@ class BatchedRehabEnv:
         return {"robot_work_j": meter["robot_work_j"], "patient_work_j": meter["patient_work_j"],
                 "assistance_ratio": ratio,
                 "patient_torque_nm": self.patient.exercised_torque(meter)}
+
+    def _optional_terms(self, native: jax.Array, previous: jax.Array,
+                        data: Any) -> tuple[jax.Array, jax.Array]:
+        """The reward's ``smoothness`` and ``effort`` terms (``Reward.optional_terms``; 0 where
+        the weight is 0): the native action's change since the last step over the
+        controller's range, and the robot's actuator torques over their limits (0 when one is
+        not finite)."""
+        t = self.tables
+        zero = jp.zeros((), jp.float32)
+        smoothness = effort = zero
+        if t.smoothness_weight:
+            change = (native - previous) / self._action_range
+            smoothness = -t.smoothness_weight * jp.mean(change * change)
+        if t.effort_weight:
+            torque = data.qfrc_actuator[self._dof] / self._reward_torque_limit
+            effort = jp.where(jp.all(jp.isfinite(torque)),
+                              -t.effort_weight * jp.mean(torque * torque), 0.0)
+        return smoothness, effort
 
     def _hold_travel(self, setpoint: jax.Array, theta: jax.Array,
                      speed: jax.Array) -> jax.Array:
@@ -336,8 +359,9 @@ class BatchedRehabEnv:
             "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
             "path_left": jp.linalg.norm(theta - w["targets"][exercise, 0])
             + w["rests"][exercise, 0],
-            "hold_gap": jp.float32(t.max_episode_steps * t.time_cost)
+            "hold_gap": jp.float32(t.max_episode_steps * self._hold_step)
             + t.progress_weight * self._hold_travel(setpoint, theta, speed),
+            "previous_action": jp.zeros(self._action_range.shape[0], jp.float32),
             "rng": rng, "truncation": zero, **self._meter_start(data),
         }
         if self.patient is not None:
@@ -535,12 +559,18 @@ class BatchedRehabEnv:
         after = next_distance + rests[exercise, new_index]
         progress = t.progress_weight * (info["path_left"] - after)
         gap = info["hold_gap"]
-        safety = jp.where(stop, -(jp.maximum(gap + progress - t.time_cost, 0.0) + t.time_cost
+        smoothness, effort = self._optional_terms(native, info["previous_action"], data)
+        others = progress - t.time_cost
+        if t.smoothness_weight or t.effort_weight:
+            others = others + smoothness + effort
+        safety = jp.where(stop, -(jp.maximum(gap + others, 0.0) + self._hold_step
                                   + t.stop_margin), 0.0)
         bonus = jp.where(reached, jp.where(last, t.final_bonus, t.intermediate_bonus), 0.0)
         reward = progress + bonus - t.time_cost + safety
+        if t.smoothness_weight or t.effort_weight:
+            reward = reward + smoothness + effort
         lead = self._hold_travel(setpoint, theta, jp.linalg.norm(data.qvel[self._dof]))
-        hold = jp.maximum(t.max_episode_steps - steps, 0) * t.time_cost \
+        hold = jp.maximum(t.max_episode_steps - steps, 0) * self._hold_step \
             + t.progress_weight * lead
         gap = jp.where(stop, gap, jp.maximum(gap + reward, hold))
         terminated = stop | (reached & last)
@@ -553,6 +583,7 @@ class BatchedRehabEnv:
         new_info = {**info, **meter, **drive, "rng": rng, "setpoint": setpoint,
                     "target_index": new_index, "steps": steps,
                     "theta": theta, "healthy": dynamic, "path_left": after, "hold_gap": gap,
+                    "previous_action": native,
                     "truncation": truncated.astype(f32)}
         metrics = {"interaction_force_n": force, "cost": (violation > 0).astype(f32),
                    "safety_violation": violation,
@@ -561,6 +592,7 @@ class BatchedRehabEnv:
                    **self._readings(data, patient, exercise, level),
                    **self._work_metrics({**meter, **drive}),
                    "reward_progress": progress, "reward_bonus": bonus,
-                   "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety}
+                   "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety,
+                   "reward_smoothness": smoothness, "reward_effort": effort}
         return State(data, obs, reward.astype(f32), (terminated | truncated).astype(f32),
                      {k: jp.asarray(v) for k, v in metrics.items()}, new_info)

@@ -62,35 +62,38 @@ class PatientTables:
 def read_patient_tables(env: Any) -> PatientTables | None:
     """The patient drive's tables of the CPU env ``env`` (``gym.make(...).unwrapped``), or None
     when its condition applies no torque (a healthy, a contracted or a passive weak limb)."""
-    drive = env._physics.drive
+    drive = env.physics.drive
     if drive is None:
         return None
     if not isinstance(drive, PatientDrive):
         raise ValueError(f"{type(drive).__name__}: only the rigid patient's drive is batched")
-    reflex = drive._reflex
-    goals = env._goals
+    reflex = drive.reflex
+    goals = env.goals_rad
     count = max(len(g) for g in goals)
-    m = len(drive._dofs)
+    m = len(drive.dof_ids)
     padded = np.zeros((len(goals), count, m))
     for e, rows in enumerate(goals):
         padded[e, :len(rows)] = rows
         padded[e, len(rows):] = rows[-1]
-    tremor = drive._tremor
+    tremor = drive.tremor
+    ranges = np.asarray(drive.stretch_ranges_rad, dtype=float).reshape(m, 2)
     return PatientTables(
-        dof_adr=np.asarray(drive._dofs, dtype=int), qpos_adr=np.asarray(drive._qadr, dtype=int),
+        dof_adr=np.asarray(drive.dof_ids, dtype=int),
+        qpos_adr=np.asarray(drive.qpos_ids, dtype=int),
         exercised_index=np.asarray(drive.exercised_index, dtype=int),
         exercised_count=int(drive.torque_nm.shape[0]),
-        low_rad=np.asarray(drive._low, dtype=float), high_rad=np.asarray(drive._high, dtype=float),
+        low_rad=ranges[:, 0], high_rad=ranges[:, 1],
         reflex=None if reflex is None else ReflexTable(
             float(reflex.gain_scale), math.radians(reflex.threshold_deg_s),
             float(reflex.catch_at_rest), float(reflex.release_to)),
-        reflex_gain_nms_per_rad=np.asarray(drive._gain, dtype=float),
-        reflex_lag=int(drive._lag), mode=str(drive._mode),
+        reflex_gain_nms_per_rad=np.asarray(drive.reflex_gains_nms_per_rad, dtype=float),
+        reflex_lag=int(drive.reflex_lag_steps), mode=str(drive.effort_mode),
         available_pos_nm=np.asarray([p for p, _ in drive.available_nm], dtype=float),
         available_neg_nm=np.asarray([n for _, n in drive.available_nm], dtype=float),
         peak_pos_nm=np.asarray([p for p, _ in drive.peak_nm], dtype=float),
         peak_neg_nm=np.asarray([n for _, n in drive.peak_nm], dtype=float),
-        kp_nm_per_rad=np.asarray(drive._kp, dtype=float), goal_lag=int(drive._goal_lag),
+        kp_nm_per_rad=np.asarray(drive.kp_nm_per_rad, dtype=float),
+        goal_lag=int(drive.goal_lag_steps),
         goals_rad=padded,
         tremor_hz=float(tremor.frequency_hz) if tremor is not None else 0.0,
         tremor_amplitude_nm=float(tremor.amplitude_nm) if tremor is not None else 0.0,

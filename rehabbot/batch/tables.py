@@ -102,6 +102,12 @@ class EnvTables:
     intermediate_bonus: float
     final_bonus: float
     stop_margin: float
+    # the optional terms: smoothness (the native action's change over its range) and effort
+    # (the robot's actuator torques over their limits), 0: off
+    smoothness_weight: float
+    effort_weight: float
+    reward_action_range: np.ndarray  # (n,)
+    reward_torque_limit_nm: np.ndarray  # (n,)
     # safety
     terminate_on_safety: bool
     patient_qpos_adr: np.ndarray
@@ -146,8 +152,6 @@ def check_supported(env_id: str, env: Any) -> None:
         ("reward", config.reward.design, "progress"),
         ("safety_penalty", config.reward.safety_penalty, "hold"),
         ("safety_penalty_steps", config.reward.safety_penalty_steps, None),
-        ("smoothness_weight", config.reward.smoothness_weight, 0.0),
-        ("effort_weight", config.reward.effort_weight, 0.0),
         ("patients", getattr(config, "patients", None), None),
         ("patient_model", env.scene.patient_model, "rigid"),
     )
@@ -157,7 +161,7 @@ def check_supported(env_id: str, env: Any) -> None:
     if config.control_mode not in CONTROL_MODES:
         raise ValueError(f"control_mode={config.control_mode!r} is not batched yet (only "
                          f"{list(CONTROL_MODES)})")
-    physics = env._physics
+    physics = env.physics
     if physics.muscles is not None or not isinstance(physics.drive, PatientDrive | None):
         raise ValueError(f"condition={config.condition!r}: only the rigid patient's "
                          "conditions are batched (not muscles' excitations)")
@@ -202,7 +206,7 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
                          "for this patient and weight_level=None would draw them; fix "
                          "weight_level")
     homes = _home_setpoints(env)
-    config, scene, safety, agent = env.config, env.scene, env.safety, env._agent
+    config, scene, safety, agent = env.config, env.scene, env.safety, env.agent_observation_map
     controller, handle, reward = env.controller, env.handles[0], env.reward_function
     n = controller.n_joints
     sequences = env.targets
@@ -217,8 +221,9 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
         tools[e, :k] = sequence.tool_pos_base_m[:, :3]
         tools[e, k:] = sequence.tool_pos_base_m[-1, :3]
         rests[e, :k] = reward.rests_rad[e][:k]
-    base_pos, base_rot_t = _rotation_t(env._frames[0])
-    unit = env._unit_actions
+    base_pos, base_rot_t = _rotation_t(env.robot_base_frames[0])
+    unit = env.unit_actions
+    rom_low, rom_high = safety.rom_bounds_rad
     low, high = controller.low_rad, controller.high_rad
     return EnvTables(
         env_id=env_id, frame_skip=int(config.frame_skip),
@@ -229,8 +234,8 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
         hold_sag_rad=float(TORQUE_HOLD_SAG_RAD), hold_brake_s=float(TORQUE_HOLD_BRAKE_S),
         servo_ids=np.asarray(handle.servo_ids, dtype=int),
         motor_ids=np.asarray(handle.motor_ids, dtype=int),
-        action_center=np.asarray(unit._center, dtype=float),
-        action_half=np.asarray(unit._half, dtype=float),
+        action_center=np.asarray(unit.center, dtype=float),
+        action_half=np.asarray(unit.half_range, dtype=float),
         setpoint_low_rad=np.asarray(low, dtype=float),
         setpoint_high_rad=np.asarray(high, dtype=float),
         home_qpos=np.asarray(scene.home_qpos, dtype=float),
@@ -249,15 +254,19 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
         progress_weight=float(reward.progress_weight), time_cost=float(reward.time_cost),
         intermediate_bonus=float(reward.intermediate_bonus),
         final_bonus=float(reward.final_bonus), stop_margin=float(STOP_MARGIN),
+        smoothness_weight=float(reward.smoothness_weight),
+        effort_weight=float(reward.effort_weight),
+        reward_action_range=np.asarray(reward.action_range, dtype=float),
+        reward_torque_limit_nm=np.asarray(reward.torque_limit_nm, dtype=float),
         terminate_on_safety=bool(config.terminate_on_safety),
         patient_qpos_adr=np.asarray(scene.patient_qpos_adr, dtype=int),
-        rom_low_rad=np.asarray(safety._rom_low, dtype=float),
-        rom_high_rad=np.asarray(safety._rom_high, dtype=float),
+        rom_low_rad=np.asarray(rom_low, dtype=float),
+        rom_high_rad=np.asarray(rom_high, dtype=float),
         cuff_row=int(safety.cuff_rows[0]), patient_cuff_site=int(handle.patient_cuff_site_id),
         cuff_force_limit_n=float(safety.force_limits_n[0]),
         contact_tolerance_m=float(safety.thresholds.contact_tolerance_m),
-        is_robot_geom=np.asarray(safety._is_robot, dtype=bool),
-        is_other_geom=np.asarray(safety._is_other, dtype=bool),
+        is_robot_geom=np.asarray(safety.robot_geom_mask, dtype=bool),
+        is_other_geom=np.asarray(safety.other_geom_mask, dtype=bool),
         blowup_speed_rad_s=float(BLOWUP_SPEED_RAD_S), blowup_force_n=float(BLOWUP_FORCE_N),
         agent_matrix=np.asarray(agent.matrix, dtype=float), tanh_stop=int(agent.tanh_stop),
         bounded_start=int(agent.bounded.start),

@@ -296,6 +296,16 @@ class UnitActions:
         self._ones = np.ones(low.shape)
         self._bounds = ((-1.0, 1.0),) * low.size
 
+    @property
+    def center(self) -> np.ndarray:
+        """The native action of a zero unit action (a copy)."""
+        return self._center.copy()
+
+    @property
+    def half_range(self) -> np.ndarray:
+        """The native action's change per unit of the unit action (a copy)."""
+        return self._half.copy()
+
     def native(self, action) -> tuple[np.ndarray, int]:
         """``(the controller's action (float32, inside its box), how many values were
         clipped to [-1, 1])``; ``ValueError`` as :func:`checked_action`."""

@@ -265,6 +265,34 @@ class RehabEnvCore(RehabEnvBase):
         self._static_inside = self._static_fields_inside()
 
     @property
+    def physics(self) -> Any:
+        """The physics of a control step (:mod:`rehabbot.sim.physics`): the patient's drive or
+        muscles and the work meter."""
+        return self._physics
+
+    @property
+    def goals_rad(self) -> Any:
+        """Per exercise, the compliant exercised joints' angles at each target (the active
+        patient's goals), or None."""
+        return self._goals
+
+    @property
+    def robot_base_frames(self) -> tuple[tuple[float, ...], ...]:
+        """Per arm, its base frame as 12 numbers: the origin [m], then R^T row by row (the
+        paper observation's tool position is p = R^T (x - origin))."""
+        return tuple(tuple(frame) for frame in self._frames)
+
+    @property
+    def unit_actions(self) -> UnitActions | None:
+        """The ``-v2`` map of unit actions onto the controller's box (None: native actions)."""
+        return self._unit_actions
+
+    @property
+    def agent_observation_map(self) -> AgentObservation | None:
+        """The ``-v2`` agent observation's affine map (None: the paper observation)."""
+        return self._agent
+
+    @property
     def reward_function(self) -> Any:
         """The reward (:mod:`rehabbot.tasks.reward`): its settings and its episode's state."""
         return self._reward

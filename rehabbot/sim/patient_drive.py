@@ -85,6 +85,57 @@ class PatientDrive:
         self._step_index = 0
         self.torque_nm = np.zeros(len(exercised))  # the last physics step's, exercised joints
 
+    # -- its parameters, read-only (the batched drive reads them: rehabbot.batch) ----------
+    @property
+    def dof_ids(self) -> tuple[int, ...]:
+        """The compliant exercised joints' dofs (in qvel and qfrc_applied)."""
+        return tuple(self._dofs)
+
+    @property
+    def qpos_ids(self) -> tuple[int, ...]:
+        """... and their places in qpos."""
+        return tuple(self._qadr)
+
+    @property
+    def stretch_ranges_rad(self) -> tuple[tuple[float, float], ...]:
+        """Per joint, the (possibly reduced) range the reflex measures the stretch in."""
+        return tuple(zip(self._low, self._high, strict=True))
+
+    @property
+    def reflex(self) -> Any:
+        """The condition's stretch reflex (None: no spasticity)."""
+        return self._reflex
+
+    @property
+    def reflex_gains_nms_per_rad(self) -> tuple[float, ...]:
+        """Per joint, the reference reflex gain (times the grade's ``gain_scale``)."""
+        return tuple(self._gain)
+
+    @property
+    def reflex_lag_steps(self) -> int:
+        """The reflex latency in physics steps."""
+        return self._lag
+
+    @property
+    def effort_mode(self) -> str:
+        """``"passive"``, ``"active_assisted"`` or ``"resistive"``."""
+        return self._mode
+
+    @property
+    def kp_nm_per_rad(self) -> tuple[float, ...]:
+        """Per joint, the active patient's PD gain."""
+        return tuple(self._kp)
+
+    @property
+    def goal_lag_steps(self) -> int:
+        """The active patient's reaction delay in control steps."""
+        return self._goal_lag
+
+    @property
+    def tremor(self) -> Tremor | None:
+        """The condition's tremor (None: none)."""
+        return self._tremor
+
     def reset(self, data: mujoco.MjData, rng: np.random.Generator) -> None:
         """Start an episode: clear the delays, draw the tremor's phases from ``rng``."""
         for row in self._velocity_history:

@@ -165,6 +165,23 @@ class SafetyMonitor:
         self._speed = np.zeros(model.nv)
 
     @property
+    def rom_bounds_rad(self) -> tuple[np.ndarray, np.ndarray]:
+        """The range-of-motion rule's bounds on every patient joint (copies): the joints'
+        ranges widened by the tolerance."""
+        return self._rom_low.copy(), self._rom_high.copy()
+
+    @property
+    def robot_geom_mask(self) -> np.ndarray:
+        """Per geom, whether it is a robot's (a copy)."""
+        return self._is_robot.copy()
+
+    @property
+    def other_geom_mask(self) -> np.ndarray:
+        """Per geom, whether it is the patient's or the furniture's (a copy): a robot geom
+        touching one of these deeper than the tolerance is unintended contact."""
+        return self._is_other.copy()
+
+    @property
     def cuff_rows(self) -> tuple[int, ...]:
         """The first constraint row of each cuff's force (``data.efc_force[row:row + 3]``)."""
         return self._cuff_rows
