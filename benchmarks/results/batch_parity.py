@@ -69,6 +69,9 @@ STOP_ID = "rehabbot/rehab-reach-v2"
 MAS4_CASE = ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "4"}})
 TREMOR_ID, TREMOR_STEPS, TREMOR_SEEDS = "rehabbot/rehab-reach-tremor-v2", 200, tuple(range(8))
 POPULATION_NAMES = ("train", "test")
+# The progress reward's optional terms switched on (smoothness of the action, robot effort).
+REWARD_CASE = ("rehabbot/rehab-reach-v2",
+               {"reward": {"design": "progress", "smoothness_weight": 2.0, "effort_weight": 1.0}})
 
 
 def population_replays(env_id: str, name: str) -> dict:
@@ -150,14 +153,17 @@ def main(argv: list[str] | None = None) -> int:
     print(f"command: {command}", flush=True)
     replays = []
     for env_id in batch.SUPPORTED_IDS:
-        replays.append(replay_expert(env_id))
+        replays.append({**replay_expert(env_id), "kwargs": {}})
         print(replays[-1], flush=True)
+    replays.append({**replay_expert(REWARD_CASE[0], **REWARD_CASE[1]), "kwargs": REWARD_CASE[1]})
+    print(replays[-1], flush=True)
     expert_table = make_table(
         "expert", "The scripted expert's episode, CPU against batched (world 0 of two)",
         ["id", "steps", "target switches", "termination step (CPU / batched)",
          "return (CPU / batched)", "max obs difference", "max reward difference per step",
          "robot work [J] (CPU / batched)"],
-        [[r["id"].split("/")[1], r["steps"],
+        [[r["id"].split("/")[1] + (" (reward: smoothness_weight 2, effort_weight 1)"
+                                   if r["kwargs"] else ""), r["steps"],
           f"{len(r['switches_cpu'])}, " + ("the same" if r["switches_cpu"] ==
                                            r["switches_batched"] else "DIFFERENT"),
           f"{r['end_cpu']} / {r['end_batched']}",
@@ -214,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
             command=command, generated_by=__file__, tables=tables,
             machine=describe_machine(), seeds={"reset": 0, "start": START},
             settings={"ids": list(batch.SUPPORTED_IDS), "stop_id": STOP_ID,
+                      "reward_case": {"id": REWARD_CASE[0], "kwargs": REWARD_CASE[1]},
                       "conditions": [{"id": i, "kwargs": k} for i, k in cases],
                       "populations": {"ids": list(POPULATION_IDS),
                                       "names": list(POPULATION_NAMES)},
