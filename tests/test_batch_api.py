@@ -128,7 +128,7 @@ def test_tables_follow_the_cpu_env_kwargs():
               "exercise": 1, "weight_level": 3, "frame_skip": 5}
     env = batch.make("rehabbot/rehab-knee-v2", naconmax=16, **kwargs)
     t, cpu = env.tables, env.cpu_env
-    assert (t.target_tolerance_rad, t.cuff_force_limit_n) == (0.08, 100.0)
+    assert (t.target_tolerance_rad, t.cuff_force_limits_n.tolist()) == (0.08, [100.0])
     assert (t.time_cost, t.progress_weight) == (0.1, 5.0)
     assert (t.exercise, t.weight_level, t.frame_skip) == (1, 3, 5)
     cpu.reset(seed=0)
