@@ -26,7 +26,9 @@ def test_import_rehabbot_loads_neither_batch_nor_jax():
 
 
 @pytest.mark.parametrize(("env_id", "kwargs", "named"), [
-    ("rehabbot/rehab-bilateral-v2", {}, "rehab-bilateral-v2"),
+    ("rehabbot/rehab-bilateral-v1", {}, "rehab-bilateral-v1"),
+    ("rehabbot/rehab-bilateral-v2", {"control_mode": "joint_position"},
+     "control_mode='joint_position'"),
     ("rehabbot/rehab-reach-v1", {}, "rehab-reach-v1"),
     ("rehabbot/rehab-reach-myo-v2", {}, "rehab-reach-myo-v2"),
     ("rehabbot/rehab-reach-population-v1", {}, "rehab-reach-population-v1"),
@@ -126,7 +128,7 @@ def test_tables_follow_the_cpu_env_kwargs():
               "exercise": 1, "weight_level": 3, "frame_skip": 5}
     env = batch.make("rehabbot/rehab-knee-v2", naconmax=16, **kwargs)
     t, cpu = env.tables, env.cpu_env
-    assert (t.target_tolerance_rad, t.cuff_force_limit_n) == (0.08, 100.0)
+    assert (t.target_tolerance_rad, t.cuff_force_limits_n.tolist()) == (0.08, [100.0])
     assert (t.time_cost, t.progress_weight) == (0.1, 5.0)
     assert (t.exercise, t.weight_level, t.frame_skip) == (1, 3, 5)
     cpu.reset(seed=0)

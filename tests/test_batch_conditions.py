@@ -146,7 +146,7 @@ def test_only_conditions_that_apply_torques_get_a_drive(kwargs, drive):
     ("rehabbot/rehab-reach-myo-v2", {}, "rehab-reach-myo-v2"),
     ("rehabbot/rehab-knee-myo-v2", {}, "rehab-knee-myo-v2"),
     ("rehabbot/rehab-knee-population-v1", {}, "rehab-knee-population-v1"),
-    ("rehabbot/rehab-bilateral-v2", {}, "rehab-bilateral-v2"),
+    ("rehabbot/rehab-bilateral-v1", {}, "rehab-bilateral-v1"),
     ("rehabbot/rehab-reach-spastic-v1", {}, "rehab-reach-spastic-v1"),
 ])
 def test_refuses_conditions_that_are_not_batched(env_id, kwargs, named):

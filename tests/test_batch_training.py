@@ -87,11 +87,11 @@ def test_settings_refuse_bad_values():
 @pytest.mark.parametrize(("argv", "named"), [
     (["--algo", "sac"], "trains PPO only, not 'sac'"),
     (["--algo", "ppo", "--demos", "5"], "--demos is not used"),
-    (["--algo", "ppo"], "bilateral"),
+    (["--algo", "ppo"], "rehab-reach-myo-v2"),
 ])
 def test_cli_refuses_by_name_and_writes_nothing(tmp_path, capsys, argv, named):
     out = tmp_path / "runs"
-    code = main(["train", "rehab-bilateral-v2" if named == "bilateral" else "rehab-reach-v2",
+    code = main(["train", named if named.startswith("rehab-") else "rehab-reach-v2",
                  *argv, "--backend", "rsl_rl", "--num-envs", "2", "--timesteps", "48",
                  "--out", str(out)])
     assert code == 2

@@ -56,8 +56,11 @@ grade-2 reflex to fire (no patient work).
 The populations' table replays every patient of both shipped populations of each population
 id at once, patient k in world k of one batch, each world its own patient's CPU episode from
 `reset(seed=0, options={"exercise": 0, "weight_level": 0, "patient": k})`. Its differences
-are the largest over the population's patients without tremor (a tremor patient's random
-streams differ, as above; its switches and termination are counted with the others)."""
+are the largest over the population's patients without tremor; a tremor patient's random
+streams differ, as above, so its switches and termination are counted apart.
+
+The expert's table also replays the two-arm id, `rehab-bilateral-v2`, on its symmetric
+(entry 0) and alternating (entry 2) exercises."""
 
 # (kwargs, unit actions held side by side): the cuff force both ways; with the highest cuff
 # limit, unintended contact and range of motion.
@@ -69,6 +72,9 @@ STOP_ID = "rehabbot/rehab-reach-v2"
 MAS4_CASE = ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "4"}})
 TREMOR_ID, TREMOR_STEPS, TREMOR_SEEDS = "rehabbot/rehab-reach-tremor-v2", 200, tuple(range(8))
 POPULATION_NAMES = ("train", "test")
+# The two-arm id: its symmetric and alternating exercises (entries 0 and 2 of its table).
+BILATERAL_CASES = (("rehabbot/rehab-bilateral-v2", {"exercise": 0, "weight_level": 0}),
+                   ("rehabbot/rehab-bilateral-v2", {"exercise": 2, "weight_level": 0}))
 # The progress reward's optional terms switched on (smoothness of the action, robot effort).
 REWARD_CASE = ("rehabbot/rehab-reach-v2",
                {"reward": {"design": "progress", "smoothness_weight": 2.0, "effort_weight": 1.0}})
@@ -90,13 +96,18 @@ def population_replays(env_id: str, name: str) -> dict:
 def population_row(result: dict) -> list:
     """A row of the populations' table."""
     rows, tremor = result["rows"], set(result["tremor_patients"])
-    same = sum(r["switches_cpu"] == r["switches_batched"] and r["end_cpu"] == r["end_batched"]
-               and r["stop_batched"] == (r["stop_cpu"] or 0) for r in rows)
+    def same(group: list[dict]) -> str:
+        count = sum(r["switches_cpu"] == r["switches_batched"]
+                    and r["end_cpu"] == r["end_batched"]
+                    and r["stop_batched"] == (r["stop_cpu"] or 0) for r in group)
+        return f"{count} of {len(group)}"
+
     steady = [r for r in rows if r["patient"] not in tremor]
+    trembling = [r for r in rows if r["patient"] in tremor]
     work_error = max(abs(r["patient_work_batched_j"] - r["patient_work_cpu_j"]) for r in steady)
     return [result["id"].split("/")[1], result["population"],
             f"{len(result['profiles_m'])} x {len(result['conditions'])} = {len(rows)}",
-            f"{same} of {len(rows)}",
+            same(steady), same(trembling),
             f"{min(r['end_cpu'] for r in rows)} - {max(r['end_cpu'] for r in rows)}",
             f"{max(r['obs_error'] for r in steady):.1e}",
             f"{max(abs(r['return_batched'] / r['return_cpu'] - 1) for r in steady):.1e}",
@@ -157,13 +168,18 @@ def main(argv: list[str] | None = None) -> int:
         print(replays[-1], flush=True)
     replays.append({**replay_expert(REWARD_CASE[0], **REWARD_CASE[1]), "kwargs": REWARD_CASE[1]})
     print(replays[-1], flush=True)
+    for env_id, start in BILATERAL_CASES:
+        replays.append({**replay_expert(env_id, start=start), "kwargs": {}})
+        print(replays[-1], flush=True)
     expert_table = make_table(
         "expert", "The scripted expert's episode, CPU against batched (world 0 of two)",
         ["id", "steps", "target switches", "termination step (CPU / batched)",
          "return (CPU / batched)", "max obs difference", "max reward difference per step",
          "robot work [J] (CPU / batched)"],
         [[r["id"].split("/")[1] + (" (reward: smoothness_weight 2, effort_weight 1)"
-                                   if r["kwargs"] else ""), r["steps"],
+                                   if r["kwargs"] else "")
+          + (f" (exercise {r['start']['exercise']})" if "bilateral" in r["id"] else ""),
+          r["steps"],
           f"{len(r['switches_cpu'])}, " + ("the same" if r["switches_cpu"] ==
                                            r["switches_batched"] else "DIFFERENT"),
           f"{r['end_cpu']} / {r['end_batched']}",
@@ -200,7 +216,8 @@ def main(argv: list[str] | None = None) -> int:
         "populations", "Populations: every patient's scripted-expert episode, CPU against "
         "batched, all patients of a population side by side in one batch",
         ["id", "population", "patients (profiles x conditions)",
-         "same switches, termination and stop", "termination steps (CPU)",
+         "same switches, termination and stop", "... with tremor (other random streams)",
+         "termination steps (CPU)",
          "max obs difference", "max return difference (relative)",
          "max patient work difference [J]", "largest patient work [J]"],
         [population_row(p) for p in populations])
@@ -221,6 +238,7 @@ def main(argv: list[str] | None = None) -> int:
             machine=describe_machine(), seeds={"reset": 0, "start": START},
             settings={"ids": list(batch.SUPPORTED_IDS), "stop_id": STOP_ID,
                       "reward_case": {"id": REWARD_CASE[0], "kwargs": REWARD_CASE[1]},
+                      "bilateral_cases": [{"id": i, "start": s} for i, s in BILATERAL_CASES],
                       "conditions": [{"id": i, "kwargs": k} for i, k in cases],
                       "populations": {"ids": list(POPULATION_IDS),
                                       "names": list(POPULATION_NAMES)},

@@ -55,22 +55,42 @@ REWARD_TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety
                 "reward_smoothness", "reward_effort")
 
 
+# MuJoCo Warp's jacobian="auto" turns sparse above this many dofs (mujoco_warp io.is_sparse).
+WARP_SPARSE_ABOVE_NV = 32
+
+
 def physics_model(model: mujoco.MjModel, tables: EnvTables) -> mujoco.MjModel:
-    """The model MuJoCo Warp steps: the CPU env's, except in ``torque`` mode, where the servos
-    are switched off by zero gains (MuJoCo Warp ignores ``opt.disableactuator``, with which the
-    CPU env switches them off). The robot's gravity compensation and torque clamp are joint
-    properties (``actgravcomp``, ``actfrcrange``), so nothing else changes."""
-    if tables.control_mode != "torque":
+    """The model MuJoCo Warp steps: the CPU env's, with two changes where needed.
+
+    * In ``torque`` mode the servos are switched off by zero gains (MuJoCo Warp ignores
+      ``opt.disableactuator``, with which the CPU env switches them off). The robot's gravity
+      compensation and torque clamp are joint properties (``actgravcomp``, ``actfrcrange``),
+      so nothing else changes.
+    * A model that MuJoCo Warp would give a sparse Jacobian (``jacobian="auto"`` and more
+      than 32 dofs: the two-arm scene's 33) gets a dense one. MuJoCo Warp's sparse path
+      regularises a site-to-site connect constraint (the cuffs) by the inverse weight of the
+      sites' *welded ancestor* bodies, where MuJoCo (and its dense path) uses the sites' own
+      bodies: the cuff forces at home came out 4 % higher (14.35 N against 13.85 N). The
+      Jacobian's layout does not change MuJoCo's physics, so the dense one matches the CPU.
+    """
+    dense = model.opt.jacobian == mujoco.mjtJacobian.mjJAC_AUTO \
+        and model.nv > WARP_SPARSE_ABOVE_NV
+    torque = tables.control_mode == "torque"
+    if not (torque or dense):
         return model
-    if not model.opt.disableactuator:
-        raise AssertionError("the CPU env's torque mode no longer disables the servos")
-    servo = tables.servo_ids
-    if np.any(model.actuator_biasprm[servo, 0] != 0):
-        raise AssertionError("a servo has a constant bias: zero gains would not switch it off")
     copy = mujoco.MjModel.__copy__(model)
-    copy.actuator_gainprm[servo, 0] = 0.0
-    copy.actuator_biasprm[servo, 1:3] = 0.0
-    copy.opt.disableactuator = 0
+    if dense:
+        copy.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
+    if torque:
+        if not model.opt.disableactuator:
+            raise AssertionError("the CPU env's torque mode no longer disables the servos")
+        servo = tables.servo_ids
+        if np.any(model.actuator_biasprm[servo, 0] != 0):
+            raise AssertionError("a servo has a constant bias: zero gains would not switch it "
+                                 "off")
+        copy.actuator_gainprm[servo, 0] = 0.0
+        copy.actuator_biasprm[servo, 1:3] = 0.0
+        copy.opt.disableactuator = 0
     return copy
 
 
@@ -132,13 +152,19 @@ class BatchedRehabEnv:
         self.action_size = int(cpu.action_space.shape[0])
         self.observation_size = int(cpu.observation_space.shape[0])
         self.dt_s = float(cpu.dt_s)
+        # The two-arm reward's sync term (BilateralReward), when its weight is set.
+        self.has_sync = self.tables.arms > 1 and self.tables.sync_weight > 0
         self._build_arrays(self.tables)
 
     def _build_arrays(self, t: EnvTables) -> None:
         self._servo, self._dof, self._qpos = _i32(t.servo_ids), _i32(t.dof_adr), _i32(t.qpos_adr)
         self._motor, self._torque_limit = _i32(t.motor_ids), _f32(t.torque_limit_nm)
         self._center, self._half = _f32(t.action_center), _f32(t.action_half)
-        self._rot_t = _f32(t.base_rot_t)
+        self._rot_t = _f32(t.base_rot_t)  # (arms, 3, 3)
+        self._tool_sites = _i32(t.tool_sites)
+        self._cuff_sites = _i32(t.patient_cuff_sites)
+        self._cuff_limits = _f32(t.cuff_force_limits_n)
+        self._robot_of = _i32(t.robot_of_geom)
         self._phi = _i32(t.phi_adr)
         self._patient_qpos = _i32(t.patient_qpos_adr)
         self._is_robot, self._is_other = jp.asarray(t.is_robot_geom), jp.asarray(t.is_other_geom)
@@ -160,7 +186,7 @@ class BatchedRehabEnv:
             "targets": _f32(a["targets_rad"]), "tools": _f32(a["tool_targets_m"]),
             "count": _i32(a["num_targets"]), "rests": _f32(a["rests_rad"]),
             "rom_low": _f32(a["rom_low_rad"]), "rom_high": _f32(a["rom_high_rad"]),
-            "matrix": _f32(a["agent_matrix"]),
+            "matrix": _f32(a["agent_matrix"]), "segments": _f32(a["segments_rad"]),
         }
         # [patient, level]: the MJX model leaves a patient or a weight level changes.
         models = self.patients.models
@@ -188,32 +214,39 @@ class BatchedRehabEnv:
     def _dynamic(self, w: dict, data: Any) -> tuple[jax.Array, jax.Array]:
         """theta (the robot's joint angles) and the paper observation's theta, p, phi."""
         theta = data.qpos[self._qpos]
-        p = self._rot_t @ (data.site_xpos[self.tables.tool_site] - w["base"])
+        tools = data.site_xpos[self._tool_sites] - w["base"]  # (arms, 3)
+        p = jp.einsum("aij,aj->ai", self._rot_t, tools).reshape(-1)
         return theta, jp.concatenate([theta, p, data.qpos[self._phi]])
 
     def _cuff_rows_force(self, data: Any) -> tuple[jax.Array, jax.Array]:
-        """The cuff's constraint force (3,) and whether its rows exist (the work meter's)."""
-        row, impl = self.tables.cuff_row, data._impl
-        return impl.efc__force[row:row + 3], jp.reshape(impl.nefc, ()) >= row + 3
+        """Each cuff's constraint force (arms, 3) and whether its rows exist (the work
+        meters')."""
+        impl = data._impl
+        rows = self.tables.cuff_rows.tolist()
+        force = jp.stack([impl.efc__force[row:row + 3] for row in rows])
+        return force, jp.reshape(impl.nefc, ()) >= jp.asarray(rows, jp.int32) + 3
 
     def _meter_start(self, data: Any) -> dict[str, jax.Array]:
-        """The work meter at the start of an episode (``WorkMeter.reset``)."""
+        """The work meters at the start of an episode (``WorkMeter.reset``, one per cuff)."""
         zero = jp.zeros((), jp.float32)
-        return {"meter_pos": data.site_xpos[self.tables.patient_cuff_site],
-                "meter_force": jp.zeros(3, jp.float32), "meter_has_force": jp.bool_(False),
+        arms = self.tables.arms
+        return {"meter_pos": data.site_xpos[self._cuff_sites],
+                "meter_force": jp.zeros((arms, 3), jp.float32),
+                "meter_has_force": jp.zeros(arms, bool),
                 "robot_work_j": zero, "robot_positive_work_j": zero}
 
     def _meter_after_step(self, meter: dict, data: Any) -> dict[str, jax.Array]:
-        """``WorkMeter.after_step``: the force of the physics step before times the cuff
-        site's displacement since (the force on the limb is minus the constraint force)."""
-        pos = data.site_xpos[self.tables.patient_cuff_site]
-        work = jp.where(meter["meter_has_force"],
-                        jp.dot(meter["meter_force"], meter["meter_pos"] - pos), 0.0)
+        """``WorkMeter.after_step`` of each cuff: the force of the physics step before times
+        the cuff site's displacement since (the force on the limb is minus the constraint
+        force); the robots' work is the cuffs' sum."""
+        pos = data.site_xpos[self._cuff_sites]
+        works = jp.where(meter["meter_has_force"],
+                         jp.sum(meter["meter_force"] * (meter["meter_pos"] - pos), axis=1), 0.0)
         force, has_force = self._cuff_rows_force(data)
         return {"meter_pos": pos, "meter_force": force, "meter_has_force": has_force,
-                "robot_work_j": meter["robot_work_j"] + work,
+                "robot_work_j": meter["robot_work_j"] + jp.sum(works),
                 "robot_positive_work_j": meter["robot_positive_work_j"]
-                + jp.maximum(work, 0.0)}
+                + jp.sum(jp.maximum(works, 0.0))}
 
     def _work_metrics(self, meter: dict) -> dict[str, jax.Array]:
         """The work entries of the CPU env's ``info``: a patient without a drive does no work
@@ -248,15 +281,48 @@ class BatchedRehabEnv:
                               -t.effort_weight * jp.mean(torque * torque), 0.0)
         return smoothness, effort
 
-    def _hold_travel(self, setpoint: jax.Array, theta: jax.Array,
-                     speed: jax.Array) -> jax.Array:
-        """How far [rad] the joints may still travel if the agent holds still
+    def _per_arm(self, values: jax.Array) -> jax.Array:
+        """``values`` over every arm's joints, one row per arm ``(arms, joints)``."""
+        return values.reshape(self.tables.arms, -1)
+
+    def _arm_distances(self, theta: jax.Array, target: jax.Array) -> jax.Array:
+        """Each arm's ``||theta_k - target_k||`` (arms,)."""
+        return jp.linalg.norm(self._per_arm(theta - target), axis=1)
+
+    def _leads(self, setpoint: jax.Array, theta: jax.Array, qvel: jax.Array) -> jax.Array:
+        """How far [rad] each arm's joints may still travel if the agent holds still
         (``Controller.hold_travel_rad``): to the setpoints, or in ``torque`` mode the sag and
-        braking allowance."""
+        braking allowance. ``(arms,)``."""
         t = self.tables
         if t.control_mode == "torque":
-            return t.hold_sag_rad + t.hold_brake_s * speed
-        return jp.linalg.norm(setpoint - theta)
+            return t.hold_sag_rad + t.hold_brake_s * jp.linalg.norm(self._per_arm(qvel),
+                                                                    axis=1)
+        return self._arm_distances(setpoint, theta)
+
+    def _in_segment(self, w: dict, exercise: jax.Array, target: jax.Array,
+                    distances: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """``BilateralReward._in_segment``: each arm's share of target ``target``'s segment
+        done (arms,) and the arms' sync gap (0 unless both arms move in the segment)."""
+        t = self.tables
+        lengths = w["segments"][exercise, target]
+        fractions = jp.where(lengths <= 0.0, 1.0,
+                             jp.clip(1.0 - distances / jp.where(lengths > 0, lengths, 1.0),
+                                     0.0, 1.0))
+        moving = jp.all(lengths > t.target_tolerance_rad)
+        gap = jp.where(moving, jp.maximum(jp.abs(fractions[0] - fractions[1])
+                                          - t.sync_tolerance, 0.0), 0.0)
+        return fractions, gap
+
+    def _sync_hold(self, w: dict, exercise: jax.Array, target: jax.Array, gap: jax.Array,
+                   leads: jax.Array) -> jax.Array:
+        """``BilateralReward.hold_cost``'s sync share per step: the largest gap the arms can
+        reach while each travels its lead, when both move in target ``target``'s segment."""
+        t = self.tables
+        lengths = w["segments"][exercise, target]
+        moving = jp.all(lengths > t.target_tolerance_rad)
+        safe = jp.where(lengths > 0, lengths, 1.0)
+        return jp.where(moving, jp.minimum(gap + jp.sum(leads / safe), 1.0), 0.0) \
+            * t.sync_weight
 
     def _paper(self, w: dict, exercise: jax.Array, index: jax.Array, dynamic: jax.Array,
                level: jax.Array) -> jax.Array:
@@ -273,11 +339,13 @@ class BatchedRehabEnv:
         start = t.paper_slices["theta"][0]  # theta, p and phi side by side
         return paper.at[start:start + dynamic.shape[0]].set(dynamic)
 
-    def _cuff_force(self, data: Any) -> jax.Array:
-        """The cuff's force [N] (0 while its constraint is not active), as the CPU reads it."""
-        row, impl = self.tables.cuff_row, data._impl
-        force = jp.linalg.norm(impl.efc__force[row:row + 3])
-        return jp.where(jp.reshape(impl.ne, ()) >= row + 3, force, 0.0)
+    def _cuff_forces(self, data: Any) -> jax.Array:
+        """Each cuff's force [N] (arms,): 0 while the cuffs' constraints are not active, as
+        the CPU reads them."""
+        impl = data._impl
+        rows = self.tables.cuff_rows.tolist()
+        forces = jp.stack([jp.linalg.norm(impl.efc__force[row:row + 3]) for row in rows])
+        return jp.where(jp.reshape(impl.ne, ()) >= max(rows) + 3, forces, 0.0)
 
     def _touch(self, data: Any) -> jax.Array:
         """Whether a robot geom touches the patient or the furniture deeper than the
@@ -289,11 +357,14 @@ class BatchedRehabEnv:
         geom = impl.contact__geom[cid]
         robot, other = self._is_robot[geom], self._is_other[geom]
         hit = (robot[:, 0] & other[:, 1]) | (robot[:, 1] & other[:, 0])
+        if self.tables.robots_collide:  # two robots' geoms touching
+            owner = self._robot_of[geom]
+            hit = hit | ((owner[:, 0] >= 0) & (owner[:, 1] >= 0) & (owner[:, 0] != owner[:, 1]))
         deep = impl.contact__dist[cid] < -self.tables.contact_tolerance_m
         return jp.any(contact_row & hit & deep)
 
     def _agent_obs(self, w: dict, paper: jax.Array, exercise: jax.Array, index: jax.Array,
-                   setpoint: jax.Array, qvel: jax.Array, force: jax.Array) -> jax.Array:
+                   setpoint: jax.Array, qvel: jax.Array, forces: jax.Array) -> jax.Array:
         t = self.tables
         count = w["count"][exercise]
         has_next = index + 1 < count
@@ -302,7 +373,7 @@ class BatchedRehabEnv:
         theta_star = paper[t.paper_slices["theta_star"][0]:t.paper_slices["theta_star"][1]]
         x = jp.concatenate([paper, jp.where(has_next, following, theta_star), setpoint,
                             jp.where(jp.isfinite(qvel), qvel, 0.0),
-                            jp.where(jp.isfinite(force), force, NONFINITE_FORCE_N)[None],
+                            jp.where(jp.isfinite(forces), forces, NONFINITE_FORCE_N),
                             jp.ones(1, jp.float32)])
         v = w["matrix"] @ x
         bounded = slice(t.bounded_start, t.bounded_start + self._bounded_low.shape[0])
@@ -349,18 +420,26 @@ class BatchedRehabEnv:
         setpoint = w["home_ctrl"][level][self._servo]
         index = jp.int32(0)
         paper = self._paper(w, exercise, index, dynamic, level)
-        speed = jp.linalg.norm(data.qvel[self._dof])
-        force = self._cuff_force(data)
-        obs = self._agent_obs(w, paper, exercise, index, setpoint, data.qvel[self._dof], force)
+        forces = self._cuff_forces(data)
+        force = jp.max(forces)
+        obs = self._agent_obs(w, paper, exercise, index, setpoint, data.qvel[self._dof], forces)
         zero = jp.zeros((), jp.float32)
+        distances = self._arm_distances(theta, w["targets"][exercise, 0])
+        leads = self._leads(setpoint, theta, data.qvel[self._dof])
+        hold_gap = jp.float32(t.max_episode_steps * self._hold_step) \
+            + t.progress_weight * jp.sum(leads)
+        sync = {}
+        if self.has_sync:
+            fractions, gap = self._in_segment(w, exercise, index, distances)
+            hold_gap = hold_gap + t.max_episode_steps * self._sync_hold(w, exercise, index, gap,
+                                                                        leads)
+            sync = {"sync_gap": gap}
         info = {
             "setpoint": setpoint, "target_index": index, "exercise": exercise,
             "weight_level": level, "patient": jp.asarray(patient, jp.int32),
             "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
-            "path_left": jp.linalg.norm(theta - w["targets"][exercise, 0])
-            + w["rests"][exercise, 0],
-            "hold_gap": jp.float32(t.max_episode_steps * self._hold_step)
-            + t.progress_weight * self._hold_travel(setpoint, theta, speed),
+            "path_left": jp.sum(distances) + w["rests"][exercise, 0],
+            "hold_gap": hold_gap, **sync,
             "previous_action": jp.zeros(self._action_range.shape[0], jp.float32),
             "rng": rng, "truncation": zero, **self._meter_start(data),
         }
@@ -372,6 +451,10 @@ class BatchedRehabEnv:
                    "target_index": index, "action_clipped": jp.int32(0),
                    **self._readings(data, patient, exercise, level),
                    **self._work_metrics(info), **dict.fromkeys(REWARD_TERMS, zero)}
+        if t.arms > 1:
+            metrics["cuff_forces_n"] = forces
+        if self.has_sync:
+            metrics.update(reward_sync=zero, segment_fraction=fractions, sync_gap=zero)
         return State(data, obs, zero, zero, metrics, info)
 
     def _readings(self, data: Any, patient: jax.Array, exercise: jax.Array, level: jax.Array
@@ -522,7 +605,8 @@ class BatchedRehabEnv:
                                                length=t.frame_skip)
 
         # Safety rules, in the CPU env's order.
-        force = self._cuff_force(data)
+        forces = self._cuff_forces(data)
+        force = jp.max(forces)
         speed = jp.max(jp.abs(data.qvel))
         unstable = (~jp.all(jp.isfinite(data.qpos)) | ~(force <= t.blowup_force_n)
                     | ~(speed <= t.blowup_speed_rad_s))
@@ -532,7 +616,7 @@ class BatchedRehabEnv:
         unstable = unstable | outside
         q = data.qpos[self._patient_qpos]
         rom = jp.any((q < w["rom_low"]) | (q > w["rom_high"]))
-        cuff = force > t.cuff_force_limit_n
+        cuff = jp.any(forces > self._cuff_limits)
         touch = self._touch(data)
         violation = jp.select([unstable, rom, cuff, touch],
                               [RULE_CODES["instability"], RULE_CODES["range_of_motion"],
@@ -546,17 +630,18 @@ class BatchedRehabEnv:
         steps = info["steps"] + 1
         targets, rests = w["targets"], w["rests"]
         error = theta - targets[exercise, index]
-        distance, largest = jp.linalg.norm(error), jp.max(jp.abs(error))
+        distances, largest = self._arm_distances(theta, targets[exercise, index]), \
+            jp.max(jp.abs(error))
         count = w["count"][exercise]
         last = index == count - 1
         stop = (violation > 0) & (t.terminate_on_safety | (violation == INSTABILITY))
         reached = (largest < t.target_tolerance_rad) & ~stop
         switching = reached & ~last
         following = jp.minimum(index + 1, targets.shape[1] - 1)
-        next_distance = jp.where(
-            switching, jp.linalg.norm(theta - targets[exercise, following]), distance)
+        next_distances = jp.where(
+            switching, self._arm_distances(theta, targets[exercise, following]), distances)
         new_index = jp.where(switching, index + 1, index)
-        after = next_distance + rests[exercise, new_index]
+        after = jp.sum(next_distances) + rests[exercise, new_index]
         progress = t.progress_weight * (info["path_left"] - after)
         gap = info["hold_gap"]
         smoothness, effort = self._optional_terms(native, info["previous_action"], data)
@@ -569,21 +654,34 @@ class BatchedRehabEnv:
         reward = progress + bonus - t.time_cost + safety
         if t.smoothness_weight or t.effort_weight:
             reward = reward + smoothness + effort
-        lead = self._hold_travel(setpoint, theta, jp.linalg.norm(data.qvel[self._dof]))
-        hold = jp.maximum(t.max_episode_steps - steps, 0) * self._hold_step \
-            + t.progress_weight * lead
+        leads = self._leads(setpoint, theta, data.qvel[self._dof])
+        steps_left = jp.maximum(t.max_episode_steps - steps, 0)
+        hold = steps_left * self._hold_step + t.progress_weight * jp.sum(leads)
+        sync_info, sync_metrics = {}, {}
+        if self.has_sync:  # BilateralReward: the arms' sync term, in the stop and the hold
+            fractions, step_gap = self._in_segment(w, exercise, index, distances)
+            state_gap = jp.where(switching, self._in_segment(w, exercise, following,
+                                                             next_distances)[1], step_gap)
+            stop_sync = t.sync_weight * jp.maximum(step_gap, info["sync_gap"])
+            safety = jp.where(stop, safety - stop_sync, safety)
+            reward_sync = jp.where(stop, 0.0, -t.sync_weight * step_gap)
+            reward = reward - jp.where(stop, stop_sync, 0.0) + reward_sync
+            hold = hold + steps_left * self._sync_hold(w, exercise, new_index, state_gap, leads)
+            sync_info = {"sync_gap": state_gap}
+            sync_metrics = {"reward_sync": reward_sync, "segment_fraction": fractions,
+                            "sync_gap": step_gap}
         gap = jp.where(stop, gap, jp.maximum(gap + reward, hold))
         terminated = stop | (reached & last)
         truncated = (steps >= t.max_episode_steps) & ~terminated
 
         paper = self._paper(w, exercise, new_index, dynamic, level)
         obs = self._agent_obs(w, paper, exercise, new_index, setpoint, data.qvel[self._dof],
-                              self._cuff_force(data))
+                              self._cuff_forces(data))
         f32 = jp.float32
         new_info = {**info, **meter, **drive, "rng": rng, "setpoint": setpoint,
                     "target_index": new_index, "steps": steps,
                     "theta": theta, "healthy": dynamic, "path_left": after, "hold_gap": gap,
-                    "previous_action": native,
+                    "previous_action": native, **sync_info,
                     "truncation": truncated.astype(f32)}
         metrics = {"interaction_force_n": force, "cost": (violation > 0).astype(f32),
                    "safety_violation": violation,
@@ -593,6 +691,8 @@ class BatchedRehabEnv:
                    **self._work_metrics({**meter, **drive}),
                    "reward_progress": progress, "reward_bonus": bonus,
                    "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety,
-                   "reward_smoothness": smoothness, "reward_effort": effort}
+                   "reward_smoothness": smoothness, "reward_effort": effort, **sync_metrics}
+        if t.arms > 1:
+            metrics["cuff_forces_n"] = jp.where(jp.isfinite(forces), forces, 0.0)
         return State(data, obs, reward.astype(f32), (terminated | truncated).astype(f32),
                      {k: jp.asarray(v) for k, v in metrics.items()}, new_info)

@@ -32,11 +32,11 @@ from rehabbot.sim.scene import WEIGHT_LEVELS
 PER_PATIENT_FIELDS: tuple[str, ...] = (
     "setpoint_low_rad", "setpoint_high_rad", "home_qpos", "home_setpoints_rad", "base_pos_m",
     "healthy_low", "healthy_high", "targets_rad", "tool_targets_m", "num_targets",
-    "rests_rad", "rom_low_rad", "rom_high_rad", "agent_matrix",
+    "rests_rad", "rom_low_rad", "rom_high_rad", "agent_matrix", "segments_rad",
 )
 # Per-patient tables with a target axis (second in the patient's own array): patients with
 # fewer targets are padded with their last target (and a rest of 0 after it).
-TARGET_FIELDS: tuple[str, ...] = ("targets_rad", "tool_targets_m", "rests_rad")
+TARGET_FIELDS: tuple[str, ...] = ("targets_rad", "tool_targets_m", "rests_rad", "segments_rad")
 # MuJoCo Warp model fields that may differ between patients although MuJoCo Warp does not
 # batch them: the dof lengths, read by MuJoCo Warp's sleep only (refused where a model
 # enables sleep). Every world gets the first patient's.
@@ -79,7 +79,8 @@ def _pad_targets(rows: np.ndarray, count: int) -> np.ndarray:
 def _pad_rests(rows: np.ndarray, count: int) -> np.ndarray:
     if rows.shape[1] == count:
         return rows
-    return np.concatenate([rows, np.zeros((rows.shape[0], count - rows.shape[1]))], axis=1)
+    pad = np.zeros((rows.shape[0], count - rows.shape[1], *rows.shape[2:]))
+    return np.concatenate([rows, pad], axis=1)
 
 
 def _stack_arrays(tables: Sequence[EnvTables]) -> dict[str, np.ndarray]:
@@ -87,7 +88,7 @@ def _stack_arrays(tables: Sequence[EnvTables]) -> dict[str, np.ndarray]:
     arrays: dict[str, np.ndarray] = {}
     for name in PER_PATIENT_FIELDS:
         rows = [np.asarray(getattr(t, name)) for t in tables]
-        if name == "rests_rad":
+        if name in ("rests_rad", "segments_rad"):
             rows = [_pad_rests(r, count) for r in rows]
         elif name in TARGET_FIELDS:
             rows = [_pad_targets(r, count) for r in rows]

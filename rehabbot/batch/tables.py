@@ -44,8 +44,10 @@ CONDITION_IDS: tuple[str, ...] = tuple(
 POPULATION_IDS: tuple[str, ...] = tuple(
     env_id for env_id, base_id in POPULATION_VARIANTS.items()
     if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
+# The two-arm id: two robots, one on each hand (the bilateral exercise table).
+BILATERAL_ID = "rehabbot/rehab-bilateral-v2"
 # Every id the batched env builds.
-BATCHED_IDS: tuple[str, ...] = SUPPORTED_IDS + CONDITION_IDS + POPULATION_IDS
+BATCHED_IDS: tuple[str, ...] = SUPPORTED_IDS + CONDITION_IDS + POPULATION_IDS + (BILATERAL_ID,)
 # The control modes the batched env builds.
 CONTROL_MODES: tuple[str, ...] = ("joint_delta", "joint_position", "joint_velocity", "torque")
 # The safety rules' codes in the batched state: 0 for none, then RULES in order (1-based).
@@ -81,18 +83,19 @@ class EnvTables:
     home_qpos: np.ndarray  # (nq,)
     home_setpoints_rad: np.ndarray  # (levels, n) clipped to the bounds, as the controller does
     # the paper observation
+    arms: int  # robots (1, or 2 for the bilateral id); n counts every arm's joints
     qpos_adr: np.ndarray  # (n,) robot joints in qpos
     dof_adr: np.ndarray  # (n,) robot joints in qvel
-    tool_site: int
-    base_pos_m: np.ndarray  # (3,) robot base in the world
-    base_rot_t: np.ndarray  # (3, 3) R^T: p = R^T (x - base)
+    tool_sites: np.ndarray  # (arms,)
+    base_pos_m: np.ndarray  # (arms, 3) each robot's base in the world
+    base_rot_t: np.ndarray  # (arms, 3, 3) R^T: p = R^T (x - base)
     phi_adr: np.ndarray  # (3,) the exercised patient joints in qpos
     healthy_low: np.ndarray  # (23,) float32 box of a healthy paper observation
     healthy_high: np.ndarray
     paper_slices: dict[str, tuple[int, int]]  # the paper observation's fields
     # targets
     targets_rad: np.ndarray  # (E, T, n)
-    tool_targets_m: np.ndarray  # (E, T, 3) p* in the robot base frame
+    tool_targets_m: np.ndarray  # (E, T, 3 arms) p* in each robot's base frame
     num_targets: np.ndarray  # (E,)
     rests_rad: np.ndarray  # (E, T) path after target i (the progress reward's rest)
     target_tolerance_rad: float
@@ -102,6 +105,11 @@ class EnvTables:
     intermediate_bonus: float
     final_bonus: float
     stop_margin: float
+    # the two-arm reward's sync term: each arm's length of the segment ending at each target
+    # (E, T, arms; zeros for one arm), its weight and tolerance (0 weight: no term)
+    segments_rad: np.ndarray
+    sync_weight: float
+    sync_tolerance: float
     # the optional terms: smoothness (the native action's change over its range) and effort
     # (the robot's actuator torques over their limits), 0: off
     smoothness_weight: float
@@ -113,12 +121,14 @@ class EnvTables:
     patient_qpos_adr: np.ndarray
     rom_low_rad: np.ndarray
     rom_high_rad: np.ndarray
-    cuff_row: int  # the cuff's first constraint row
-    patient_cuff_site: int  # the patient's side of the cuff (the work meter's point)
-    cuff_force_limit_n: float
+    cuff_rows: np.ndarray  # (arms,) each cuff's first constraint row
+    patient_cuff_sites: np.ndarray  # (arms,) the patient's side of each cuff (work meters)
+    cuff_force_limits_n: np.ndarray  # (arms,)
     contact_tolerance_m: float
     is_robot_geom: np.ndarray  # (ngeom,) bool
     is_other_geom: np.ndarray  # (ngeom,) bool: patient or furniture
+    robot_of_geom: np.ndarray  # (ngeom,) the robot a geom belongs to, -1: none
+    robots_collide: bool  # a contact between two robots' geoms is unintended contact
     blowup_speed_rad_s: float
     blowup_force_n: float
     # the -v2 agent observation: v = matrix @ [paper | next | setpoint | qvel | force | 1]
@@ -134,8 +144,9 @@ class EnvTables:
 def check_id(env_id: str) -> None:
     """``ValueError`` (naming it) for an id the batched env does not build yet: checked before
     the CPU env is made (a ``-myo-`` id would need MyoSuite's models first)."""
-    if env_id in BILATERAL_IDS:
-        raise ValueError(f"env_id={env_id!r}: the bilateral env is not batched yet")
+    if env_id in BILATERAL_IDS and env_id != BILATERAL_ID:
+        raise ValueError(f"env_id={env_id!r}: of the bilateral ids only {BILATERAL_ID!r} is "
+                         "batched")
     if env_id not in BATCHED_IDS:
         kind = "a -v2 id that" if env_id in V2_IDS else "an id that"
         raise ValueError(f"env_id={env_id!r} is {kind} the batched env does not build yet; "
@@ -165,8 +176,9 @@ def check_supported(env_id: str, env: Any) -> None:
     if physics.muscles is not None or not isinstance(physics.drive, PatientDrive | None):
         raise ValueError(f"condition={config.condition!r}: only the rigid patient's "
                          "conditions are batched (not muscles' excitations)")
-    if len(env.handles) != 1:
-        raise ValueError(f"{len(env.handles)} robots: only one-arm scenes are batched yet")
+    if len(env.handles) != 1 and config.control_mode != "joint_delta":
+        raise ValueError(f"control_mode={config.control_mode!r}: the two-arm env is batched in "
+                         "'joint_delta' mode only yet")
     # The contact rule reads the contacts through their constraint rows, which MuJoCo Warp
     # makes for contacts closer than margin - gap: every contact deeper than the tolerance
     # has rows when no geom has a gap.
@@ -179,14 +191,22 @@ def check_supported(env_id: str, env: Any) -> None:
 def _home_setpoints(env: Any) -> np.ndarray:
     """The home setpoints at every weight level ``(levels, n)``, clipped to the controller's
     bounds. The CPU env's scene is put back at its level afterwards."""
-    scene, controller = env.scene, env.controller
+    scene = env.scene
     start = scene.weight_level
     homes = []
     for level in WEIGHT_LEVELS:
         scene.set_weight_level(level)
-        homes.append(np.clip(scene.home_setpoints[0], controller.low_rad, controller.high_rad))
+        homes.append(np.concatenate([
+            np.clip(scene.home_setpoints[k], arm.low_rad, arm.high_rad)
+            for k, arm in enumerate(arm_controllers(env.controller))]))
     scene.set_weight_level(start)
     return np.stack(homes)
+
+
+def arm_controllers(controller: Any) -> tuple[Any, ...]:
+    """Each arm's controller (a :class:`~rehabbot.envs.control.ControllerPair`'s two, or the
+    one)."""
+    return tuple(getattr(controller, "controllers", (controller,)))
 
 
 def _rotation_t(frame: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -207,42 +227,52 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
                          "weight_level")
     homes = _home_setpoints(env)
     config, scene, safety, agent = env.config, env.scene, env.safety, env.agent_observation_map
-    controller, handle, reward = env.controller, env.handles[0], env.reward_function
-    n = controller.n_joints
+    controller, handles, reward = env.controller, env.handles, env.reward_function
+    arms = len(handles)
+    per_arm = arm_controllers(controller)
+    n = len(controller.clip_low)
     sequences = env.targets
     count = max(len(s.robot_rad) for s in sequences)
     targets = np.zeros((len(sequences), count, n))
-    tools = np.zeros((len(sequences), count, 3))
+    tools = np.zeros((len(sequences), count, 3 * arms))
     rests = np.zeros((len(sequences), count))
+    segments = np.zeros((len(sequences), count, arms))
     for e, sequence in enumerate(sequences):
         k = len(sequence.robot_rad)
         targets[e, :k] = sequence.robot_rad
         targets[e, k:] = sequence.robot_rad[-1]
-        tools[e, :k] = sequence.tool_pos_base_m[:, :3]
-        tools[e, k:] = sequence.tool_pos_base_m[-1, :3]
+        tools[e, :k] = sequence.tool_pos_base_m[:, :3 * arms]
+        tools[e, k:] = sequence.tool_pos_base_m[-1, :3 * arms]
         rests[e, :k] = reward.rests_rad[e][:k]
-    base_pos, base_rot_t = _rotation_t(env.robot_base_frames[0])
+        if arms > 1:
+            segments[e, :k] = reward.segments_rad[e][:k]
+    frames = [_rotation_t(frame) for frame in env.robot_base_frames]
     unit = env.unit_actions
     rom_low, rom_high = safety.rom_bounds_rad
-    low, high = controller.low_rad, controller.high_rad
+    low = np.concatenate([arm.low_rad for arm in per_arm])
+    high = np.concatenate([arm.high_rad for arm in per_arm])
     return EnvTables(
         env_id=env_id, frame_skip=int(config.frame_skip),
         max_episode_steps=int(env.max_episode_steps), weight_level=config.weight_level,
         exercise=config.exercise,
-        control_mode=config.control_mode, controller_dt_s=float(controller.dt_s),
-        torque_limit_nm=np.asarray(controller.robot.torque_limits(), dtype=float),
+        control_mode=config.control_mode, controller_dt_s=float(per_arm[0].dt_s),
+        torque_limit_nm=np.concatenate([np.asarray(h.robot.torque_limits(), dtype=float)
+                                        for h in handles]),
         hold_sag_rad=float(TORQUE_HOLD_SAG_RAD), hold_brake_s=float(TORQUE_HOLD_BRAKE_S),
-        servo_ids=np.asarray(handle.servo_ids, dtype=int),
-        motor_ids=np.asarray(handle.motor_ids, dtype=int),
+        servo_ids=np.concatenate([np.asarray(h.servo_ids, dtype=int) for h in handles]),
+        motor_ids=np.concatenate([np.asarray(h.motor_ids, dtype=int) for h in handles]),
         action_center=np.asarray(unit.center, dtype=float),
         action_half=np.asarray(unit.half_range, dtype=float),
         setpoint_low_rad=np.asarray(low, dtype=float),
         setpoint_high_rad=np.asarray(high, dtype=float),
         home_qpos=np.asarray(scene.home_qpos, dtype=float),
         home_setpoints_rad=homes,
-        qpos_adr=np.asarray(handle.qpos_adr, dtype=int),
-        dof_adr=np.asarray(handle.dof_adr, dtype=int),
-        tool_site=int(handle.tool_site_id), base_pos_m=base_pos, base_rot_t=base_rot_t,
+        arms=arms,
+        qpos_adr=np.concatenate([np.asarray(h.qpos_adr, dtype=int) for h in handles]),
+        dof_adr=np.concatenate([np.asarray(h.dof_adr, dtype=int) for h in handles]),
+        tool_sites=np.asarray([h.tool_site_id for h in handles], dtype=int),
+        base_pos_m=np.stack([pos for pos, _rot in frames]),
+        base_rot_t=np.stack([rot for _pos, rot in frames]),
         phi_adr=np.asarray(scene.exercised_qpos_adr, dtype=int),
         healthy_low=np.asarray(env.healthy_obs_low, dtype=np.float32),
         healthy_high=np.asarray(env.healthy_obs_high, dtype=np.float32),
@@ -254,6 +284,8 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
         progress_weight=float(reward.progress_weight), time_cost=float(reward.time_cost),
         intermediate_bonus=float(reward.intermediate_bonus),
         final_bonus=float(reward.final_bonus), stop_margin=float(STOP_MARGIN),
+        segments_rad=segments, sync_weight=float(getattr(reward, "sync_weight", 0.0)),
+        sync_tolerance=float(getattr(reward, "sync_tolerance", 0.0)),
         smoothness_weight=float(reward.smoothness_weight),
         effort_weight=float(reward.effort_weight),
         reward_action_range=np.asarray(reward.action_range, dtype=float),
@@ -262,11 +294,13 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
         patient_qpos_adr=np.asarray(scene.patient_qpos_adr, dtype=int),
         rom_low_rad=np.asarray(rom_low, dtype=float),
         rom_high_rad=np.asarray(rom_high, dtype=float),
-        cuff_row=int(safety.cuff_rows[0]), patient_cuff_site=int(handle.patient_cuff_site_id),
-        cuff_force_limit_n=float(safety.force_limits_n[0]),
+        cuff_rows=np.asarray(safety.cuff_rows, dtype=int),
+        patient_cuff_sites=np.asarray([h.patient_cuff_site_id for h in handles], dtype=int),
+        cuff_force_limits_n=np.asarray(safety.force_limits_n, dtype=float),
         contact_tolerance_m=float(safety.thresholds.contact_tolerance_m),
         is_robot_geom=np.asarray(safety.robot_geom_mask, dtype=bool),
         is_other_geom=np.asarray(safety.other_geom_mask, dtype=bool),
+        robot_of_geom=safety.robot_of_geom, robots_collide=safety.robots_collide,
         blowup_speed_rad_s=float(BLOWUP_SPEED_RAD_S), blowup_force_n=float(BLOWUP_FORCE_N),
         agent_matrix=np.asarray(agent.matrix, dtype=float), tanh_stop=int(agent.tanh_stop),
         bounded_start=int(agent.bounded.start),

@@ -182,6 +182,16 @@ class SafetyMonitor:
         return self._is_other.copy()
 
     @property
+    def robot_of_geom(self) -> np.ndarray:
+        """Per geom, the robot it belongs to (-1: none), a copy."""
+        return self._robot_of.copy()
+
+    @property
+    def robots_collide(self) -> bool:
+        """Whether a contact between two robots' geoms is unintended contact."""
+        return self._robots_collide
+
+    @property
     def cuff_rows(self) -> tuple[int, ...]:
         """The first constraint row of each cuff's force (``data.efc_force[row:row + 3]``)."""
         return self._cuff_rows
