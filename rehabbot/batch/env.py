@@ -20,9 +20,8 @@ Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
    optional smoothness and effort terms, and the target switch;
 5. the agent observation: ``tanh`` or a clip of the CPU env's affine map.
 
-MuJoCo Warp keeps one contact array for all worlds. The contact rule therefore reads the
-contacts through the world's own constraint rows (``efc_type`` a contact, ``efc_id`` the
-contact), which belong to this world only, whatever ``vmap`` does.
+The cuffs' forces, the work meters and the contact rule are read by
+:mod:`rehabbot.batch.cuffs`; the model MuJoCo Warp steps is :mod:`rehabbot.batch.model`'s.
 """
 
 from __future__ import annotations
@@ -36,6 +35,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from rehabbot.batch.cuffs import METER_KEYS, CuffReadings
+from rehabbot.batch.model import physics_model
 from rehabbot.batch.patient import BatchedPatientDrive
 from rehabbot.batch.patient_tables import read_patient_tables
 from rehabbot.batch.patients import PatientStack, stack_patients
@@ -43,55 +44,11 @@ from rehabbot.batch.state import State
 from rehabbot.batch.tables import POPULATION_IDS, RULE_CODES, EnvTables, check_id, read_tables
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
-CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
-                       int(mujoco.mjtConstraint.mjCNSTR_CONTACT_PYRAMIDAL),
-                       int(mujoco.mjtConstraint.mjCNSTR_CONTACT_ELLIPTIC))
 # A non-finite cuff force reads as this in the agent observation (as the CPU env does).
 NONFINITE_FORCE_N = 1e9
 INSTABILITY = RULE_CODES["instability"]
-METER_KEYS = ("meter_pos", "meter_force", "meter_has_force", "robot_work_j",
-              "robot_positive_work_j")
 REWARD_TERMS = ("reward_progress", "reward_bonus", "reward_time", "reward_safety",
                 "reward_smoothness", "reward_effort")
-
-
-# MuJoCo Warp's jacobian="auto" turns sparse above this many dofs (mujoco_warp io.is_sparse).
-WARP_SPARSE_ABOVE_NV = 32
-
-
-def physics_model(model: mujoco.MjModel, tables: EnvTables) -> mujoco.MjModel:
-    """The model MuJoCo Warp steps: the CPU env's, with two changes where needed.
-
-    * In ``torque`` mode the servos are switched off by zero gains (MuJoCo Warp ignores
-      ``opt.disableactuator``, with which the CPU env switches them off). The robot's gravity
-      compensation and torque clamp are joint properties (``actgravcomp``, ``actfrcrange``),
-      so nothing else changes.
-    * A model that MuJoCo Warp would give a sparse Jacobian (``jacobian="auto"`` and more
-      than 32 dofs: the two-arm scene's 33) gets a dense one. MuJoCo Warp's sparse path
-      regularises a site-to-site connect constraint (the cuffs) by the inverse weight of the
-      sites' *welded ancestor* bodies, where MuJoCo (and its dense path) uses the sites' own
-      bodies: the cuff forces at home came out 4 % higher (14.35 N against 13.85 N). The
-      Jacobian's layout does not change MuJoCo's physics, so the dense one matches the CPU.
-    """
-    dense = model.opt.jacobian == mujoco.mjtJacobian.mjJAC_AUTO \
-        and model.nv > WARP_SPARSE_ABOVE_NV
-    torque = tables.control_mode == "torque"
-    if not (torque or dense):
-        return model
-    copy = mujoco.MjModel.__copy__(model)
-    if dense:
-        copy.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
-    if torque:
-        if not model.opt.disableactuator:
-            raise AssertionError("the CPU env's torque mode no longer disables the servos")
-        servo = tables.servo_ids
-        if np.any(model.actuator_biasprm[servo, 0] != 0):
-            raise AssertionError("a servo has a constant bias: zero gains would not switch it "
-                                 "off")
-        copy.actuator_gainprm[servo, 0] = 0.0
-        copy.actuator_biasprm[servo, 1:3] = 0.0
-        copy.opt.disableactuator = 0
-    return copy
 
 
 def _f32(array: Any) -> jax.Array:
@@ -162,14 +119,11 @@ class BatchedRehabEnv:
         self._center, self._half = _f32(t.action_center), _f32(t.action_half)
         self._rot_t = _f32(t.base_rot_t)  # (arms, 3, 3)
         self._tool_sites = _i32(t.tool_sites)
-        self._cuff_sites = _i32(t.patient_cuff_sites)
         self._cuff_limits = _f32(t.cuff_force_limits_n)
-        self._robot_of = _i32(t.robot_of_geom)
         self._phi = _i32(t.phi_adr)
+        self.cuffs = CuffReadings(t)
         self._patient_qpos = _i32(t.patient_qpos_adr)
-        self._is_robot, self._is_other = jp.asarray(t.is_robot_geom), jp.asarray(t.is_other_geom)
         self._bounded_low, self._bounded_high = _f32(t.bounded_low), _f32(t.bounded_high)
-        self._contact_types = _i32(CONTACT_CONSTRAINTS)
         self._action_range = _f32(t.reward_action_range)
         self._reward_torque_limit = _f32(t.reward_torque_limit_nm)
         # A step's hold cost: the time cost and the optional terms' largest losses.
@@ -217,36 +171,6 @@ class BatchedRehabEnv:
         tools = data.site_xpos[self._tool_sites] - w["base"]  # (arms, 3)
         p = jp.einsum("aij,aj->ai", self._rot_t, tools).reshape(-1)
         return theta, jp.concatenate([theta, p, data.qpos[self._phi]])
-
-    def _cuff_rows_force(self, data: Any) -> tuple[jax.Array, jax.Array]:
-        """Each cuff's constraint force (arms, 3) and whether its rows exist (the work
-        meters')."""
-        impl = data._impl
-        rows = self.tables.cuff_rows.tolist()
-        force = jp.stack([impl.efc__force[row:row + 3] for row in rows])
-        return force, jp.reshape(impl.nefc, ()) >= jp.asarray(rows, jp.int32) + 3
-
-    def _meter_start(self, data: Any) -> dict[str, jax.Array]:
-        """The work meters at the start of an episode (``WorkMeter.reset``, one per cuff)."""
-        zero = jp.zeros((), jp.float32)
-        arms = self.tables.arms
-        return {"meter_pos": data.site_xpos[self._cuff_sites],
-                "meter_force": jp.zeros((arms, 3), jp.float32),
-                "meter_has_force": jp.zeros(arms, bool),
-                "robot_work_j": zero, "robot_positive_work_j": zero}
-
-    def _meter_after_step(self, meter: dict, data: Any) -> dict[str, jax.Array]:
-        """``WorkMeter.after_step`` of each cuff: the force of the physics step before times
-        the cuff site's displacement since (the force on the limb is minus the constraint
-        force); the robots' work is the cuffs' sum."""
-        pos = data.site_xpos[self._cuff_sites]
-        works = jp.where(meter["meter_has_force"],
-                         jp.sum(meter["meter_force"] * (meter["meter_pos"] - pos), axis=1), 0.0)
-        force, has_force = self._cuff_rows_force(data)
-        return {"meter_pos": pos, "meter_force": force, "meter_has_force": has_force,
-                "robot_work_j": meter["robot_work_j"] + jp.sum(works),
-                "robot_positive_work_j": meter["robot_positive_work_j"]
-                + jp.sum(jp.maximum(works, 0.0))}
 
     def _work_metrics(self, meter: dict) -> dict[str, jax.Array]:
         """The work entries of the CPU env's ``info``: a patient without a drive does no work
@@ -339,30 +263,6 @@ class BatchedRehabEnv:
         start = t.paper_slices["theta"][0]  # theta, p and phi side by side
         return paper.at[start:start + dynamic.shape[0]].set(dynamic)
 
-    def _cuff_forces(self, data: Any) -> jax.Array:
-        """Each cuff's force [N] (arms,): 0 while the cuffs' constraints are not active, as
-        the CPU reads them."""
-        impl = data._impl
-        rows = self.tables.cuff_rows.tolist()
-        forces = jp.stack([jp.linalg.norm(impl.efc__force[row:row + 3]) for row in rows])
-        return jp.where(jp.reshape(impl.ne, ()) >= max(rows) + 3, forces, 0.0)
-
-    def _touch(self, data: Any) -> jax.Array:
-        """Whether a robot geom touches the patient or the furniture deeper than the
-        tolerance: the contacts of this world's contact constraint rows."""
-        impl = data._impl
-        rows = jp.arange(impl.efc__type.shape[-1]) < jp.reshape(impl.nefc, ())
-        contact_row = rows & jp.isin(impl.efc__type, self._contact_types)
-        cid = jp.clip(impl.efc__id, 0, impl.contact__geom.shape[0] - 1)
-        geom = impl.contact__geom[cid]
-        robot, other = self._is_robot[geom], self._is_other[geom]
-        hit = (robot[:, 0] & other[:, 1]) | (robot[:, 1] & other[:, 0])
-        if self.tables.robots_collide:  # two robots' geoms touching
-            owner = self._robot_of[geom]
-            hit = hit | ((owner[:, 0] >= 0) & (owner[:, 1] >= 0) & (owner[:, 0] != owner[:, 1]))
-        deep = impl.contact__dist[cid] < -self.tables.contact_tolerance_m
-        return jp.any(contact_row & hit & deep)
-
     def _agent_obs(self, w: dict, paper: jax.Array, exercise: jax.Array, index: jax.Array,
                    setpoint: jax.Array, qvel: jax.Array, forces: jax.Array) -> jax.Array:
         t = self.tables
@@ -420,7 +320,7 @@ class BatchedRehabEnv:
         setpoint = w["home_ctrl"][level][self._servo]
         index = jp.int32(0)
         paper = self._paper(w, exercise, index, dynamic, level)
-        forces = self._cuff_forces(data)
+        forces = self.cuffs.forces(data)
         force = jp.max(forces)
         obs = self._agent_obs(w, paper, exercise, index, setpoint, data.qvel[self._dof], forces)
         zero = jp.zeros((), jp.float32)
@@ -441,7 +341,7 @@ class BatchedRehabEnv:
             "path_left": jp.sum(distances) + w["rests"][exercise, 0],
             "hold_gap": hold_gap, **sync,
             "previous_action": jp.zeros(self._action_range.shape[0], jp.float32),
-            "rng": rng, "truncation": zero, **self._meter_start(data),
+            "rng": rng, "truncation": zero, **self.cuffs.meter_start(data),
         }
         if self.patient is not None:
             info["rng"], key = jax.random.split(rng)
@@ -598,14 +498,14 @@ class BatchedRehabEnv:
             d = mjx.step(model, d)
             if self.patient is not None:
                 drive = self.patient.count_work(drive, d, q)
-            return (d, self._meter_after_step(meter, d), drive), None
+            return (d, self.cuffs.meter_after_step(meter, d), drive), None
 
         meter = {k: info[k] for k in METER_KEYS}
         (data, meter, drive), _ = jax.lax.scan(physics_step, (data, meter, drive), None,
                                                length=t.frame_skip)
 
         # Safety rules, in the CPU env's order.
-        forces = self._cuff_forces(data)
+        forces = self.cuffs.forces(data)
         force = jp.max(forces)
         speed = jp.max(jp.abs(data.qvel))
         unstable = (~jp.all(jp.isfinite(data.qpos)) | ~(force <= t.blowup_force_n)
@@ -617,7 +517,7 @@ class BatchedRehabEnv:
         q = data.qpos[self._patient_qpos]
         rom = jp.any((q < w["rom_low"]) | (q > w["rom_high"]))
         cuff = jp.any(forces > self._cuff_limits)
-        touch = self._touch(data)
+        touch = self.cuffs.touch(data)
         violation = jp.select([unstable, rom, cuff, touch],
                               [RULE_CODES["instability"], RULE_CODES["range_of_motion"],
                                RULE_CODES["cuff_force"], RULE_CODES["unintended_contact"]],
@@ -676,7 +576,7 @@ class BatchedRehabEnv:
 
         paper = self._paper(w, exercise, new_index, dynamic, level)
         obs = self._agent_obs(w, paper, exercise, new_index, setpoint, data.qvel[self._dof],
-                              self._cuff_forces(data))
+                              self.cuffs.forces(data))
         f32 = jp.float32
         new_info = {**info, **meter, **drive, "rng": rng, "setpoint": setpoint,
                     "target_index": new_index, "steps": steps,
