@@ -27,8 +27,6 @@ def test_import_rehabbot_loads_neither_batch_nor_jax():
 
 @pytest.mark.parametrize(("env_id", "kwargs", "named"), [
     ("rehabbot/rehab-bilateral-v1", {}, "rehab-bilateral-v1"),
-    ("rehabbot/rehab-bilateral-v2", {"control_mode": "joint_position"},
-     "control_mode='joint_position'"),
     ("rehabbot/rehab-reach-v1", {}, "rehab-reach-v1"),
     ("rehabbot/rehab-reach-myo-v2", {}, "rehab-reach-myo-v2"),
     ("rehabbot/rehab-reach-population-v1", {}, "rehab-reach-population-v1"),

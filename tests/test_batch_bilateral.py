@@ -24,6 +24,7 @@ pytest.importorskip("mujoco.mjx")
 import rehabbot.batch as batch  # noqa: E402
 from rehabbot.analysis.batch_parity import (  # noqa: E402
     batched_rollout,
+    cpu_episode,
     replay_expert,
     replay_stops,
 )
@@ -36,6 +37,7 @@ OBS_TOL = 1e-3
 RETURN_RTOL = 1e-4
 WORK_RTOL = 1e-3
 STEP_REWARD_TOL = 1e-4
+TORQUE_TRANSIENT_TOL = 0.05
 
 
 @pytest.mark.parametrize("exercise", [0, 2], ids=["symmetric", "alternating"])
@@ -94,3 +96,41 @@ def test_the_two_arm_model_steps_with_a_dense_jacobian():
     assert env.mj_model.opt.jacobian == mujoco.mjtJacobian.mjJAC_DENSE
     one_arm = batch.make("rehabbot/rehab-reach-v2")
     assert one_arm.mj_model is one_arm.cpu_env.model  # unchanged below 33 dofs
+
+
+@pytest.mark.parametrize("mode", ["joint_position", "joint_velocity"])
+def test_setpoint_control_modes_follow_the_cpu(mode):
+    """The two-arm expert's first 80 steps in the setpoint modes, every observation entry
+    within the bound."""
+    cpu = cpu_episode(ENV, max_steps=80, control_mode=mode)
+    out = batched_rollout(ENV, cpu["actions"][:, None], control_mode=mode)
+    assert np.abs(out["obs"][:, 0] - cpu["obs"][1:]).max() < OBS_TOL
+    assert out["rewards"][:, 0].sum() == pytest.approx(cpu["rewards"].sum(), rel=RETURN_RTOL)
+    assert not out["done"].any()
+
+
+def test_torque_mode_sags_into_the_same_stop():
+    """``control_mode="torque"`` on both robots (their servos off by zero gains): zero
+    torque, and a push on both shoulders and elbows, stop both envs on the same step by the
+    cuff-force rule. Without servos float32 rounding shows in the transient joint velocities
+    and cuff forces (``TORQUE_TRANSIENT_TOL``, as in tests/test_batch_parity.py)."""
+    unit_actions = ([0.0] * 12, [0, -0.1, 0.1, 0, 0, 0] * 2)
+    kwargs = {"control_mode": "torque"}
+    cpus = [cpu_episode(ENV, np.asarray(a, np.float32), max_steps=60, **kwargs)
+            for a in unit_actions]
+    out = batched_rollout(ENV, np.repeat(np.asarray(unit_actions, np.float32)[None], 60,
+                                         axis=0), **kwargs)
+    layout = gym.make(ENV, **kwargs).unwrapped.agent_layout
+    transient = np.zeros(layout.size, bool)
+    for name in ("joint_velocity", "cuff_force"):
+        transient[layout.slice(name)] = True
+    for world, cpu in enumerate(cpus):
+        assert cpu["violation"] == "cuff_force"
+        stop = len(cpu["actions"]) - 1
+        assert int(np.flatnonzero(out["done"][:, world])[0]) == stop
+        assert out["violation"][stop, world] == batch.RULE_CODES["cuff_force"]
+        error = np.abs(out["obs"][:stop + 1, world] - cpu["obs"][1:])
+        assert error[:, ~transient].max() < OBS_TOL
+        assert error[:, transient].max() < TORQUE_TRANSIENT_TOL
+        assert out["rewards"][:stop + 1, world].sum() == pytest.approx(cpu["rewards"].sum(),
+                                                                      rel=RETURN_RTOL)

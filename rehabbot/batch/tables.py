@@ -50,6 +50,9 @@ BILATERAL_ID = "rehabbot/rehab-bilateral-v2"
 BATCHED_IDS: tuple[str, ...] = SUPPORTED_IDS + CONDITION_IDS + POPULATION_IDS + (BILATERAL_ID,)
 # The control modes the batched env builds.
 CONTROL_MODES: tuple[str, ...] = ("joint_delta", "joint_position", "joint_velocity", "torque")
+# The control modes the two-arm env is batched in (parity-tested).
+TWO_ARM_CONTROL_MODES: tuple[str, ...] = ("joint_delta", "joint_position", "joint_velocity",
+                                          "torque")
 # The safety rules' codes in the batched state: 0 for none, then RULES in order (1-based).
 RULE_CODES: dict[str, int] = {rule: k + 1 for k, rule in enumerate(RULES)}
 
@@ -176,9 +179,9 @@ def check_supported(env_id: str, env: Any) -> None:
     if physics.muscles is not None or not isinstance(physics.drive, PatientDrive | None):
         raise ValueError(f"condition={config.condition!r}: only the rigid patient's "
                          "conditions are batched (not muscles' excitations)")
-    if len(env.handles) != 1 and config.control_mode != "joint_delta":
+    if len(env.handles) != 1 and config.control_mode not in TWO_ARM_CONTROL_MODES:
         raise ValueError(f"control_mode={config.control_mode!r}: the two-arm env is batched in "
-                         "'joint_delta' mode only yet")
+                         f"{list(TWO_ARM_CONTROL_MODES)} only yet")
     # The contact rule reads the contacts through their constraint rows, which MuJoCo Warp
     # makes for contacts closer than margin - gap: every contact deeper than the tolerance
     # has rows when no geom has a gap.
