@@ -218,9 +218,9 @@ def test_weight_levels_drawn_per_world():
         assert error < OBS_TOL, (world, levels[world], error)
 
 
-@pytest.mark.parametrize("condition", [None, {"spasticity_mas": "3"},
+@pytest.mark.parametrize("condition", [None,
                                        {"effort": "active_assisted", "strength_fraction": 0.5}],
-                         ids=["healthy", "mas3", "active"])
+                         ids=["healthy", "active"])
 def test_torque_mode_zeroes_the_servo_gains(condition):
     """``control_mode="torque"``: MuJoCo Warp ignores ``opt.disableactuator``, so the batched
     model has zero servo gains instead. World 0 holds zero torque (a healthy arm sags into the
