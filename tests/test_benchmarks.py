@@ -202,6 +202,37 @@ def test_stratified_results_leave_out_the_cells_an_env_refuses() -> None:
                                           {"robot": "kuka"}, 1, 900)
 
 
+def test_stratified_results_evaluate_a_population_id_on_its_held_out_patients() -> None:
+    """A population id's cells are the held-out "test" population's patients, each picked with
+    the reset option ``patient`` (its episodes are that patient's: the 1.80 m man's contracture
+    changes his targets); a population id is refused with profiles, a one-patient id with
+    patients, each naming the profile set to use."""
+    from benchmarks.results import stratified_results
+
+    patients = stratified_results.PROFILE_SETS["patients"]
+    assert len(patients) == 12 and set(patients) == {
+        n for n in patients if n[0] in "fm"}  # named by sex, height and condition
+    assert "m180 stiffness_scale=3.0, rom_scale=0.7" in patients
+    chosen = {name: patients[name] for name in ("f168 spasticity_mas='3'",
+                                                "m180 stiffness_scale=3.0, rom_scale=0.7")}
+    episodes = stratified_results.evaluate_cells(
+        "expert", "rehabbot/rehab-reach-population-v2", {}, 1, 800, profiles=chosen)
+    assert len(episodes) == 2 * 5 * 2
+    assert {e["profile"] for e in episodes} == set(chosen)
+    assert all(e["patient"] == chosen[e["profile"]]["patient"] for e in episodes)
+    # The expert finishes every exercise of both patients, within their own bounds.
+    assert all(e["success"] for e in episodes)
+    steps = {name: sorted(e["steps"] for e in episodes if e["profile"] == name)
+             for name in chosen}
+    assert steps["f168 spasticity_mas='3'"] != steps["m180 stiffness_scale=3.0, rom_scale=0.7"]
+    with pytest.raises(ValueError, match="--profiles patients"):
+        stratified_results.evaluate_cells("expert", "rehabbot/rehab-reach-population-v2", {},
+                                          1, 800)
+    with pytest.raises(ValueError, match="--profiles test"):
+        stratified_results.evaluate_cells("expert", "rehabbot/rehab-reach-v2", {}, 1, 800,
+                                          profiles=chosen)
+
+
 def test_stratified_results_describe_each_algorithms_training() -> None:
     """n_steps is an off-policy learner's return length but PPO's rollout per env."""
     from benchmarks.results.stratified_results import training_text

@@ -11,12 +11,13 @@ the same way, so the ratio batched / CPU is measured in one run on one machine.
 
 Usage::
 
-    python benchmarks/performance/batch_throughput.py [--env rehab-reach-v2]
+    python benchmarks/performance/batch_throughput.py [--env rehab-reach-v2 ...]
         [--num-envs 1 16 256 1024 4096 8192] [--steps 20] [--rounds 3]
         [--page docs/results/batch-throughput]
 
 Needs ``pip install "rehabbot[gpu]"``; on a CUDA host also ``jax[cuda12]``: JAX then runs on
-the GPU, and the page names the device.
+the GPU, and the page names the device. Several ``--env`` ids give a table each, from one run
+on one machine.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from benchmarks.common.documents import (
     write_page,
 )
 from benchmarks.common.machine import describe_machine
+from rehabbot.batch.tables import check_id
 from rehabbot.envs.registration import resolve_env_id
 
 DEFAULT_WORLDS = (1, 16, 256, 1024, 4096, 8192)
@@ -106,9 +108,40 @@ def time_batched(env_id: str, worlds: int, steps: int, rounds: int, seed: int
             "frame_skip": env.tables.frame_skip, "device": str(jax.devices()[0])}
 
 
+def measure(env_id: str, args: argparse.Namespace) -> dict[str, Any]:
+    """The CPU env's rates and every ``--num-envs`` batch's, for one id."""
+    cpu_rates = time_cpu(env_id, args.cpu_steps, args.rounds, args.seed)
+    print(f"{env_id}: CPU env {statistics.median(cpu_rates):.0f} env steps/s", flush=True)
+    results = []
+    for worlds in args.num_envs:
+        result = time_batched(env_id, worlds, args.steps, args.rounds, args.seed)
+        result["median"] = statistics.median(result["rates"])
+        results.append(result)
+        print(f"{env_id}: {worlds} worlds: {result['median']:.0f} env steps/s "
+              f"(compiled in {result['compile_s']:.1f} s)", flush=True)
+    return {"env_id": env_id, "cpu_rates": cpu_rates, "batched": results}
+
+
+def throughput_table(entry: dict[str, Any]) -> dict[str, Any]:
+    """One id's table: the CPU env's row, then a row per number of worlds."""
+    cpu = statistics.median(entry["cpu_rates"])
+    results = entry["batched"]
+    frame_skip = results[0]["frame_skip"] if results else 10
+    rows = [["CPU env (1 process)", "-", f"{cpu:,.0f}", f"{cpu * frame_skip:,.0f}", "1.00",
+             "-"]]
+    rows += [[f"batched, {r['device']}", f"{r['worlds']:,}", f"{r['median']:,.0f}",
+              f"{r['median'] * r['frame_skip']:,.0f}", f"{r['median'] / cpu:.2f}",
+              f"{r['compile_s']:.1f}"] for r in results]
+    name = entry["env_id"].split("/")[1]
+    return make_table(f"throughput/{name}", f"{name}: env and physics steps/s",
+                      ["env", "worlds", "env steps/s", "physics steps/s", "x CPU env",
+                       "compile [s]"], rows)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--env", default="rehab-reach-v2", help="a batched -v2 id")
+    parser.add_argument("--env", nargs="+", default=["rehab-reach-v2"], metavar="ID",
+                        help="batched -v2 ids, a table each (default: %(default)s)")
     parser.add_argument("--num-envs", type=int, nargs="+", default=list(DEFAULT_WORLDS),
                         metavar="N", help="worlds per batch (default: %(default)s)")
     parser.add_argument("--steps", type=int, default=20, help="batched steps per round")
@@ -123,39 +156,30 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     if any(n < 1 for n in args.num_envs):
         parser.error(f"--num-envs must be >= 1, got {args.num_envs}")
-    env_id = resolve_env_id(args.env)
+    try:  # an unknown or unbatched id is refused before anything is timed
+        env_ids = [resolve_env_id(name) for name in args.env]
+        for env_id in env_ids:
+            check_id(env_id)
+    except ValueError as err:
+        parser.error(str(err))
     command = command_line(__file__, argv if argv is not None else sys.argv[1:])
     print(f"command: {command}", flush=True)
-    cpu_rates = time_cpu(env_id, args.cpu_steps, args.rounds, args.seed)
-    cpu = statistics.median(cpu_rates)
-    print(f"CPU env: {cpu:.0f} env steps/s", flush=True)
-    results = []
-    for worlds in args.num_envs:
-        result = time_batched(env_id, worlds, args.steps, args.rounds, args.seed)
-        result["median"] = statistics.median(result["rates"])
-        results.append(result)
-        print(f"{worlds} worlds: {result['median']:.0f} env steps/s "
-              f"(compiled in {result['compile_s']:.1f} s)", flush=True)
-    frame_skip = results[0]["frame_skip"] if results else 10
-    device = results[0]["device"] if results else "-"
-    rows = [["CPU env (1 process)", "-", f"{cpu:,.0f}", f"{cpu * frame_skip:,.0f}", "1.00",
-             "-"]]
-    rows += [[f"batched, {device}", f"{r['worlds']:,}", f"{r['median']:,.0f}",
-              f"{r['median'] * r['frame_skip']:,.0f}", f"{r['median'] / cpu:.2f}",
-              f"{r['compile_s']:.1f}"] for r in results]
-    table = make_table("throughput", f"{env_id.split('/')[1]}: env and physics steps/s",
-                       ["env", "worlds", "env steps/s", "physics steps/s", "x CPU env",
-                        "compile [s]"], rows)
-    print(table_markdown(table), flush=True)
+    tables, measured, device = [], [], "-"
+    for env_id in env_ids:
+        entry = measure(env_id, args)
+        measured.append(entry)
+        device = entry["batched"][0]["device"] if entry["batched"] else device
+        tables.append(throughput_table(entry))
+        print(table_markdown(tables[-1]), flush=True)
     if args.page is not None:
         write_page(make_document(
             title=f"Batched throughput ({device})", intro=INTRO, command=command,
-            generated_by=__file__, tables=[table], machine=describe_machine(),
+            generated_by=__file__, tables=tables, machine=describe_machine(),
             seeds={"actions": args.seed},
-            settings={"env_id": env_id, "num_envs": args.num_envs, "steps": args.steps,
+            settings={"env_ids": env_ids, "num_envs": args.num_envs, "steps": args.steps,
                       "cpu_steps": args.cpu_steps, "rounds": args.rounds,
                       "device": device},
-            data={"cpu_rates": cpu_rates, "batched": results}), args.page)
+            data={"envs": measured}), args.page)
     return 0
 
 

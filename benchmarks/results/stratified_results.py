@@ -6,7 +6,10 @@ Each run folder (``.../<env>/<algo>/seed<k>/`` with a ``model.zip``, or a batche
 ``policy.npz``) is evaluated with
 deterministic actions on ``--per-cell`` episodes of every cell: each exercise of the id, each
 weight level 0..4 and each of three profiles (the 1.75 m, 75 kg man the runs trained on, and two
-held out: a 1.60 m, 60 kg woman and a 1.85 m, 90 kg man). Episode seeds start at ``--seed``
+held out: a 1.60 m, 60 kg woman and a 1.85 m, 90 kg man). A population id's runs
+(``rehab-reach-population-v2``) are evaluated with ``--profiles patients`` instead: every patient
+of the held-out ``"test"`` population, picked with the reset option ``patient``, stands where a
+profile stands. Episode seeds start at ``--seed``
 (default 50 000, far from the training seeds, the expert demonstrations' 20 000 + i and the
 evaluation callback's) and count up over the cells, the same for every run. The scripted
 expert runs the same episodes as a reference. Every number in the output comes from these
@@ -56,6 +59,7 @@ from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import runs
 from rehabbot.rl.policies import load_policy
+from rehabbot.sim.populations import POPULATIONS
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
 PROFILES = {
@@ -75,8 +79,23 @@ VALIDATION_PROFILES = {
 # MyoSuite's legs and arm are one adult size (patient_model="myo" is built for the default profile
 # only): their runs are evaluated on the patient they trained on.
 TRAINED_PROFILES = {"m175": None}
+# A population id's runs are evaluated on the held-out population's patients, each picked with
+# the reset option ``patient`` (no profile or condition in common with the "train" population
+# the runs drew from). A cell's "profile" is then a patient: a name of the profile and condition
+# -> {"patient": its index}.
+HELD_OUT_POPULATION = "test"
+
+
+def population_patients(name: str = HELD_OUT_POPULATION) -> dict[str, dict[str, int]]:
+    """The patients of a shipped population as cells: ``f168 spasticity_mas='3'`` (sex, height
+    in cm, condition) -> ``{"patient": k}``."""
+    population = POPULATIONS[name]
+    return {f"{profile.sex[0]}{round(100 * profile.height_m)} {condition.describe()}":
+            {"patient": k} for k, (profile, condition) in enumerate(population.patients)}
+
+
 PROFILE_SETS = {"test": PROFILES, "validation": VALIDATION_PROFILES,
-                "trained": TRAINED_PROFILES}
+                "trained": TRAINED_PROFILES, "patients": population_patients()}
 DEFAULT_SEED = 50_000
 TITLE = "Results on the -v2 ids: plain networks, held-out episodes"
 INTRO = """Every trained run's final model acts deterministically on held-out episodes that cover
@@ -93,6 +112,20 @@ woman and 1.70 m and 1.80 m men, seeds from 40 000) than these. The per-cell tab
 every seed of a row; a cell's stops name the safety rule that ended those episodes. Every
 episode is in the `data` of this page's JSON file, from which the command below renders this
 page again."""
+PATIENTS_TITLE = "Results on the population ids: plain networks, held-out patients"
+PATIENTS_INTRO = """Every trained run drew a patient of the `"train"` population (3 profiles x 9
+conditions) at every episode. Its final model acts deterministically on held-out episodes that
+cover every exercise x weight level (0-4) x patient of the held-out `"test"` population
+(`--profiles patients`: 2 other profiles, a 1.68 m, 62 kg woman and a 1.80 m, 85 kg man, x 6 other
+conditions; no profile and no condition in common with training), each picked with the reset
+option `patient`: {per_cell} episodes per cell, episode seeds from {seed}, far from every seed
+training used and the same for every run and for the scripted expert. A patient is named by
+sex, height in cm and condition. With a tremor the episodes of a cell differ with their seeds;
+otherwise a deterministic policy plays one episode per cell, counted again. "success IQM" is the
+interquartile mean of the seeds' success rates with a 95 % percentile-bootstrap interval over
+seeds (rliable). The per-cell tables pool every seed of a row; a cell's stops name the safety
+rule that ended those episodes. Every episode is in the `data` of this page's JSON file, from
+which the command below renders this page again."""
 TRAINED_TITLE = "Results on the musculoskeletal patient: plain networks, the trained patient"
 TRAINED_INTRO = """Every trained run's final model acts deterministically on every exercise x
 weight level (0-4) of the patient it trained on (`m175`: MyoSuite's models are one adult size, so
@@ -139,6 +172,30 @@ def cell_envs(env_id: str, kwargs: dict) -> tuple[dict[int, gym.Env], dict[int, 
     return envs, refused
 
 
+def is_population_id(env_id: str) -> bool:
+    """Whether ``env_id`` draws a patient from a population each episode."""
+    return "-population-" in env_short_name(env_id)
+
+
+def cell_setup(env_id: str, env_kwargs: dict, profile: dict | None) -> tuple[dict, dict]:
+    """The env kwargs and reset options of one patient of a cell: a profile (``profile=``),
+    the training profile (None) or a held-out population's patient (``{"patient": k}``: the
+    held-out population, and ``patient`` at reset). A population id takes only patients, and
+    only it takes them (``ValueError`` naming the id and the profile set to use)."""
+    population = is_population_id(env_id)
+    if (profile is not None and "patient" in profile) != population:
+        raise ValueError(f"{env_short_name(env_id)} is evaluated with --profiles "
+                         f"{'patients' if population else 'test, validation or trained'}, "
+                         f"not on {profile!r}")
+    kwargs = dict(env_kwargs)
+    if population:
+        kwargs["patients"] = HELD_OUT_POPULATION
+        return kwargs, {"patient": profile["patient"]}
+    if profile is not None:
+        kwargs["profile"] = profile
+    return kwargs, {}
+
+
 def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
                    seed: int, refused: list[dict] | None = None,
                    profiles: dict[str, dict | None] = PROFILES) -> list[dict]:
@@ -149,9 +206,7 @@ def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
     episodes = []
     next_seed = seed
     for profile_name, profile in profiles.items():
-        kwargs = dict(env_kwargs)
-        if profile is not None:
-            kwargs["profile"] = profile
+        kwargs, options = cell_setup(env_id, env_kwargs, profile)
         envs, refusals = cell_envs(env_id, kwargs)
         if refused is not None:
             refused += [{"profile": profile_name, "weight_level": level, "reason": reason}
@@ -168,7 +223,7 @@ def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
                     env, policy = envs[level], policies[id(envs[level])]
                     for _ in range(per_cell):
                         obs, info = env.reset(seed=next_seed, options={
-                            "exercise": exercise, "weight_level": level})
+                            **options, "exercise": exercise, "weight_level": level})
                         done, steps = False, 0
                         while not done:
                             obs, _, terminated, truncated, info = env.step(policy.act(obs))
@@ -176,7 +231,8 @@ def evaluate_cells(spec: str, env_id: str, env_kwargs: dict, per_cell: int,
                         episodes.append({
                             "seed": next_seed, "profile": profile_name, "exercise": exercise,
                             "weight_level": level, "success": bool(info["is_success"]),
-                            "safety_violation": info["safety_violation"], "steps": steps})
+                            "safety_violation": info["safety_violation"], "steps": steps,
+                            **({"patient": info["patient"]} if "patient" in info else {})})
                         next_seed += 1
         finally:
             for env in unique:
@@ -306,8 +362,10 @@ def runs_table(results: dict[tuple[str, str], list[dict]],
 
 
 def summary_tables(results: dict[tuple[str, str], list[dict]],
-                   profiles: Sequence[str] = tuple(PROFILES)) -> list[dict[str, Any]]:
-    """One row per env and algorithm (IQM over seeds), then a per-cell table per row."""
+                   profiles: Sequence[str] = tuple(PROFILES),
+                   patient_column: str = "profile") -> list[dict[str, Any]]:
+    """One row per env and algorithm (IQM over seeds), then a per-cell table per row (its
+    patients under ``patient_column``: ``profile``, or ``patient`` for a population's)."""
     summary, cell_tables = [], []
     for (env_id, algo), entries in sorted(results.items()):
         if algo == "expert":
@@ -350,7 +408,7 @@ def summary_tables(results: dict[tuple[str, str], list[dict]],
         cell_tables.append(make_table(
             f"cells/{env_short_name(env_id)}/{algo}",
             f"{env_short_name(env_id)} / {algo}",
-            ["exercise", "profile", *(f"l{lv}" for lv in WEIGHT_LEVELS)], rows,
+            ["exercise", patient_column, *(f"l{lv}" for lv in WEIGHT_LEVELS)], rows,
             section="Success per cell (all seeds; stops in brackets)", note=note))
     head = make_table("summary", "Success per env and algorithm", SUMMARY_COLUMNS, summary)
     return [head, *cell_tables]
@@ -409,13 +467,16 @@ def learning_document(results: dict[tuple[str, str], list[dict]], args: argparse
     data = {"per_cell": args.per_cell, "seed": args.seed, "profile_set": args.profiles,
             "profiles": profiles,
             "results": [{"env_id": k[0], "algo": k[1], "runs": v} for k, v in results.items()]}
-    trained = args.profiles == "trained"
+    title, intro = {"trained": (TRAINED_TITLE, TRAINED_INTRO),
+                    "patients": (PATIENTS_TITLE, PATIENTS_INTRO)}.get(args.profiles,
+                                                                      (TITLE, INTRO))
     return make_document(
-        title=TRAINED_TITLE if trained else TITLE,
-        intro=(TRAINED_INTRO if trained else INTRO).format(
-            per_cell=args.per_cell, seed=args.seed, profiles=args.profiles),
+        title=title,
+        intro=intro.format(per_cell=args.per_cell, seed=args.seed, profiles=args.profiles),
         command=command, generated_by=__file__, sweeps=list(sweeps),
-        tables=[*summary_tables(results, tuple(profiles)), runs_table(results, sweeps)],
+        tables=[*summary_tables(results, tuple(profiles),
+                                "patient" if args.profiles == "patients" else "profile"),
+                runs_table(results, sweeps)],
         seeds={"first_episode_seed": args.seed, "episodes_per_cell": args.per_cell,
                "training_seeds": "per run, in the runs table"},
         settings={"profiles": args.profiles, "actions": "deterministic",
@@ -434,7 +495,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="the patients: test (the training profile and two held out; "
                              "the published tables) or validation (three others, on which "
                              "zoo agents are chosen) or trained (the training profile only: "
-                             "MyoSuite's legs, one adult size)")
+                             "MyoSuite's legs, one adult size) or patients (a population id's: "
+                             "the 12 patients of the held-out \"test\" population)")
     parser.add_argument("--json", type=Path, help="write every episode to this file")
     parser.add_argument("--skrl", type=Path, nargs="+", default=[], metavar="RESULT.json",
                         help="result.json files of examples/skrl_sac.py or skrl_ppo.py, shown "
@@ -476,8 +538,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         env_id, algo = manifest["env_id"], manifest["algo"]
         env_kwargs = manifest.get("env_kwargs") or {}
         refused: list[dict] = []
-        episodes = evaluate_cells(str(runs.final_model(run_dir)), env_id, env_kwargs,
-                                  args.per_cell, args.seed, refused, profiles)
+        try:
+            episodes = evaluate_cells(str(runs.final_model(run_dir)), env_id, env_kwargs,
+                                      args.per_cell, args.seed, refused, profiles)
+        except ValueError as err:
+            parser.error(f"{run_dir}: {err}")
         run = {"run_dir": str(run_dir), "train_seed": manifest.get("seed"),
                "env_kwargs": env_kwargs, "timesteps": manifest.get("timesteps_done"),
                "training": training_text(manifest), "settings": manifest_settings(manifest),

@@ -576,7 +576,7 @@ class BatchedRehabEnv:
 
         paper = self._paper(w, exercise, new_index, dynamic, level)
         obs = self._agent_obs(w, paper, exercise, new_index, setpoint, data.qvel[self._dof],
-                              self.cuffs.forces(data))
+                              forces)
         f32 = jp.float32
         new_info = {**info, **meter, **drive, "rng": rng, "setpoint": setpoint,
                     "target_index": new_index, "steps": steps,

@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
+from rehabbot.batch.padding import stack_padded
 from rehabbot.batch.patient_tables import PatientTables
 from rehabbot.sim.conditions import CATCH_RAMP, CATCH_SHIFT_PER_RAD_S, RELEASE_WIDTH
 from rehabbot.sim.patient_drive import ACTIVE_DAMPING_S, RESIST_VELOCITY_RAD_S
@@ -56,13 +57,6 @@ def _neutral(template: PatientTables) -> PatientTables:
         available_pos_nm=zeros, available_neg_nm=zeros, peak_pos_nm=zeros, peak_neg_nm=zeros,
         kp_nm_per_rad=zeros, goals_rad=np.zeros_like(template.goals_rad), tremor_hz=0.0,
         tremor_amplitude_nm=0.0)
-
-
-def _pad_goals(goals: np.ndarray, count: int) -> np.ndarray:
-    if goals.shape[1] == count:
-        return goals
-    return np.concatenate([goals, np.repeat(goals[:, -1:], count - goals.shape[1], axis=1)],
-                          axis=1)
 
 
 class BatchedPatientDrive:
@@ -118,7 +112,7 @@ class BatchedPatientDrive:
         self._peak_neg = stack([t.peak_neg_nm for t in rows])
         self._kp = stack([t.kp_nm_per_rad for t in rows])
         count = max(t.goals_rad.shape[1] for t in rows)
-        self._goals = stack([_pad_goals(t.goals_rad, count) for t in rows])
+        self._goals = stack([stack_padded(list(t.goals_rad), count) for t in rows])
         self._tremor_hz = stack([t.tremor_hz for t in rows])
         self._tremor_nm = stack([t.tremor_amplitude_nm for t in rows])
         control_dt_s = first.frame_skip * first.dt_s

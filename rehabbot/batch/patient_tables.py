@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from rehabbot.batch.padding import stack_padded
 from rehabbot.sim.patient_drive import PatientDrive
 
 
@@ -69,12 +70,8 @@ def read_patient_tables(env: Any) -> PatientTables | None:
         raise ValueError(f"{type(drive).__name__}: only the rigid patient's drive is batched")
     reflex = drive.reflex
     goals = env.goals_rad
-    count = max(len(g) for g in goals)
     m = len(drive.dof_ids)
-    padded = np.zeros((len(goals), count, m))
-    for e, rows in enumerate(goals):
-        padded[e, :len(rows)] = rows
-        padded[e, len(rows):] = rows[-1]
+    padded = stack_padded(goals)
     tremor = drive.tremor
     ranges = np.asarray(drive.stretch_ranges_rad, dtype=float).reshape(m, 2)
     return PatientTables(

@@ -24,6 +24,7 @@ import jax
 import mujoco
 import numpy as np
 
+from rehabbot.batch.padding import stack_padded
 from rehabbot.batch.tables import EnvTables
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
@@ -68,30 +69,15 @@ def _equal(a: object, b: object) -> bool:
     return a == b
 
 
-def _pad_targets(rows: np.ndarray, count: int) -> np.ndarray:
-    """A patient's ``(E, T, ...)`` target table padded to ``count`` targets with its last."""
-    if rows.shape[1] == count:
-        return rows
-    pad = np.repeat(rows[:, -1:], count - rows.shape[1], axis=1)
-    return np.concatenate([rows, pad], axis=1)
-
-
-def _pad_rests(rows: np.ndarray, count: int) -> np.ndarray:
-    if rows.shape[1] == count:
-        return rows
-    pad = np.zeros((rows.shape[0], count - rows.shape[1], *rows.shape[2:]))
-    return np.concatenate([rows, pad], axis=1)
-
-
 def _stack_arrays(tables: Sequence[EnvTables]) -> dict[str, np.ndarray]:
     count = max(t.targets_rad.shape[1] for t in tables)
     arrays: dict[str, np.ndarray] = {}
     for name in PER_PATIENT_FIELDS:
         rows = [np.asarray(getattr(t, name)) for t in tables]
         if name in ("rests_rad", "segments_rad"):
-            rows = [_pad_rests(r, count) for r in rows]
+            rows = [stack_padded(list(r), count, 0.0) for r in rows]
         elif name in TARGET_FIELDS:
-            rows = [_pad_targets(r, count) for r in rows]
+            rows = [stack_padded(list(r), count) for r in rows]
         shapes = {r.shape for r in rows}
         if len(shapes) != 1:
             raise ValueError(f"the patients' {name} tables have different shapes {sorted(shapes)}")

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from rehabbot.batch.padding import stack_padded
 from rehabbot.envs.control import TORQUE_HOLD_BRAKE_S, TORQUE_HOLD_SAG_RAD
 from rehabbot.envs.registration import (
     BILATERAL_IDS,
@@ -233,22 +234,15 @@ def read_tables(env_id: str, env: Any) -> EnvTables:
     controller, handles, reward = env.controller, env.handles, env.reward_function
     arms = len(handles)
     per_arm = arm_controllers(controller)
-    n = len(controller.clip_low)
     sequences = env.targets
     count = max(len(s.robot_rad) for s in sequences)
-    targets = np.zeros((len(sequences), count, n))
-    tools = np.zeros((len(sequences), count, 3 * arms))
-    rests = np.zeros((len(sequences), count))
-    segments = np.zeros((len(sequences), count, arms))
-    for e, sequence in enumerate(sequences):
-        k = len(sequence.robot_rad)
-        targets[e, :k] = sequence.robot_rad
-        targets[e, k:] = sequence.robot_rad[-1]
-        tools[e, :k] = sequence.tool_pos_base_m[:, :3 * arms]
-        tools[e, k:] = sequence.tool_pos_base_m[-1, :3 * arms]
-        rests[e, :k] = reward.rests_rad[e][:k]
-        if arms > 1:
-            segments[e, :k] = reward.segments_rad[e][:k]
+    targets = stack_padded([s.robot_rad for s in sequences], count)
+    tools = stack_padded([s.tool_pos_base_m[:, :3 * arms] for s in sequences], count)
+    lengths = [len(s.robot_rad) for s in sequences]
+    rests = stack_padded([reward.rests_rad[e][:k] for e, k in enumerate(lengths)], count, 0.0)
+    segments = (stack_padded([reward.segments_rad[e][:k] for e, k in enumerate(lengths)],
+                             count, 0.0) if arms > 1
+                else np.zeros((len(sequences), count, arms)))
     frames = [_rotation_t(frame) for frame in env.robot_base_frames]
     unit = env.unit_actions
     rom_low, rom_high = safety.rom_bounds_rad

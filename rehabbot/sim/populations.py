@@ -5,7 +5,7 @@ conditions is a patient, and each episode draws one uniformly (``rehabbot.envs.p
 Two populations ship, with no profile and no condition in common, so that an agent trained on
 one can be tested on patients it has never met (``docs/conditions.md``, Populations):
 
-* ``"train"``: 3 profiles x 8 conditions (healthy, MAS 1, 1+ and 2, tremor at 4 and 8 Hz,
+* ``"train"``: 3 profiles x 9 conditions (healthy, MAS 1, 1+ and 2, tremor at 4 and 8 Hz,
   active patients at 20 % and 50 % strength, a mild contracture);
 * ``"test"``: 2 other profiles x 6 other conditions (MAS 3, a 6 Hz tremor twice as strong,
   an active patient at 35 % strength, a resistive patient, a stronger contracture, spasticity
