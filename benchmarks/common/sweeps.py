@@ -38,8 +38,18 @@ def sweep_keys(path: str | Path) -> list[RunKey]:
     from rehabbot.rl.sweep_config import load_sweep_config
 
     return [run_key(trial.env_id, trial.env_kwargs, trial.algo, trial.seed,
-                    trial.total_timesteps, trial.backend or "auto", trial.demos, trial.bc)
+                    trial_timesteps(trial), trial.backend or "auto", trial.demos, trial.bc)
             for trial in load_sweep_config(path).trials()]
+
+
+def trial_timesteps(trial: Any) -> int:
+    """The steps a trial's run does: its ``timesteps``, except that a batched (rsl_rl) run
+    trains whole PPO iterations of ``n_envs`` x ``num_steps_per_env`` steps, so its total is
+    rounded up to a whole iteration (1 000 000 steps of 256 worlds x 24: 1 001 472)."""
+    if not trial.batched:
+        return int(trial.total_timesteps)
+    per_iteration = trial.n_envs * trial.build_rsl_settings().num_steps_per_env
+    return -(-int(trial.total_timesteps) // per_iteration) * per_iteration
 
 
 def row_key(row: Mapping[str, Any]) -> RunKey:
