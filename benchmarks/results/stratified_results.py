@@ -56,7 +56,7 @@ from benchmarks.common.documents import (
 from benchmarks.common.sweeps import KEY_FIELDS, run_key, sweep_keys
 from rehabbot.analysis.aggregate import iqm_interval
 from rehabbot.common.tables import markdown_table
-from rehabbot.envs.registration import env_short_name
+from rehabbot.envs.registration import POPULATION_VARIANTS, env_short_name
 from rehabbot.rl import runs
 from rehabbot.rl.policies import load_policy
 from rehabbot.sim.populations import POPULATIONS
@@ -174,7 +174,7 @@ def cell_envs(env_id: str, kwargs: dict) -> tuple[dict[int, gym.Env], dict[int, 
 
 def is_population_id(env_id: str) -> bool:
     """Whether ``env_id`` draws a patient from a population each episode."""
-    return "-population-" in env_short_name(env_id)
+    return env_id in POPULATION_VARIANTS
 
 
 def cell_setup(env_id: str, env_kwargs: dict, profile: dict | None) -> tuple[dict, dict]:
