@@ -233,6 +233,29 @@ def test_stratified_results_evaluate_a_population_id_on_its_held_out_patients() 
                                           profiles=chosen)
 
 
+def test_stratified_results_describe_the_populations_they_read(monkeypatch) -> None:
+    """The patients page says what the shipped populations hold, read from them: a population
+    with another profile and one condition fewer is described so."""
+    from benchmarks.results import stratified_results
+    from rehabbot.sim.patient import PatientProfile
+    from rehabbot.sim.populations import POPULATIONS, PatientPopulation
+
+    def intro() -> str:
+        return " ".join(stratified_results.PATIENTS_INTRO.format(
+            per_cell=2, seed=50_000, profiles="patients",
+            **stratified_results.population_facts()).split())
+
+    shipped = intro()
+    assert "(3 profiles x 9 conditions)" in shipped
+    assert "2 other profiles, a 1.68 m, 62 kg woman and a 1.80 m, 85 kg man, x 6 other" in shipped
+    test = POPULATIONS["test"]
+    monkeypatch.setitem(POPULATIONS, "test", PatientPopulation(
+        "test", (*test.profiles, PatientProfile(1.90, 100.0, "male")), test.conditions[:-1]))
+    changed = intro()
+    assert "3 other profiles, a 1.68 m, 62 kg woman and a 1.80 m, 85 kg man and a 1.90 m, " \
+           "100 kg man, x 5 other conditions" in changed
+
+
 def test_stratified_results_describe_each_algorithms_training() -> None:
     """n_steps is an off-policy learner's return length but PPO's rollout per env."""
     from benchmarks.results.stratified_results import training_text

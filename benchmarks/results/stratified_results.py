@@ -84,6 +84,8 @@ TRAINED_PROFILES = {"m175": None}
 # the runs drew from). A cell's "profile" is then a patient: a name of the profile and condition
 # -> {"patient": its index}.
 HELD_OUT_POPULATION = "test"
+TRAINING_POPULATION = "train"
+SEX_NOUNS = {"female": "woman", "male": "man"}
 
 
 def population_patients(name: str = HELD_OUT_POPULATION) -> dict[str, dict[str, int]]:
@@ -92,6 +94,17 @@ def population_patients(name: str = HELD_OUT_POPULATION) -> dict[str, dict[str, 
     population = POPULATIONS[name]
     return {f"{profile.sex[0]}{round(100 * profile.height_m)} {condition.describe()}":
             {"patient": k} for k, (profile, condition) in enumerate(population.patients)}
+
+
+def population_facts() -> dict[str, Any]:
+    """What the patients intro says of the shipped populations, read from them: counts of the
+    training population's profiles and conditions, and the held-out one's profiles
+    (``a 1.68 m, 62 kg woman``) and condition count."""
+    train, test = POPULATIONS[TRAINING_POPULATION], POPULATIONS[HELD_OUT_POPULATION]
+    people = [f"a {p.height_m:.2f} m, {p.mass_kg:.0f} kg {SEX_NOUNS[p.sex]}" for p in test.profiles]
+    return {"train_profiles": len(train.profiles), "train_conditions": len(train.conditions),
+            "test_profiles": len(test.profiles), "test_conditions": len(test.conditions),
+            "test_people": " and ".join(people)}
 
 
 PROFILE_SETS = {"test": PROFILES, "validation": VALIDATION_PROFILES,
@@ -113,19 +126,20 @@ every seed of a row; a cell's stops name the safety rule that ended those episod
 episode is in the `data` of this page's JSON file, from which the command below renders this
 page again."""
 PATIENTS_TITLE = "Results on the population ids: plain networks, held-out patients"
-PATIENTS_INTRO = """Every trained run drew a patient of the `"train"` population (3 profiles x 9
-conditions) at every episode. Its final model acts deterministically on held-out episodes that
-cover every exercise x weight level (0-4) x patient of the held-out `"test"` population
-(`--profiles patients`: 2 other profiles, a 1.68 m, 62 kg woman and a 1.80 m, 85 kg man, x 6 other
-conditions; no profile and no condition in common with training), each picked with the reset
-option `patient`: {per_cell} episodes per cell, episode seeds from {seed}, far from every seed
-training used and the same for every run and for the scripted expert. A patient is named by
-sex, height in cm and condition. With a tremor the episodes of a cell differ with their seeds;
-otherwise a deterministic policy plays one episode per cell, counted again. "success IQM" is the
-interquartile mean of the seeds' success rates with a 95 % percentile-bootstrap interval over
-seeds (rliable). The per-cell tables pool every seed of a row; a cell's stops name the safety
-rule that ended those episodes. Every episode is in the `data` of this page's JSON file, from
-which the command below renders this page again."""
+PATIENTS_INTRO = """Every trained run drew a patient of the `"train"` population
+({train_profiles} profiles x {train_conditions} conditions) at every episode. Its final model
+acts deterministically on held-out episodes that cover every exercise x weight level (0-4) x
+patient of the held-out `"test"` population (`--profiles patients`: {test_profiles} other
+profiles, {test_people}, x {test_conditions} other conditions; no profile and no condition in
+common with training), each picked with the reset option `patient`: {per_cell} episodes per
+cell, episode seeds from {seed}, far from every seed training used and the same for every run
+and for the scripted expert. A patient is named by sex, height in cm and condition. With a
+tremor the episodes of a cell differ with their seeds; otherwise a deterministic policy plays
+one episode per cell, counted again. "success IQM" is the interquartile mean of the seeds'
+success rates with a 95 % percentile-bootstrap interval over seeds (rliable). The per-cell
+tables pool every seed of a row; a cell's stops name the safety rule that ended those episodes.
+Every episode is in the `data` of this page's JSON file, from which the command below renders
+this page again."""
 TRAINED_TITLE = "Results on the musculoskeletal patient: plain networks, the trained patient"
 TRAINED_INTRO = """Every trained run's final model acts deterministically on every exercise x
 weight level (0-4) of the patient it trained on (`m175`: MyoSuite's models are one adult size, so
@@ -472,7 +486,8 @@ def learning_document(results: dict[tuple[str, str], list[dict]], args: argparse
                                                                       (TITLE, INTRO))
     return make_document(
         title=title,
-        intro=intro.format(per_cell=args.per_cell, seed=args.seed, profiles=args.profiles),
+        intro=intro.format(per_cell=args.per_cell, seed=args.seed, profiles=args.profiles,
+                           **population_facts()),
         command=command, generated_by=__file__, sweeps=list(sweeps),
         tables=[*summary_tables(results, tuple(profiles),
                                 "patient" if args.profiles == "patients" else "profile"),

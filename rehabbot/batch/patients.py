@@ -24,7 +24,7 @@ import jax
 import mujoco
 import numpy as np
 
-from rehabbot.batch.padding import stack_padded
+from rehabbot.batch.padding import LAST, stack_padded
 from rehabbot.batch.tables import EnvTables
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
@@ -36,8 +36,9 @@ PER_PATIENT_FIELDS: tuple[str, ...] = (
     "rests_rad", "rom_low_rad", "rom_high_rad", "agent_matrix", "segments_rad",
 )
 # Per-patient tables with a target axis (second in the patient's own array): patients with
-# fewer targets are padded with their last target (and a rest of 0 after it).
+# fewer targets are padded with their last target, the rests and segments after it with 0.
 TARGET_FIELDS: tuple[str, ...] = ("targets_rad", "tool_targets_m", "rests_rad", "segments_rad")
+ZERO_PADDED_FIELDS: frozenset[str] = frozenset({"rests_rad", "segments_rad"})
 # MuJoCo Warp model fields that may differ between patients although MuJoCo Warp does not
 # batch them: the dof lengths, read by MuJoCo Warp's sleep only (refused where a model
 # enables sleep). Every world gets the first patient's.
@@ -74,10 +75,9 @@ def _stack_arrays(tables: Sequence[EnvTables]) -> dict[str, np.ndarray]:
     arrays: dict[str, np.ndarray] = {}
     for name in PER_PATIENT_FIELDS:
         rows = [np.asarray(getattr(t, name)) for t in tables]
-        if name in ("rests_rad", "segments_rad"):
-            rows = [stack_padded(list(r), count, 0.0) for r in rows]
-        elif name in TARGET_FIELDS:
-            rows = [stack_padded(list(r), count) for r in rows]
+        if name in TARGET_FIELDS:
+            fill = 0.0 if name in ZERO_PADDED_FIELDS else LAST
+            rows = [stack_padded(list(r), count, fill) for r in rows]
         shapes = {r.shape for r in rows}
         if len(shapes) != 1:
             raise ValueError(f"the patients' {name} tables have different shapes {sorted(shapes)}")
