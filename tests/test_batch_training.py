@@ -128,7 +128,7 @@ def _train(out: Path, *extra: str, timesteps: int = 2 * 24 * WORLDS) -> list[str
 
 
 @pytest.mark.slow
-def test_train_interrupt_resume_evaluate_ship(tmp_path, monkeypatch):
+def test_train_interrupt_resume_evaluate_ship(tmp_path, monkeypatch, capsys):
     out = tmp_path / "runs"
     run_dir = out / "rehab-reach-v2" / "ppo" / "seed0"
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONWARNINGS": "error::UserWarning"}
@@ -152,16 +152,28 @@ def test_train_interrupt_resume_evaluate_ship(tmp_path, monkeypatch):
     # A run is there: without --resume or --overwrite it is refused.
     again = subprocess.run(_train(out), capture_output=True, text=True, env=env, timeout=300)
     assert again.returncode == 2 and "--resume" in again.stderr
-    # Resumed to one iteration more than it had.
+    # Resumed towards 1M steps with a wall-clock budget half a second past what the run has
+    # used: building the worlds takes longer, so it ends, finished, after one more iteration.
     total = done + 24 * WORLDS
+    used_s = manifest["wall_clock_s"]
     start = time.monotonic()
-    resumed = subprocess.run(_train(out, "--resume", timesteps=total), capture_output=True,
-                             text=True, env=env, timeout=600)
+    resumed = subprocess.run(_train(out, "--resume", "--time-limit-s", f"{used_s + 0.5}",
+                                    timesteps=10**6),
+                             capture_output=True, text=True, env=env, timeout=600)
     assert resumed.returncode == 0, resumed.stderr
     assert resumed.stderr == ""  # quiet: no library's warning or print
+    assert "done at the" in resumed.stdout and "s time limit" in resumed.stdout
     assert time.monotonic() - start < 600
     manifest = json.loads((run_dir / "manifest.json").read_text())
     assert manifest["status"] == "finished" and manifest["timesteps_done"] == total
+    assert manifest["stopped_by"] == "time_limit" and manifest["total_timesteps"] == 10**6
+    assert manifest["time_limit_s"] == pytest.approx(used_s + 0.5)
+    assert manifest["wall_clock_s"] >= used_s + 0.5
+    # Its budget spent, it is refused another segment under the same limit, by name.
+    assert main(["train", "rehab-reach-v2", "--algo", "ppo", "--backend", "rsl_rl",
+                 "--num-envs", str(WORLDS), "--timesteps", str(10**6), "--out", str(out),
+                 "--resume", "--time-limit-s", f"{used_s + 0.5}"]) == 2
+    assert "has already trained for" in capsys.readouterr().err
     assert [s["start_timesteps"] for s in manifest["segments"]] == [0, done]
     assert manifest["seeds"] == {"jax_worlds": 0, "torch": 0}
     assert manifest["versions"]["rsl-rl-lib"] and manifest["versions"]["warp-lang"]
@@ -217,12 +229,35 @@ def test_cli_passes_its_options_to_the_plan(tmp_path, monkeypatch, capsys):
     code = main(["train", "rehab-reach-v2", "--algo", "ppo", "--backend", "rsl_rl",
                  "--num-envs", "64", "--timesteps", "5000", "--seeds", "3", "4",
                  "--env-kwargs", '{"max_episode_steps": 20}', "--hyperparams", str(settings),
-                 "--checkpoint-freq", "1000", "--out", str(tmp_path / "runs")])
+                 "--checkpoint-freq", "1000", "--time-limit-s", "600",
+                 "--out", str(tmp_path / "runs")])
     assert code == 0
     assert [p.seed for p in plans] == [3, 4]
     plan = plans[0]
     assert plan.env_kwargs == {"max_episode_steps": 20} and plan.num_envs == 64
     assert plan.total_timesteps == 5000 and plan.checkpoint_freq == 1000
+    assert plan.time_limit_s == 600.0
     assert plan.settings.num_mini_batches == 8 and plan.settings.gamma == 0.98
     assert plan.settings.num_learning_epochs == bt.RslPpoSettings().num_learning_epochs
     assert "64 worlds" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("argv", "named"), [
+    (["--backend", "sb3", "--time-limit-s", "60"], "--time-limit-s 60 is used by --backend "
+                                                   "rsl_rl only, not --backend sb3"),
+    (["--backend", "rsl_rl", "--time-limit-s", "0"], "must be a number of seconds > 0, got 0"),
+    (["--backend", "rsl_rl", "--time-limit-s", "nan"], "got nan"),
+    (["--backend", "rsl_rl", "--time-limit-s", "ten"], "not a number of seconds: 'ten'"),
+])
+def test_time_limit_is_refused_by_name(tmp_path, capsys, argv, named):
+    out = tmp_path / "runs"
+    try:
+        code = main(["train", "rehab-reach-v2", "--algo", "ppo", "--timesteps", "48",
+                     "--out", str(out), *argv])
+    except SystemExit as err:  # argparse's refusal
+        code = err.code
+    assert code == 2
+    assert named in capsys.readouterr().err
+    assert not out.exists()
+    with pytest.raises(UsageError, match=r"time_limit_s=-1\.0 must be"):
+        bt.BatchRunPlan(ENV, seed=0, total_timesteps=48, out_dir=out, time_limit_s=-1.0)

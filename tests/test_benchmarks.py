@@ -280,6 +280,16 @@ def test_stratified_results_describe_each_algorithms_training() -> None:
     assert row_label("ppo", {"training": cloned}) == "ppo + bc"
     assert row_label("ppo + bc", {"training": cloned}) == "ppo + bc"
     assert row_label("ppo", {"training": "sbx MlpPolicy, 1000 steps"}) == "ppo"
+    # A batched run says its worlds, and a wall-clock budget that ended it.
+    batched = {"backend": "rsl_rl", "n_envs": 4096, "timesteps_done": 98304,
+               "hyperparameters": {"actor_hidden_dims": [64, 64], "activation": "tanh",
+                                   "num_steps_per_env": 24}}
+    assert training_text(batched) == ("rsl_rl PPO on MuJoCo Warp, 64-64 tanh MLPs, 4096 worlds "
+                                      "x 24 steps per update, 98304 steps")
+    assert training_text({**batched, "time_limit_s": 600.0, "stopped_by": "timesteps"}) == \
+        training_text(batched)
+    assert training_text({**batched, "time_limit_s": 600.0, "stopped_by": "time_limit"}) == \
+        training_text(batched) + " (stopped at its 600 s time limit)"
 
 
 def test_zoo_select_picks_each_rows_best_seed_on_validation_episodes(tmp_path) -> None:

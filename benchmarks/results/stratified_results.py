@@ -261,7 +261,9 @@ def training_text(manifest: dict) -> str:
         hidden = "-".join(map(str, hp.get("actor_hidden_dims", [])))
         return (f"rsl_rl PPO on MuJoCo Warp, {hidden} {hp.get('activation')} MLPs, "
                 f"{manifest.get('n_envs')} worlds x {hp.get('num_steps_per_env')} steps per "
-                f"update, {manifest.get('timesteps_done')} steps")
+                f"update, {manifest.get('timesteps_done')} steps"
+                + (f" (stopped at its {manifest['time_limit_s']:g} s time limit)"
+                   if manifest.get("stopped_by") == "time_limit" else ""))
     demos = (manifest.get("demos") or {}).get("episodes", 0)
     n_steps = (hp.get("kwargs") or {}).get("n_steps")
     if not n_steps:

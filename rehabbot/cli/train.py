@@ -5,6 +5,7 @@ resumes an interrupted one."""
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import signal
 import sys
@@ -57,6 +58,16 @@ def _non_negative_count(text: str) -> int:
     value = _count(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0, got {text}")
     return value
 
 
@@ -116,7 +127,8 @@ Batched: --backend rsl_rl trains rsl_rl's PPO on the batched env (MuJoCo Warp; p
 'rehabbot[gpu]'; a GPU makes it fast), e.g.
   rehabbot train rehab-reach-v2 --algo ppo --backend rsl_rl --num-envs 4096
 It writes the same run folder (the actor as policy.npz, which `rehabbot evaluate RUN_DIR` runs
-on the CPU env); --hyperparams takes a YAML mapping of its settings (docs/batch.md).
+on the CPU env); --hyperparams takes a YAML mapping of its settings (docs/batch.md);
+--time-limit-s S ends each run after the first PPO iteration past S seconds of wall clock.
 
 Hyperparameter files are RL-Zoo-style YAML: env ids (full or short) mapped to hyperparameters,
 or one flat mapping. Keys: the SB3 constructor arguments of the algorithm, plus n_timesteps,
@@ -178,6 +190,10 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("--checkpoint-freq", type=_non_negative_count, metavar="N",
                         help=f"checkpoint every N env steps, 0: only at the end (default: "
                              f"{DEFAULT_CHECKPOINT_FREQ})")
+    parser.add_argument("--time-limit-s", type=_positive_seconds, metavar="S",
+                        help="--backend rsl_rl: end each run, as finished, after the first "
+                             "PPO iteration that ends past S seconds of wall clock (building "
+                             "the batched env included; docs/batch.md)")
     parser.add_argument("--eval-freq", type=_non_negative_count, metavar="N",
                         help=f"evaluate every N env steps on a separate env, 0: never "
                              f"(default: {DEFAULT_EVAL_FREQ})")
@@ -222,6 +238,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     if args.backend == BATCH_BACKEND:
         return train_batched_cli(args, DEFAULT_SEEDS, parse_env_kwargs(args.env_kwargs))
+    if args.time_limit_s is not None:
+        raise CliError(f"--time-limit-s {args.time_limit_s:g} is used by --backend "
+                       f"{BATCH_BACKEND} only, not --backend {args.backend}", EXIT_USAGE)
     hyperparams, demos = args.hyperparams, args.demos
     shipped = hyperparams is None and not args.resume
     if shipped:

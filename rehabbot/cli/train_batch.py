@@ -11,6 +11,7 @@ from typing import Any
 from rehabbot.cli.errors import EXIT_OK, CliError
 from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import env_short_name, resolve_env_id
+from rehabbot.rl import runs
 
 BATCH_BACKEND = "rsl_rl"
 # Options of the CPU trainers that a batched run has no use for: (attribute, flag).
@@ -20,10 +21,11 @@ CPU_ONLY_OPTIONS = (("eval_freq", "--eval-freq"), ("eval_episodes", "--eval-epis
 
 def _resume_command(args: argparse.Namespace, env_id: str, seeds: list[int],
                     total: int) -> str:
+    limit = [] if args.time_limit_s is None else ["--time-limit-s", f"{args.time_limit_s:g}"]
     return shlex.join(["rehabbot", "train", env_short_name(env_id), "--algo", "ppo",
                        "--backend", BATCH_BACKEND, "--num-envs", str(args.n_envs),
-                       "--timesteps", str(total), "--seeds", *map(str, seeds), "--out",
-                       str(args.out), "--resume"])
+                       "--timesteps", str(total), "--seeds", *map(str, seeds), *limit,
+                       "--out", str(args.out), "--resume"])
 
 
 def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
@@ -61,7 +63,7 @@ def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
         plan = BatchRunPlan(env_id, seed=seed, total_timesteps=total, out_dir=Path(args.out),
                             num_envs=args.n_envs, env_kwargs=dict(env_kwargs or {}),
                             settings=settings, resume=args.resume, overwrite=args.overwrite,
-                            **kwargs)
+                            time_limit_s=args.time_limit_s, **kwargs)
         print(f"{plan.run_dir}: {'resuming' if plan.resume else 'training'} ppo on {env_id} "
               f"({BATCH_BACKEND}, MuJoCo Warp), seed {seed}, to {total} steps ({plan.num_envs} "
               f"worlds, {plan.steps_per_iteration} steps per PPO iteration)", flush=True)
@@ -85,5 +87,8 @@ def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
         except KeyboardInterrupt as err:
             raise CliError(f"{plan.run_dir}: interrupted before a checkpoint could be saved",
                            130) from err
-        print(f"{run_dir}: done; evaluate with: rehabbot evaluate {run_dir}", flush=True)
+        limit = args.time_limit_s
+        ended = (f" at the {limit:g} s time limit" if limit is not None and
+                 (runs.read_manifest(run_dir) or {}).get("stopped_by") == "time_limit" else "")
+        print(f"{run_dir}: done{ended}; evaluate with: rehabbot evaluate {run_dir}", flush=True)
     return EXIT_OK

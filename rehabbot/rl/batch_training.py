@@ -25,6 +25,11 @@ our Stable-Baselines3 actors.
 A run stops at a signal after its PPO iteration, saving a checkpoint; ``--resume`` goes on from
 the newest one (the networks, optimizer and PyTorch RNG are restored; the worlds start new
 episodes from the key of the seed and the iteration).
+
+A wall-clock budget (``--time-limit-s S``) ends a run, as finished, after the first PPO
+iteration that ends past ``S`` seconds (``stopped_by: "time_limit"`` in the manifest). The
+clock is the manifest's ``wall_clock_s``: from the start of building the batched env (MuJoCo
+Warp's compilation included), summed over the segments of a resumed run.
 """
 
 from __future__ import annotations
@@ -220,6 +225,7 @@ class BatchRunPlan:
     resume: bool = False
     overwrite: bool = False
     device: str | None = None  # torch device of the learner: JAX's device when None
+    time_limit_s: float | None = None  # wall-clock budget (module docstring); None: no limit
 
     def __post_init__(self) -> None:
         self.env_id = resolve_env_id(self.env_id)
@@ -228,6 +234,10 @@ class BatchRunPlan:
             low = 0 if name in ("seed", "checkpoint_freq") else 1
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise UsageError(f"{name}={value!r} must be an integer >= {low}")
+        limit = self.time_limit_s
+        if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int | float)
+                                  or not math.isfinite(limit) or limit <= 0):
+            raise UsageError(f"time_limit_s={limit!r} must be a number of seconds > 0")
         if self.resume and self.overwrite:
             raise UsageError("--resume and --overwrite exclude each other")
         self.out_dir = Path(self.out_dir)
@@ -398,6 +408,10 @@ def _plan_start(plan: BatchRunPlan) -> tuple[dict[str, Any] | None, tuple[int, P
             if manifest.get(key) != mine:
                 raise UsageError(f"--resume with {key} {mine!r}, but {run_dir} was trained "
                                  f"with {manifest.get(key)!r}")
+        used_s = float(manifest.get("wall_clock_s", 0.0))
+        if plan.time_limit_s is not None and used_s >= plan.time_limit_s:
+            raise UsageError(f"--time-limit-s {plan.time_limit_s:g}: {run_dir} has already "
+                             f"trained for {used_s:g} s")
         return manifest, resume_point(run_dir, manifest)
     if run_dir.is_dir() and runs.has_content(run_dir) and not plan.overwrite:
         raise UsageError(f"{run_dir} already holds a run ({runs.describe(run_dir)}); continue "
@@ -423,6 +437,7 @@ def train_batched(plan: BatchRunPlan,
     """
     from rehabbot.rl.rsl_vec_env import RslVecEnv
 
+    started = time.monotonic()  # the run's clock includes building (compiling) the worlds
     old_manifest, resume_from = _plan_start(plan)
     try:
         vec = RslVecEnv(plan.env_id, plan.num_envs, plan.seed, plan.env_kwargs)
@@ -437,14 +452,16 @@ def train_batched(plan: BatchRunPlan,
         if old_manifest is None and plan.overwrite:
             remove_contents(run_dir, keep=(runs.LOCK_NAME,))
         with handling_signals(latch):
-            return _train_locked(plan, vec, old_manifest, resume_from, latch, report)
+            return _train_locked(plan, vec, old_manifest, resume_from, latch, report,
+                                 started)
     finally:
         lock.release()
 
 
 def _train_locked(plan: BatchRunPlan, vec: Any, old: dict[str, Any] | None,
                   resume_from: tuple[int, Path] | None, latch: SignalLatch,
-                  report: Callable[[dict[str, Any]], None] | None) -> Path:
+                  report: Callable[[dict[str, Any]], None] | None,
+                  started: float) -> Path:
     import jax
     import torch
     from rsl_rl.algorithms import PPO
@@ -459,7 +476,6 @@ def _train_locked(plan: BatchRunPlan, vec: Any, old: dict[str, Any] | None,
     if resume_from is not None:
         iteration, done = _load_checkpoint(alg, resume_from[1])
         vec.reset(plan.seed + iteration)
-    started = time.monotonic()
     prior_wall = float((old or {}).get("wall_clock_s", 0.0))
     command = list(sys.argv)
     manifest: dict[str, Any] = dict(old or {}) if old else {
@@ -471,6 +487,7 @@ def _train_locked(plan: BatchRunPlan, vec: Any, old: dict[str, Any] | None,
         "hyperparameters": _settings_json(plan.settings), "started_at": now_iso(),
         "model": POLICY_NAME, "full_model": FULL_MODEL_NAME, "segments": []}
     manifest.update(total_timesteps=plan.total_timesteps, timesteps_done=done,
+                    time_limit_s=plan.time_limit_s, stopped_by=None,
                     iterations_done=iteration, status="running", finished_at=None,
                     device={"jax": str(jax.devices()[0]), "torch": device},
                     versions=batch_versions(), git_commit=git_commit(), command=command,
@@ -527,6 +544,9 @@ def _train_locked(plan: BatchRunPlan, vec: Any, old: dict[str, Any] | None,
                     raise BatchTrainingInterrupted(run_dir, done, path, latch.signum)
             else:
                 write(timesteps_done=done, iterations_done=iteration)
+            if plan.time_limit_s is not None and row["wall_clock_s"] >= plan.time_limit_s:
+                manifest["stopped_by"] = "time_limit"
+                break
     except BatchTrainingInterrupted:
         raise
     except BaseException as err:
@@ -535,6 +555,6 @@ def _train_locked(plan: BatchRunPlan, vec: Any, old: dict[str, Any] | None,
     _save_checkpoint(alg, run_dir / FULL_MODEL_NAME, iteration, done)
     alg.eval_mode()
     write(status="finished", finished_at=now_iso(), timesteps_done=done,
-          iterations_done=iteration)
+          iterations_done=iteration, stopped_by=manifest["stopped_by"] or "timesteps")
     write_policy(run_dir, alg.get_policy().to("cpu"), vec, manifest)
     return run_dir
