@@ -128,7 +128,8 @@ def test_the_shipped_sweep_files_load() -> None:
             ({"MlpPolicy"} if cpu else set()), path.name
     assert [path.name for path in shipped
             if all(t.batched for t in load_sweep_config(path).trials())] == \
-        ["rsl-ppo-reach-population-v2.yaml", "rsl-ppo-reach-v2.yaml"]
+        ["rsl-ppo-knee-population-v2.yaml", "rsl-ppo-reach-population-v2.yaml",
+         "rsl-ppo-reach-v2.yaml"]
     ppo = load_sweep_config(ROOT / "sweeps" / "ppo-v2.yaml").trials()
     assert len(ppo) == 12 and {(t.algo, t.backend, t.demos, t.bc, t.total_timesteps)
                                for t in ppo} == {("ppo", "sbx", 40, True, 300_000)}
