@@ -65,12 +65,17 @@ def prose(text: str) -> str:
 ENV_ID = re.compile(r"rehabbot/rehab-[\w{},*-]*")  # a Gymnasium id, not a path
 
 
+BUILD_OUTPUTS = ("docs/_build", "docs/_generated")
+
+
 def is_repository_path(token: str) -> bool:
     token = token.rstrip(".,;:")
     if ENV_ID.fullmatch(token):
         return False
     if token in TOP_FILES:
         return True
+    if token.startswith(BUILD_OUTPUTS):  # written by `make docs`, not part of the repository
+        return False
     head = token.split("/", 1)[0]
     return "/" in token and head in TOP_DIRS
 

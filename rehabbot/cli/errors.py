@@ -24,6 +24,7 @@ import argparse
 import contextlib
 import functools
 import json
+import math
 import pickle
 import sys
 import warnings
@@ -136,6 +137,51 @@ def non_negative_int(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {value}")
     return value
+
+
+def bounded_int(low: int, high: int) -> Callable[[str], int]:
+    """An argparse type: an integer in ``[low, high]``, naming the bad value. Every count a
+    command takes has an upper bound too (episodes, steps, frames), so that a typo such as
+    ``1e26`` is refused at once instead of running for ever or overflowing later."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            try:
+                number = float(text)
+            except ValueError:
+                number = math.nan
+            if not number.is_integer():
+                raise argparse.ArgumentTypeError(
+                    f"must be an integer in [{low}, {high:,}], got {text!r}") from None
+            value = int(number)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high:,}], "
+                                             f"got {text!r}")
+        return value
+
+    parse.__name__ = "int"  # argparse names the type in its message: "invalid int value"
+    return parse
+
+
+def bounded_float(low: float, high: float, *, low_open: bool = False) -> Callable[[str], float]:
+    """An argparse type: a finite number in ``[low, high]`` (``(low, high]`` with
+    ``low_open``), naming the bad value; ``nan`` and ``inf`` are refused."""
+    interval = f"{'(' if low_open else '['}{low:g}, {high:g}]"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        below = value <= low if low_open else value < low
+        if not math.isfinite(value) or below or value > high:
+            raise argparse.ArgumentTypeError(f"must be a number in {interval}, got {text!r}")
+        return value
+
+    parse.__name__ = "float"
+    return parse
 
 
 LIBRARY_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError, RuntimeError,

@@ -114,6 +114,25 @@ def check_writable_dir(path: Path, what: str = "output folder") -> None:
         shutil.rmtree(created, ignore_errors=True)
 
 
+def check_parent_exists(path: Path, what: str = "--out") -> Path:
+    """``path`` as a Path whose parent folder exists: a folder a user names is created (its
+    last part only), a file written into it, but a missing folder above it is a typo, not
+    something to build (``mkdir`` without ``-p``). Defaults of the commands (``runs/...``)
+    are not checked by this: they are created with their parents.
+
+    Raises:
+        UsageError: the parent folder does not exist, or is not a folder (naming both).
+    """
+    path = Path(path)
+    parent = path.parent
+    if not parent.exists():
+        raise UsageError(f"{what} {str(path)!r}: its folder {str(parent)!r} does not exist; "
+                         "create it first")
+    if not parent.is_dir():
+        raise UsageError(f"{what} {str(path)!r}: {str(parent)!r} is not a folder")
+    return path
+
+
 # --------------------------------------------------------------------------- checked outputs
 # Every output a command hands to a user (video, figure, JSON, trace) is written under a
 # temporary name, checked by reading it back, and only then renamed over the earlier file:
