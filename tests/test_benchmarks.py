@@ -256,6 +256,79 @@ def test_stratified_results_describe_the_populations_they_read(monkeypatch) -> N
            "100 kg man, x 5 other conditions" in changed
 
 
+def _run_folder(root: Path, seed: int = 0, *, backend: str = "sbx") -> Path:
+    """A finished run folder as training leaves it (a manifest and a final model's file)."""
+    run_dir = root / "rehab-reach-v2" / "sac" / f"seed{seed}"
+    run_dir.mkdir(parents=True)
+    (run_dir / "manifest.json").write_text(json.dumps({
+        "env_id": "rehabbot/rehab-reach-v2", "algo": "sac", "seed": seed, "backend": backend,
+        "timesteps_done": 3000, "hyperparameters": {"policy": "MlpPolicy"}}))
+    (run_dir / "model.zip").write_bytes(b"not read here")
+    return run_dir
+
+
+def test_training_curves_read_each_kind_of_run_folder(tmp_path) -> None:
+    """A batched run's training log, SB3's evaluations and the monitor files each give the
+    success rate against env steps; a folder with none gives no curve; long curves are
+    thinned with their ends kept; a broken log is named."""
+    import numpy as np
+
+    from benchmarks.results.training_curves import MAX_POINTS, run_curve, thin
+    from rehabbot.common.errors import DataError
+
+    batched = _run_folder(tmp_path / "a")
+    (batched / "training_log.csv").write_text(
+        "iteration,timesteps,success_rate\n1,512,\n2,1024,0.25\n3,1536,0.75\n")
+    assert run_curve(batched) == {"source": "training_log.csv", "timesteps": [1024, 1536],
+                                  "success_rate": [0.25, 0.75]}
+    evaluated = _run_folder(tmp_path / "b")
+    (evaluated / "eval").mkdir()
+    np.savez(evaluated / "eval" / "evaluations.npz", timesteps=np.array([1000, 2000]),
+             results=np.zeros((2, 4)), ep_lengths=np.ones((2, 4)),
+             successes=np.array([[0, 0, 1, 0], [1, 1, 1, 0]], dtype=bool))
+    assert run_curve(evaluated) == {"source": "eval/evaluations.npz",
+                                    "timesteps": [1000, 2000], "success_rate": [0.25, 0.75]}
+    monitored = _run_folder(tmp_path / "c")
+    (monitored / "monitor").mkdir()
+    (monitored / "monitor" / "train_0.monitor.csv").write_text(
+        '#{"t_start": 0}\nr,l,t,is_success\n1.0,100,1.0,False\n2.0,100,2.0,True\n')
+    assert run_curve(monitored) == {"source": "monitor/*.monitor.csv", "timesteps": [100, 200],
+                                    "success_rate": [0.0, 0.5]}
+    assert run_curve(_run_folder(tmp_path / "d")) is None
+    (batched / "training_log.csv").write_text("iteration,timesteps,success_rate\n1,x,0.5\n")
+    with pytest.raises(DataError, match=r"training_log\.csv"):
+        run_curve(batched)
+    long = thin(np.arange(1000) * 10, np.linspace(0, 1, 1000))
+    assert len(long["timesteps"]) == MAX_POINTS
+    assert (long["timesteps"][0], long["timesteps"][-1]) == (0, 9990)
+    assert long["success_rate"][-1] == 1.0
+
+
+def test_stratified_results_keep_each_runs_curve_with_its_episodes(tmp_path, monkeypatch):
+    """Evaluating a run folder stores its learning curve in the episodes' file, so that the
+    page (rendered from that file alone) can draw it."""
+    from benchmarks.results import stratified_results
+
+    run_dir = _run_folder(tmp_path / "runs")
+    (run_dir / "training_log.csv").write_text("iteration,timesteps,success_rate\n1,512,0.5\n")
+    played = []
+
+    def fake_cells(spec, env_id, env_kwargs, per_cell, seed, refused=None,
+                   profiles=stratified_results.PROFILES):
+        played.append(spec)
+        return [{"seed": seed, "profile": "m175", "exercise": 0, "weight_level": 0,
+                 "success": True, "safety_violation": None, "steps": 1}]
+
+    monkeypatch.setattr(stratified_results, "evaluate_cells", fake_cells)
+    out = tmp_path / "episodes.json"
+    assert stratified_results.main([str(tmp_path / "runs"), "--json", str(out)]) == 0
+    assert played == [str(run_dir / "model.zip"), "expert"]
+    saved = json.loads(out.read_text())
+    run = next(e for e in saved["results"] if e["algo"] != "expert")["runs"][0]
+    assert run["curve"] == {"source": "training_log.csv", "timesteps": [512],
+                            "success_rate": [0.5]}
+
+
 def test_stratified_results_describe_each_algorithms_training() -> None:
     """n_steps is an off-policy learner's return length but PPO's rollout per env."""
     from benchmarks.results.stratified_results import training_text

@@ -7,13 +7,18 @@
 * every sweep file a page names trains exactly the runs of its runs table (the package's own
   sweep loader expands it), so the grid and the table cannot drift apart;
 * the learning page's tables are those its episodes give, and the README's headline block
-  (when the README has one) is the headline table rendered from the learning page.
+  (when the README has one) is the headline table rendered from the learning page;
+* every figure a page names is beside it and was drawn from the data its JSON holds now: the
+  learning pages' figures are computed again from their episodes and the digest of that data
+  is compared with the one the document and the PNG carry (digests, not pixels);
+* the section's index lists every page, the headline first, and no two pages share a title.
 """
 
 from __future__ import annotations
 
 import copy
 import json
+import re
 import shlex
 from collections import defaultdict
 from pathlib import Path
@@ -28,12 +33,19 @@ from benchmarks.common.documents import (
     render_markdown,
     replace_block,
 )
+from benchmarks.common.figures import (
+    FIGURES_DIR,
+    MAX_FIGURE_BYTES,
+    MAX_PAGE_FIGURES_BYTES,
+    png_digest,
+)
 from benchmarks.common.sweeps import KEY_FIELDS, row_key, sweep_keys
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results"
 PAGES = sorted(RESULTS.glob("*.json"))
 LEARNING = RESULTS / "learning-v2.json"
+HEADLINE_PAGE = "learning-v2"
 # The pages of trained runs' held-out episodes (benchmarks/results/stratified_results.py).
 LEARNING_PAGES = sorted(RESULTS.glob("learning-*.json"))
 
@@ -140,12 +152,208 @@ def test_the_learning_tables_are_what_its_episodes_give(path: Path) -> None:
     data = document["data"]
     results, _ = stratified_results.load_results([path], data["per_cell"], data["seed"],
                                                  data["profile_set"])
-    namespace = type("Args", (), {"per_cell": data["per_cell"], "seed": data["seed"],
-                                  "profiles": data["profile_set"],
-                                  "sweep": [ROOT / s for s in document["sweeps"]]})()
-    again = stratified_results.learning_document(results, namespace, document["command"],
-                                                 document["provenance"])
+    words = shlex.split(document["command"])
+    assert "--title" in words and words[words.index("--title") + 1] == document["title"]
+    again = stratified_results.learning_document(results, learning_args(path, document),
+                                                 document["command"], document["provenance"])
     assert again["tables"] == document["tables"]
+    assert again["notes"] == document["notes"]
+    # The figures and the digests of the data they show, computed again from the episodes.
+    assert again["figures"] == document["figures"]
+    envs = {row[0] for row in next(t for t in document["tables"] if t["id"] == "summary")["rows"]}
+    assert {f["caption"] for f in document["figures"] if f["id"].startswith("cells/")} == envs
+
+
+def learning_args(path: Path, document: dict, **changes):
+    """The options a learning page's command gave its script, as the script reads them."""
+    data = document["data"]
+    return type("Args", (), {"per_cell": data["per_cell"], "seed": data["seed"],
+                             "profiles": data["profile_set"], "title": document["title"],
+                             "page": path.with_suffix(""),
+                             "sweep": [ROOT / s for s in document["sweeps"]], **changes})()
+
+
+def figure_pages() -> list[Path]:
+    return [p for p in PAGES if load_document(p).get("figures")]
+
+
+def test_every_learning_page_has_figures() -> None:
+    assert set(LEARNING_PAGES) <= set(figure_pages())
+
+
+@pytest.mark.parametrize("path", figure_pages(), ids=page_id)
+def test_each_figure_is_beside_its_page_and_drawn_from_its_json(path: Path) -> None:
+    """Each figure is a small PNG in the page's figure folder, shown on the page, carrying the
+    digest of the data its document records."""
+    document = load_document(path)
+    page = path.with_suffix(".md").read_text(encoding="utf-8")
+    for figure in document["figures"]:
+        file = RESULTS / figure["file"]
+        assert figure["file"].startswith(f"{FIGURES_DIR}/{path.stem}/"), figure["file"]
+        assert file.is_file(), f"{path.name} names {figure['file']}, which is not there"
+        assert f"]({figure['file']})" in page
+        assert file.stat().st_size <= MAX_FIGURE_BYTES, f"{file}: {file.stat().st_size} bytes"
+        assert png_digest(file) == figure["sha256"], (
+            f"{figure['file']} was drawn from other data than {path.name} holds; run the "
+            f"page's command again: {document['command']}")
+
+
+def test_the_figure_folders_hold_only_the_pages_figures() -> None:
+    named = {RESULTS / f["file"] for p in PAGES for f in load_document(p).get("figures", [])}
+    found = set((RESULTS / FIGURES_DIR).rglob("*")) - set(
+        p for p in (RESULTS / FIGURES_DIR).rglob("*") if p.is_dir())
+    assert found == named, f"files no page names: {sorted(map(str, found - named))}"
+    assert sum(p.stat().st_size for p in found) <= MAX_PAGE_FIGURES_BYTES
+
+
+def test_a_changed_episode_or_a_redrawn_figure_is_caught(tmp_path: Path) -> None:
+    """One episode's outcome changed in the JSON: the figure data's digest changes, so it no
+    longer matches the PNG's; a PNG drawn from other data carries another digest."""
+    from benchmarks.common.figures import save_png
+    from benchmarks.results import stratified_results
+    from rehabbot.analysis.figures import new_figure
+
+    path = RESULTS / "learning-myo-arm.json"
+    document = load_document(path)
+    changed = copy.deepcopy(document)
+    episode = changed["data"]["results"][0]["runs"][0]["episodes"][0]
+    episode["success"] = not episode["success"]
+    data = changed["data"]
+    results, _ = stratified_results.load_results([_write(tmp_path / "c.json", changed)],
+                                                 data["per_cell"], data["seed"],
+                                                 data["profile_set"])
+    again = stratified_results.learning_document(results, learning_args(path, changed),
+                                                 document["command"], document["provenance"])
+    figure = document["figures"][0]
+    assert again["figures"][0]["sha256"] != figure["sha256"]
+    assert again["figures"][0]["sha256"] != png_digest(RESULTS / figure["file"])
+    # A PNG carries the digest it was saved with, whatever it shows.
+    other = tmp_path / "other.png"
+    save_png(new_figure((2.0, 2.0)), other, again["figures"][0]["sha256"])
+    assert png_digest(other) == again["figures"][0]["sha256"] != figure["sha256"]
+
+
+def _write(path: Path, document: dict) -> Path:
+    path.write_text(json.dumps(document), encoding="utf-8")
+    return path
+
+
+def test_a_page_draws_its_learning_curves_where_its_runs_hold_them(tmp_path: Path) -> None:
+    """A run with a curve in its data: the page gains a learning-curve figure (drawn beside
+    it, with its digest) and loses the note that no run has one; a figure the page no longer
+    names is removed from its folder."""
+    from benchmarks.results import stratified_results
+
+    path = RESULTS / "learning-myo-arm.json"
+    document = load_document(path)
+    assert any("No run of this page has a learning curve" in n for n in document["notes"])
+    runs = document["data"]["results"][0]["runs"]
+    for k, run in enumerate(runs):
+        run["curve"] = {"source": "eval/evaluations.npz", "timesteps": [1000, 2000, 3000],
+                        "success_rate": [0.0, 0.5 + 0.1 * k, 1.0]}
+    source = _write(tmp_path / "in.json", document)
+    stale = tmp_path / FIGURES_DIR / "page" / "gone.png"
+    stale.parent.mkdir(parents=True)
+    stale.write_bytes(b"old")
+    data = document["data"]
+    assert stratified_results.main([
+        "--from-json", str(source), "--profiles", data["profile_set"], "--per-cell",
+        str(data["per_cell"]), "--seed", str(data["seed"]), "--title", "T",
+        "--page", str(tmp_path / "page")]) == 0
+    written = load_document(tmp_path / "page.json")
+    assert [f["id"] for f in written["figures"]] == ["cells/rehab-reach-myo-v2", "curves"]
+    assert not any("No run of this page" in n for n in written["notes"])
+    page = (tmp_path / "page.md").read_text()
+    assert "## Learning curves" in page and "](figures/page/curves.png)" in page
+    for figure in written["figures"]:
+        assert png_digest(tmp_path / figure["file"]) == figure["sha256"]
+    assert not stale.exists()
+    # The curves are part of the figure's data: another curve, another digest.
+    runs[0]["curve"]["success_rate"][1] = 0.25
+    results, _ = stratified_results.load_results([_write(tmp_path / "in2.json", document)],
+                                                 data["per_cell"], data["seed"],
+                                                 data["profile_set"])
+    again = stratified_results.learning_document(
+        results, learning_args(tmp_path / "page.json", written), written["command"], None)
+    assert again["figures"][1]["sha256"] != written["figures"][1]["sha256"]
+    assert again["figures"][0] == written["figures"][0]
+
+
+def test_a_page_is_refused_before_anything_runs_without_matplotlib(tmp_path: Path,
+                                                                   monkeypatch) -> None:
+    """--page draws figures: without matplotlib it is refused at once (exit 2, naming the
+    extra to install), and nothing is written."""
+    import importlib.util
+
+    from benchmarks.results import stratified_results
+
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *args: None if name == "matplotlib"
+                        else find_spec(name, *args))
+    with pytest.raises(SystemExit) as exit_info:
+        stratified_results.main(["--from-json", str(RESULTS / "learning-myo-arm.json"),
+                                 "--profiles", "trained", "--page", str(tmp_path / "page")])
+    assert exit_info.value.code == 2
+    assert list(tmp_path.iterdir()) == []
+
+
+def index_entries() -> tuple[list[str], list[str]]:
+    """The results index's toctree entries and the pages its lists link, in order."""
+    text = (RESULTS / "index.md").read_text(encoding="utf-8")
+    fence = re.search(r"```\{toctree\}\n(.*?)```", text, re.S)
+    assert fence is not None, "docs/results/index.md has no toctree"
+    toctree = [line.strip() for line in fence.group(1).splitlines()
+               if line.strip() and not line.strip().startswith(":")]
+    links = re.findall(r"^- \[\]\(([\w-]+)\.md\): \S", text, re.M)
+    return toctree, links
+
+
+def test_the_results_index_lists_every_page_headline_first() -> None:
+    """An explicit toctree, in the order of the index's described list: every results page
+    once (a new page cannot be left out), the headline learning page first."""
+    toctree, links = index_entries()
+    assert toctree == links, "the toctree and the described list differ"
+    assert len(set(toctree)) == len(toctree), "a page is listed twice"
+    assert sorted(toctree) == sorted(p.stem for p in PAGES), (
+        f"pages missing from docs/results/index.md: "
+        f"{sorted({p.stem for p in PAGES} - set(toctree))}")
+    assert toctree[0] == HEADLINE_PAGE
+    learning = [i for i, name in enumerate(toctree) if name.startswith("learning-")]
+    assert learning == list(range(len(learning))), "the learning pages come first"
+
+
+def test_no_two_results_pages_share_a_title() -> None:
+    titles: dict[str, list[str]] = defaultdict(list)
+    for path in PAGES:
+        titles[" ".join(load_document(path)["title"].casefold().split())].append(path.stem)
+    shared = {title: pages for title, pages in titles.items() if len(pages) > 1}
+    assert not shared, f"pages that share a title: {shared}"
+
+
+def test_a_document_renders_its_figures_after_their_table(tmp_path: Path) -> None:
+    from benchmarks.common.documents import make_document, make_figure, make_table
+
+    tables = [make_table("a", "A", ["x"], [[1]]), make_table("b", "B", ["x"], [[2]])]
+    figure = make_figure("f", "F", "figures/t/f.png", "a heat map", {"cells": [1, 2]},
+                         after="a", section="Pictures", note="Read me.")
+    document = make_document(title="T", command="c", generated_by="g", tables=tables,
+                             figures=[figure])
+    page = render_markdown(document)
+    assert page.index("## A") < page.index("## Pictures\n\n### F\n\n![a heat map]"
+                                           "(figures/t/f.png)\n\nRead me.") < page.index("## B")
+    assert figure["sha256"] == make_figure("g", "G", "x.png", "y", {"cells": [1, 2]})["sha256"]
+    assert figure["sha256"] != make_figure("g", "G", "x.png", "y", {"cells": [1, 3]})["sha256"]
+    for bad, match in (({**figure, "after": "z"}, "follows table 'z'"),
+                       ({**figure, "file": "../f.png"}, "inside the page's folder"),
+                       ({**figure, "alt": "a [b]"}, "brackets"),
+                       ({k: v for k, v in figure.items() if k != "sha256"}, "lacks sha256")):
+        with pytest.raises(ValueError, match=match):
+            make_document(title="T", command="c", generated_by="g", tables=tables,
+                          figures=[bad])
+    with pytest.raises(ValueError, match="repeats"):
+        make_document(title="T", command="c", generated_by="g", tables=tables,
+                      figures=[figure, figure])
 
 
 def test_the_readme_headline_is_the_learning_pages() -> None:

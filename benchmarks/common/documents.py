@@ -20,11 +20,20 @@ document is a mapping:
   captions then become ``### `` headings) and ``note`` (Markdown under the table);
 * ``notes``: Markdown paragraphs after the tables; ``provenance``: where the data came from,
   as text (paths outside the repository included), or ``None``;
+* ``figures``: optional, each ``{"id", "caption", "file", "alt", "sha256"}`` with optional
+  ``after`` (the id of the table the figure follows; without it the figure comes before the
+  tables), ``section`` and ``note`` (as a table's). ``file`` is the image's path relative to
+  the page's folder (``figures/<page>/<name>.png``, :mod:`benchmarks.common.figures`), and
+  ``sha256`` the digest (:func:`payload_sha256`) of the data the figure was drawn from: the
+  script that made the page computes that data again from the JSON, and the image carries
+  the same digest in its metadata, so a figure that no longer shows its JSON is found
+  without comparing pixels;
 * ``data``: optional raw data the tables are derived from (not rendered).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shlex
 from collections.abc import Mapping, Sequence
@@ -37,12 +46,14 @@ SCHEMA = "rehabbot-results/1"
 ROOT = Path(__file__).resolve().parents[2]
 REQUIRED = ("schema", "title", "intro", "command", "sweeps", "generated_by", "rehabbot_version",
             "machine", "seeds", "settings", "tables", "notes", "provenance")
+FIGURE_REQUIRED = ("id", "caption", "file", "alt", "sha256")
 HEADLINE_START = "<!-- headline-results: start -->"
 HEADLINE_END = "<!-- headline-results: end -->"
 
 __all__ = ["HEADLINE_END", "HEADLINE_START", "ROOT", "SCHEMA", "block_between", "command_line",
-           "load_document", "make_document", "make_table", "render_markdown", "replace_block",
-           "repo_path", "table_markdown", "table_text", "write_page"]
+           "load_document", "make_document", "make_figure", "make_table", "payload_sha256",
+           "render_markdown", "replace_block", "repo_path", "table_markdown", "table_text",
+           "write_page"]
 
 
 def repo_path(path: str | Path) -> str:
@@ -75,12 +86,34 @@ def make_table(table_id: str, caption: str, columns: Sequence[str],
     return table
 
 
+def payload_sha256(payload: Any) -> str:
+    """SHA-256 (hex) of ``payload`` as canonical JSON (sorted keys, no spaces, ASCII): the
+    same data gives the same digest on every machine."""
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), ensure_ascii=True,
+                      allow_nan=False)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def make_figure(figure_id: str, caption: str, file: str, alt: str, payload: Any, *,
+                after: str | None = None, section: str | None = None,
+                note: str | None = None) -> dict[str, Any]:
+    """One figure of a document (see the module's docstring), recording the digest of
+    ``payload``, the data it is drawn from."""
+    figure: dict[str, Any] = {"id": figure_id, "caption": caption, "file": file, "alt": alt,
+                              "sha256": payload_sha256(payload)}
+    for key, value in (("after", after), ("section", section), ("note", note)):
+        if value is not None:
+            figure[key] = value
+    return figure
+
+
 def make_document(*, title: str, command: str, generated_by: str | Path,
                   tables: Sequence[Mapping[str, Any]], intro: str = "",
                   sweeps: Sequence[str | Path] = (), machine: str | None = None,
                   seeds: Any = None, settings: Mapping[str, Any] | None = None,
                   notes: Sequence[str] = (), provenance: str | None = None,
-                  data: Any = None) -> dict[str, Any]:
+                  data: Any = None,
+                  figures: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
     """A results document (see the module's docstring); ``generated_by`` and ``sweeps`` are
     recorded relative to the repository root."""
     import rehabbot
@@ -91,6 +124,8 @@ def make_document(*, title: str, command: str, generated_by: str | Path,
         "rehabbot_version": rehabbot.__version__, "machine": machine, "seeds": seeds,
         "settings": dict(settings or {}), "tables": [dict(table) for table in tables],
         "notes": [note.strip() for note in notes], "provenance": provenance}
+    if figures:
+        document["figures"] = [dict(figure) for figure in figures]
     if data is not None:
         document["data"] = data
     check_document(document)
@@ -111,6 +146,43 @@ def check_document(document: Mapping[str, Any]) -> None:
         raise ValueError(f"table ids repeat: {ids}")
     for table in document["tables"]:
         table_markdown(table)
+    check_figures(document.get("figures", []), ids)
+
+
+def check_figures(figures: Sequence[Mapping[str, Any]], table_ids: Sequence[str]) -> None:
+    """Raise :class:`ValueError` naming a figure that lacks a key, repeats an id, follows no
+    table of the document, or names a file outside the page's folder."""
+    if not isinstance(figures, list):
+        raise ValueError(f"figures must be a list, not {figures!r}")
+    seen: set[str] = set()
+    for figure in figures:
+        missing = [key for key in FIGURE_REQUIRED if key not in figure]
+        if missing:
+            raise ValueError(f"figure {figure.get('id')!r} lacks {', '.join(missing)}")
+        if figure["id"] in seen:
+            raise ValueError(f"figure id {figure['id']!r} repeats")
+        seen.add(figure["id"])
+        if figure.get("after") is not None and figure["after"] not in table_ids:
+            raise ValueError(f"figure {figure['id']!r} follows table {figure['after']!r}, "
+                             f"which the document lacks")
+        if any(mark in str(figure["alt"]) for mark in "[]\n"):
+            raise ValueError(f"figure {figure['id']!r}: alt text {figure['alt']!r} cannot "
+                             f"hold brackets or a newline")
+        file = str(figure["file"])
+        if file.startswith("/") or "\\" in file or ".." in file.split("/"):
+            raise ValueError(f"figure {figure['id']!r}: file {file!r} must be a relative "
+                             f"POSIX path inside the page's folder")
+
+
+def _blocks(document: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any]]]:
+    """The tables and figures in page order: figures without ``after`` first, then each table
+    followed by the figures that name it."""
+    figures = document.get("figures", [])
+    blocks = [("figure", f) for f in figures if f.get("after") is None]
+    for table in document["tables"]:
+        blocks.append(("table", table))
+        blocks += [("figure", f) for f in figures if f.get("after") == table["id"]]
+    return blocks
 
 
 def table_markdown(table: Mapping[str, Any]) -> str:
@@ -137,7 +209,7 @@ def _comment(text: str) -> str:
 def render_markdown(document: Mapping[str, Any]) -> str:
     """The Markdown page of ``document`` (MyST-compatible): three comment lines naming the
     command, the sweep files and the JSON it is rendered from, the ``# `` title, the intro,
-    every table under its caption, the notes, and how the page was made."""
+    every table and figure under its caption, the notes, and how the page was made."""
     check_document(document)
     sweeps = " ".join(document["sweeps"]) or "none"
     lines = [_comment(f"generated by: {document['command']}"),
@@ -148,15 +220,17 @@ def render_markdown(document: Mapping[str, Any]) -> str:
     if document["intro"]:
         lines += [document["intro"], ""]
     section = None
-    for table in document["tables"]:
-        if table.get("section") != section:
-            section = table.get("section")
+    for kind, block in _blocks(document):
+        if block.get("section") != section:
+            section = block.get("section")
             if section is not None:
                 lines += [f"## {section}", ""]
         level = "###" if section is not None else "##"
-        lines += [f"{level} {table['caption']}", "", table_markdown(table), ""]
-        if table.get("note"):
-            lines += [table["note"], ""]
+        body = (table_markdown(block) if kind == "table"
+                else f"![{block['alt']}]({block['file']})")
+        lines += [f"{level} {block['caption']}", "", body, ""]
+        if block.get("note"):
+            lines += [block["note"], ""]
     for note in document["notes"]:
         lines += [note, ""]
     lines += ["## How this page was made", "",

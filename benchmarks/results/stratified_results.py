@@ -15,19 +15,31 @@ evaluation callback's) and count up over the cells, the same for every run. The 
 expert runs the same episodes as a reference. Every number in the output comes from these
 episodes; ``--json`` keeps them all (with each episode's seed, cell, outcome and safety rule).
 
+With ``--page docs/results/NAME`` the script writes the results document ``NAME.json``, its
+page ``NAME.md`` and the page's figures (``docs/results/figures/NAME/*.png``, matplotlib:
+:mod:`benchmarks.results.learning_figures`): a heat map of success per cell for each env and,
+where the runs' data hold them, learning curves. Evaluating a run folder keeps its learning
+curve with its episodes (:mod:`benchmarks.results.training_curves`: ``training_log.csv``,
+``eval/evaluations.npz`` or the monitor files), so that ``--from-json`` draws it again
+without the folder.
+
 Usage::
 
     python benchmarks/results/stratified_results.py runs/v2 [--per-cell 2] [--seed 50000]
-        [--json F] [--sweep SWEEP.yaml ...] [--page docs/results/NAME]
+        [--json F] [--sweep SWEEP.yaml ...] [--title TEXT] [--page docs/results/NAME]
     python benchmarks/results/stratified_results.py --from-json docs/results/learning-v2.json \
         --sweep sweeps/results-v2/*.yaml --page docs/results/learning-v2   # render again
     python benchmarks/results/stratified_results.py --from-json docs/results/learning-v2.json \
         --headline [--update-readme README.md]      # the README's headline table
+
+Every published page's exact command is at its top; running it again renders the page and
+its figures from the JSON.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import re
 import sys
@@ -47,14 +59,20 @@ from benchmarks.common.documents import (
     HEADLINE_START,
     command_line,
     make_document,
+    make_figure,
     make_table,
     render_markdown,
     replace_block,
     repo_path,
     write_page,
 )
+from benchmarks.common.figures import figure_file, page_name, write_figures
 from benchmarks.common.sweeps import KEY_FIELDS, run_key, sweep_keys
+from benchmarks.results import learning_figures
+from benchmarks.results.training_curves import SOURCES as CURVE_SOURCES
+from benchmarks.results.training_curves import run_curve
 from rehabbot.analysis.aggregate import iqm_interval
+from rehabbot.common.extras import missing_module_message
 from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import POPULATION_VARIANTS, env_short_name
 from rehabbot.rl import runs
@@ -474,6 +492,70 @@ def load_results(paths: Sequence[Path], per_cell: int, seed: int, profile_set: s
     return results, provenance
 
 
+CELLS_SECTION = "Success per cell at a glance (all seeds pooled)"
+CELLS_NOTE = """Each map is one row of the summary table (its seeds pooled, as in the per-cell
+tables below) or the scripted expert on the same episodes. Its rows are exercise x {column},
+its columns the weight levels 0-4; a cell's colour is the share of its episodes that finished
+and its text finished/played. A red frame marks a cell where a safety rule stopped an episode
+(the tables below name the rule); grey, a cell the env refuses for that {column}."""
+CURVES_SECTION = "Learning curves"
+NO_CURVES_NOTE = """**Learning curves.** No run of this page has a learning curve in its data:
+these runs were evaluated from their folders (outside the repository, not published) before
+this script kept each run's curve with its episodes. Evaluating run folders again
+(`stratified_results.py RUNS ... --page ...`) stores their curves in the JSON
+(`training_log.csv`, `eval/evaluations.npz` or the monitor files), and the page then draws
+them."""
+
+
+def learning_page_figures(results: dict[tuple[str, str], list[dict]], patients: Sequence[str],
+                          patient_column: str, page: str
+                          ) -> list[tuple[dict[str, Any], Any]]:
+    """The page's figures (document entries) with what draws each: a heat map per env, and
+    the learning curves where the runs' data hold them."""
+    figures = []
+    for k, payload in enumerate(learning_figures.cell_payloads(results, patients,
+                                                               patient_column)):
+        env = payload["env"]
+        entry = make_figure(
+            f"cells/{env}", env, figure_file(page, f"cells-{env}"),
+            f"Heat maps of the success of {env} per exercise, {patient_column} and weight "
+            f"level, one per algorithm and one for the scripted expert", payload,
+            after="summary", section=CELLS_SECTION,
+            note=CELLS_NOTE.format(column=patient_column) if k == 0 else None)
+        figures.append((entry, payload))
+    curves = learning_figures.curve_payload(results)
+    if curves is not None:
+        sources = sorted({run["source"] for panel in curves["panels"] for row in panel["rows"]
+                          for run in row["runs"]})
+        note = ("The curves come from each run's folder, kept with its episodes: "
+                + "; ".join(f"`{source}`: {CURVE_SOURCES[source]}" for source in sources)
+                + ". Runs without a curve in the data are not drawn.")
+        figures.append((make_figure(
+            "curves", "Success rate during training", figure_file(page, "curves"),
+            "Learning curves: success rate against env steps per env and algorithm", curves,
+            after="summary", section=CURVES_SECTION, note=note), curves))
+    return figures
+
+
+def curve_notes(results: dict[tuple[str, str], list[dict]]) -> list[str]:
+    """The page's note that its runs hold no learning curve, where none does."""
+    return [] if learning_figures.curve_payload(results) is not None else [NO_CURVES_NOTE]
+
+
+def draw_learning_figures(document: dict[str, Any], results: dict[tuple[str, str], list[dict]],
+                          args: argparse.Namespace) -> list[Path]:
+    """Draw the figures ``document`` names beside its page ``args.page``."""
+    profiles = PROFILE_SETS[args.profiles]
+    patient_column = "patient" if args.profiles == "patients" else "profile"
+    drawings = {}
+    for entry, payload in learning_page_figures(results, tuple(profiles), patient_column,
+                                                page_name(args.page)):
+        build = (learning_figures.build_curves_figure if payload["kind"] == "training-curves"
+                 else learning_figures.build_cells_figure)
+        drawings[entry["id"]] = (lambda build=build, payload=payload: build(payload))
+    return write_figures(document, args.page, drawings)
+
+
 def learning_document(results: dict[tuple[str, str], list[dict]], args: argparse.Namespace,
                       command: str, provenance: str | None) -> dict[str, Any]:
     """The results document of a learning table: the summary, the per-cell tables, the runs
@@ -486,14 +568,18 @@ def learning_document(results: dict[tuple[str, str], list[dict]], args: argparse
     title, intro = {"trained": (TRAINED_TITLE, TRAINED_INTRO),
                     "patients": (PATIENTS_TITLE, PATIENTS_INTRO)}.get(args.profiles,
                                                                       (TITLE, INTRO))
+    patient_column = "patient" if args.profiles == "patients" else "profile"
+    figures = ([figure for figure, _ in learning_page_figures(
+        results, tuple(profiles), patient_column, page_name(args.page))]
+        if args.page is not None else [])
     return make_document(
-        title=title,
+        title=args.title or title,
         intro=intro.format(per_cell=args.per_cell, seed=args.seed, profiles=args.profiles,
                            **population_facts()),
         command=command, generated_by=__file__, sweeps=list(sweeps),
-        tables=[*summary_tables(results, tuple(profiles),
-                                "patient" if args.profiles == "patients" else "profile"),
+        tables=[*summary_tables(results, tuple(profiles), patient_column),
                 runs_table(results, sweeps)],
+        figures=figures, notes=curve_notes(results),
         seeds={"first_episode_seed": args.seed, "episodes_per_cell": args.per_cell,
                "training_seeds": "per run, in the runs table"},
         settings={"profiles": args.profiles, "actions": "deterministic",
@@ -528,6 +614,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--sweep", type=Path, nargs="+", default=[], metavar="FILE",
                         help="the sweep files that trained the runs: the page names them and "
                              "its runs table says which file trains each run")
+    parser.add_argument("--title", help="the page's title (default: one for the --profiles "
+                                        "set); a page's title says what sets it apart")
     parser.add_argument("--provenance", help="where the runs and episodes came from (text "
                                              "recorded on the page; default: the input's)")
     parser.add_argument("--headline", action="store_true",
@@ -541,6 +629,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"--per-cell {args.per_cell} must be at least 1")
     if args.skrl and args.profiles != "test":
         parser.error("--skrl results hold the test patients' episodes; use --profiles test")
+    if args.page and importlib.util.find_spec("matplotlib") is None:
+        parser.error(missing_module_message("--page (it draws the page's figures)",
+                                            "matplotlib"))
     profiles = PROFILE_SETS[args.profiles]
     found = find_runs(args.roots)
     if not found and not args.skrl and not args.from_json:
@@ -564,6 +655,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                "env_kwargs": env_kwargs, "timesteps": manifest.get("timesteps_done"),
                "training": training_text(manifest), "settings": manifest_settings(manifest),
                "episodes": episodes, "refused_cells": refused}
+        try:
+            curve = run_curve(run_dir)
+        except ValueError as err:
+            parser.error(f"{run_dir}: {err}")
+        if curve is not None:
+            run["curve"] = curve
         row_env = env_label(env_id, env_kwargs)
         results[(row_env, row_label(algo, run))].append(run)
         rate = np.mean([e["success"] for e in episodes])
@@ -591,7 +688,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(headline_markdown(document))
     else:
         print(render_markdown(document))
-    if args.page:
+    if args.page:  # the figures first: a page never names a figure that was not drawn
+        for path in draw_learning_figures(document, results, args):
+            print(f"wrote {repo_path(path)}", file=sys.stderr)
         write_page(document, args.page)
     if args.update_readme:
         text = args.update_readme.read_text(encoding="utf-8")
