@@ -183,6 +183,18 @@ def test_tables_follow_the_cpu_env_kwargs():
     np.testing.assert_array_equal(t.agent_matrix, cpu.agent_observation_map.matrix)
 
 
+def test_a_population_restricted_to_conditions_stacks_only_their_patients():
+    env = batch.make("rehabbot/rehab-knee-population-v2", patients="test", conditions=[0, 3],
+                     naconmax=16)
+    assert env.patients.count == 4 == len(env.patient_envs)
+    test = env.cpu_env.population
+    assert test.name == "test[conditions 0, 3]"
+    assert [e.config.patient.condition for e in env.patient_envs] == [
+        test.conditions[0], test.conditions[1]] * 2
+    with pytest.raises(ValueError, match=r"names condition 3 .* twice"):
+        batch.make("rehabbot/rehab-knee-population-v2", conditions=[3, 3], naconmax=16)
+
+
 def test_the_batched_env_prints_nothing():
     """Building, compiling and stepping a batched env prints nothing (Warp announces every
     kernel module it loads unless told to be quiet), in a fresh process."""
