@@ -88,6 +88,11 @@ def test_gymnasium_vector_door():
     assert info["safety_violation"].tolist() == [0, 0]
     with pytest.raises(ValueError, match=r"shape \(6,\)"):
         vec.step(np.zeros(6, np.float32))
+    nan = np.zeros((2, 6), np.float32)
+    nan[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"world 1 at indices \[0\]"):
+        vec.step(nan)  # after reset too: no world steps
+    assert np.isfinite(vec.step(np.zeros((2, 6), np.float32))[0]).all()
     # Reset options, as the CPU env's: every world's first episode.
     obs, _ = vec.reset(seed=1, options={"exercise": 1, "weight_level": 3})
     cpu_obs, _ = gym.make(env_id).reset(seed=0, options={"exercise": 1, "weight_level": 3})
@@ -97,6 +102,48 @@ def test_gymnasium_vector_door():
                            ({"speed": 1}, "speed")):
         with pytest.raises(ValueError, match=named):
             vec.reset(options=options)
+
+
+def test_vector_door_refuses_non_finite_actions_as_the_cpu_env_does():
+    """NaN/inf actions are refused with the CPU env's error type, naming the world and the
+    value, before anything is compiled or stepped (the jitted step would read them as 0)."""
+    import gymnasium as gym
+
+    env_id = "rehabbot/rehab-reach-v2"
+    cpu = gym.make(env_id)
+    cpu.reset(seed=0)
+    with pytest.raises(ValueError, match="non-finite"):
+        cpu.step(np.full(6, np.nan, np.float32))
+    before = gym.registry[env_id].vector_entry_point
+    batch.register_vector_entry_points()
+    try:
+        door = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point")
+    finally:
+        gym.registry[env_id].vector_entry_point = before
+    for vec in (door, batch.make_vec(env_id, 3)):
+        for bad, named in ((np.nan, "nan"), (np.inf, "inf"), (-np.inf, "-inf")):
+            actions = np.zeros((3, 6), np.float32)
+            actions[1, 4] = bad
+            with pytest.raises(ValueError, match=rf"world 1 at indices \[4\]: .*{named}"):
+                vec.step(actions)
+        actions = np.zeros((3, 6))
+        actions[0, 0] = actions[2, 5] = np.nan
+        with pytest.raises(ValueError, match=r"2 of 3 worlds: world 0 .*; world 2 "):
+            vec.step(actions)
+        with pytest.raises(ValueError, match="dtype bool"):
+            vec.step(np.zeros((3, 6), bool))
+        with pytest.raises(ValueError, match=r"shape \(6,\)"):
+            vec.step(np.zeros(6))
+        with pytest.raises(gym.error.ResetNeeded):  # good actions pass the check
+            vec.step(np.zeros((3, 6), np.float32))
+
+
+def test_checked_actions_keeps_finite_values_finite():
+    from rehabbot.batch.vector import checked_actions
+
+    actions = checked_actions([[1e300, -1e300, 0.5]], (1, 3))
+    assert actions.dtype == np.float32 and np.isfinite(actions).all()
+    assert actions[0, 2] == np.float32(0.5) and actions[0, 0] > 1 and actions[0, 1] < -1
 
 
 @pytest.mark.slow
@@ -134,6 +181,18 @@ def test_tables_follow_the_cpu_env_kwargs():
     np.testing.assert_array_equal(t.targets_rad[1, :len(cpu.target_sequence.robot_rad)],
                                   cpu.target_sequence.robot_rad)
     np.testing.assert_array_equal(t.agent_matrix, cpu.agent_observation_map.matrix)
+
+
+def test_a_population_restricted_to_conditions_stacks_only_their_patients():
+    env = batch.make("rehabbot/rehab-knee-population-v2", patients="test", conditions=[0, 3],
+                     naconmax=16)
+    assert env.patients.count == 4 == len(env.patient_envs)
+    test = env.cpu_env.population
+    assert test.name == "test[conditions 0, 3]"
+    assert [e.config.patient.condition for e in env.patient_envs] == [
+        test.conditions[0], test.conditions[1]] * 2
+    with pytest.raises(ValueError, match=r"names condition 3 .* twice"):
+        batch.make("rehabbot/rehab-knee-population-v2", conditions=[3, 3], naconmax=16)
 
 
 def test_the_batched_env_prints_nothing():

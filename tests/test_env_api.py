@@ -14,6 +14,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.utils.env_checker import check_env
 
 from rehabbot.envs.registration import ENV_SPECS
 from rehabbot.rl.experts import ScriptedExpert
@@ -80,6 +81,50 @@ def test_gymnasium_env_checker_passes_without_warnings_on_every_id():
     # Newest first, so that each scene's render modes are checked on its current id.
     _check_envs([env_id for env_id in reversed(PAPER_IDS) if not env_id.endswith("reach-v1")],
                 expect_render_checks=7)
+
+
+# One id per family: the paper's, the learnable reward, the agent interface, a condition
+# variant, a population, both arms, the musculoskeletal patient; and the second robot.
+FAMILIES = [("rehabbot/rehab-reach-v0", {}), ("rehabbot/rehab-knee-v1", {}),
+            ("rehabbot/rehab-hip-v2", {}), ("rehabbot/rehab-reach-spastic-v2", {}),
+            ("rehabbot/rehab-knee-population-v2", {}), ("rehabbot/rehab-bilateral-v2", {}),
+            ("rehabbot/rehab-knee-myo-v2", {}), ("rehabbot/rehab-reach-v2", {"robot": "fr3"})]
+
+
+@pytest.fixture
+def headless(monkeypatch):
+    for name in ("DISPLAY", "WAYLAND_DISPLAY"):
+        monkeypatch.delenv(name, raising=False)
+
+
+@pytest.mark.parametrize(("env_id", "kwargs"), FAMILIES,
+                         ids=[f"{i.split('/')[1]}{'-' + k['robot'] if k else ''}"
+                              for i, k in FAMILIES])
+def test_env_checker_passes_headless_with_the_render_check_skipped(env_id, kwargs, headless):
+    """What docs/envs.md tells a headless user to run, on one id of each family."""
+    if "-myo-" in env_id:
+        pytest.importorskip("myo_sim", reason='the -myo- ids need pip install "rehabbot[myo]"')
+    env = gym.make(env_id, **kwargs)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            check_env(env.unwrapped, skip_render_check=True)
+    finally:
+        env.close()
+    assert [str(w.message) for w in caught] == []
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the display check is Linux's")
+def test_env_checker_headless_names_the_skip(headless):
+    """Without a display the checker's human render stops with an error that says what to do."""
+    env = gym.make("rehabbot/rehab-hip-v2")
+    try:
+        with pytest.raises(RuntimeError, match=r"needs a display .*skip_render_check=True"), \
+                warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            check_env(env.unwrapped)
+    finally:
+        env.close()
 
 
 def _episode_digest(env_id: str, seed: int, steps: int = 1000) -> tuple[str, list]:

@@ -121,3 +121,75 @@ def test_every_shipped_patient_can_do_the_exercises(env_id, split):
     env.unwrapped.build_all()  # ValueError for a patient the env refuses
     assert len(env.unwrapped._envs) == len(POPULATIONS[split].patients)
     env.close()
+
+
+def test_conditions_restrict_a_population_to_one_condition():
+    """Over many episodes only the chosen condition appears, with every profile of the
+    population; patient indices count in the subset."""
+    train = POPULATIONS["train"]
+    env = gym.make("rehabbot/rehab-reach-population-v2", conditions=3)
+    base = env.unwrapped
+    assert base.population.name == "train[conditions 3]"
+    assert base.population.conditions == (train.conditions[3],)
+    assert base.population.profiles == train.profiles
+    seen_conditions, seen_profiles = set(), set()
+    env.reset(seed=0)
+    for _ in range(40):
+        _, info = env.reset()
+        patient = base.current_env.config.patient
+        seen_conditions.add(patient.condition)
+        seen_profiles.add(patient.profile)
+        assert info["patient"] in range(3)
+    env.close()
+    assert seen_conditions == {PatientCondition(spasticity_mas="2")}
+    assert seen_profiles == set(train.profiles)
+    explicit = gym.make("rehabbot/rehab-reach-population-v2", conditions=None)
+    assert explicit.unwrapped.population is train  # None: every condition, as by default
+    explicit.close()
+
+
+def test_conditions_may_be_named_by_value_and_several():
+    env = gym.make("rehabbot/rehab-knee-population-v2", patients="test",
+                   conditions=[{"spasticity_mas": "3"}, 3])
+    population = env.unwrapped.population
+    assert population.name == "test[conditions 0, 3]"
+    assert population.conditions == (POPULATIONS["test"].conditions[0],
+                                     POPULATIONS["test"].conditions[3])
+    assert len(population.patients) == 4
+    env.close()
+    assert POPULATIONS["train"].with_conditions(PatientCondition()).conditions == (
+        PatientCondition(),)
+
+
+@pytest.mark.parametrize(("conditions", "named"), [
+    (9, r"condition 9 is not an index into the conditions of population 'train'; valid: "
+        r"0 \(healthy, passive\); 1 \(spasticity_mas='1'\);.* 8 \(stiffness_scale=2.0"),
+    (-1, "condition -1 is not an index"),
+    (True, "condition True must be an index"),
+    (2.0, "condition 2.0 must be an index"),
+    ("MAS 2", "condition 'MAS 2' must be an index"),
+    ([], r"conditions=\[\] must name at least one condition"),
+    ([3, 3], r"names condition 3 \(spasticity_mas='2'\) twice"),
+    ({"spasticity_mas": "3"}, "condition \"spasticity_mas='3'\" is not one of the conditions of "
+                              "population 'train' .*make a PatientPopulation"),
+    ({"bogus": 1}, r"condition \{'bogus': 1\}: .*unknown field.*; valid: 0 \(healthy"),
+])
+def test_a_bad_condition_is_named_with_the_valid_ones(conditions, named):
+    with pytest.raises(ValueError, match=named):
+        gym.make("rehabbot/rehab-reach-population-v2", conditions=conditions)
+
+
+def test_the_default_draws_every_patient_as_before():
+    """Without conditions= the population is the whole split and each reset's patient is the
+    first draw of the env's np_random, as it always was."""
+    env = gym.make("rehabbot/rehab-reach-population-v2")
+    base = env.unwrapped
+    assert base.population is POPULATIONS["train"]
+    drawn = []
+    for seed in range(12):
+        _, info = env.reset(seed=seed)
+        rng, _ = gym.utils.seeding.np_random(seed)
+        assert info["patient"] == int(rng.integers(27))
+        drawn.append(info["patient"])
+    env.close()
+    assert len(set(drawn)) > 3

@@ -71,12 +71,13 @@ class BatchedVectorEnv(VectorEnv):
         return np.asarray(self._state.obs), self._info(self._state)
 
     def step(self, actions):
+        """One decision of every world. ``actions`` are checked first, as the CPU env checks
+        its action (:func:`checked_actions`: ``ValueError`` naming the world and the value
+        for NaN/inf, a wrong shape, a dtype that is not a real number); then
+        ``gymnasium.error.ResetNeeded`` before the first :meth:`reset`."""
+        actions = checked_actions(actions, self.action_space.shape)
         if self._state is None:
             raise gym.error.ResetNeeded("step() called before reset(); call reset() first")
-        actions = np.asarray(actions, dtype=np.float32)
-        if actions.shape != self.action_space.shape:
-            raise ValueError(f"actions have shape {actions.shape}; expected "
-                             f"{self.action_space.shape}")
         self._state, final_obs = self._step(self._state, jp.asarray(actions))
         state = self._state
         done = np.asarray(state.done) > 0
@@ -93,6 +94,39 @@ class BatchedVectorEnv(VectorEnv):
     @staticmethod
     def _info(state: Any) -> dict[str, np.ndarray]:
         return {name: np.asarray(value) for name, value in state.metrics.items()}
+
+
+def checked_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``actions`` (one row per world) as float32, refused as the CPU env refuses one action
+    (:func:`rehabbot.envs.control.checked_action`): ``ValueError`` for a wrong shape, a dtype
+    that is not a real number (bool, complex, str, object: no silent casts), and NaN/inf,
+    naming each bad world, its indices and its action. The jitted step would read a
+    non-finite entry as 0; a finite value beyond float32's range is clipped to it (the step
+    clips to [-1, 1] anyway) rather than becoming inf."""
+    try:
+        a = np.asarray(actions)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"actions {actions!r} cannot be read as {shape} floats: "
+                         f"{err}") from None
+    if a.dtype.kind not in "iuf":
+        raise ValueError(f"actions have dtype {a.dtype}; expected {shape} real numbers "
+                         "(float32 preferred)")
+    if a.shape != shape:
+        raise ValueError(f"actions have shape {a.shape}; expected {shape}")
+    if a.dtype != np.float32:
+        a = a.astype(np.float64)
+    bad = ~np.isfinite(a)
+    if bad.any():
+        worlds = np.flatnonzero(bad.reshape(len(a), -1).any(axis=1)).tolist()
+        named = "; ".join(f"world {k} at indices {np.flatnonzero(bad[k]).tolist()}: "
+                          f"{a[k].tolist()}" for k in worlds[:4])
+        more = f"; and {len(worlds) - 4} more worlds" if len(worlds) > 4 else ""
+        raise ValueError(f"actions have non-finite values in {len(worlds)} of {len(a)} "
+                         f"worlds: {named}{more}")
+    if a.dtype != np.float32:
+        limit = float(np.finfo(np.float32).max)
+        a = np.clip(a, -limit, limit).astype(np.float32)
+    return a
 
 
 def make_vec(env_id: str, num_envs: int, **kwargs: Any) -> BatchedVectorEnv:

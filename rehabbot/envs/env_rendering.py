@@ -88,7 +88,8 @@ class EnvRendering:
                                                          or os.environ.get("WAYLAND_DISPLAY")):
                 raise RuntimeError("render_mode='human' opens MuJoCo's viewer, which needs a "
                                    "display (DISPLAY is not set); use render_mode='rgb_array' "
-                                   "on a headless machine, or run under xvfb-run")
+                                   "on a headless machine, or run under xvfb-run (Gymnasium's "
+                                   "check_env: pass skip_render_check=True)")
             before = set(threading.enumerate())
             self._viewer = mujoco.viewer.launch_passive(self.model, data, show_left_ui=False,
                                                         show_right_ui=False)

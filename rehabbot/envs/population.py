@@ -7,11 +7,25 @@ passes every ``reset``, ``step`` and ``render`` to the patient of the episode. T
 the same for every patient of an id (checked as each is built), so one policy serves them all.
 
 ## Arguments
-``patients`` (default ``"train"``): a :class:`~rehabbot.sim.populations.PatientPopulation`, a
-dict of its fields, or the name of a shipped one (``"train"``, ``"test"``;
-:data:`rehabbot.sim.populations.POPULATIONS`). Every other keyword is a
-:class:`~rehabbot.envs.config.RehabEnvConfig` field (not ``profile`` or ``condition``, which
-the population sets), validated when the env is built.
+
+==================== ======================================================================
+``patients``         default ``"train"``: a
+                     :class:`~rehabbot.sim.populations.PatientPopulation`, a dict of its
+                     fields, or the name of a shipped one (``"train"``, ``"test"``;
+                     :data:`rehabbot.sim.populations.POPULATIONS`)
+``conditions``       default ``None`` (all): the population's conditions to draw from, as
+                     indices into ``population.conditions`` or the conditions themselves
+                     (a ``PatientCondition`` or a dict of its fields), one or a sequence;
+                     every profile is kept. ``conditions=3`` on ``"train"`` gives its three
+                     profiles with MAS 2 only. The env's ``population`` is then that subset
+                     (:meth:`~rehabbot.sim.populations.PatientPopulation.with_conditions`,
+                     named ``"train[conditions 3]"``), and patient indices count in it.
+                     ``ValueError`` names a bad or repeated entry and lists the valid ones.
+                     The default draws exactly as before
+``**kwargs``         every other keyword is a :class:`~rehabbot.envs.config.RehabEnvConfig`
+                     field (not ``profile`` or ``condition``, which the population sets),
+                     validated when the env is built
+==================== ======================================================================
 
 The ``-v2`` population ids (``rehab-reach-population-v2``, ``rehab-knee-population-v2``)
 pass ``observation="agent"`` and ``action_scale="unit"`` to every patient's env: the agent
@@ -52,12 +66,15 @@ class PopulationEnv(MakeTimeLimit, gym.Env):
     metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}
 
     def __init__(self, patients: PatientPopulation | dict | str = "train",
-                 **kwargs: Any) -> None:
+                 conditions: Any = None, **kwargs: Any) -> None:
         for name in ("profile", "condition"):
             if name in kwargs:
                 raise ValueError(f"PopulationEnv sets {name!r} from its population; pass "
-                                 f"patients= instead of {name}=")
-        self.population = as_population(patients)
+                                 f"patients= (or conditions=, a subset of the population's) "
+                                 f"instead of {name}=")
+        population = as_population(patients)
+        self.population = population if conditions is None \
+            else population.with_conditions(conditions)
         self.config = RehabEnvConfig(**kwargs)  # ValueError naming a bad kwarg, now
         self._kwargs = dict(kwargs)
         self._envs: dict[int, RehabEnv] = {}

@@ -58,8 +58,10 @@ The ``-v2`` ids are the ``-v1`` task and reward with an interface any learner ca
 action is ``Box(-1, 1, (n,), float32)``, mapped linearly onto the control mode's box
 (``joint_delta``: -1 .. +1 is -pi/400 .. +pi/400 rad; ``joint_position``: the patient's
 setpoint bounds; :class:`rehabbot.envs.control.UnitActions`), and the observation is
-``Box(-2, 2, (50,), float32)`` (56 with the FR3), every entry scaled to about [-1, 1]
-(:mod:`rehabbot.tasks.agent_observation`, where the formulas are):
+``Box(-2, 2, (50,), float32)`` (56 with the FR3), every entry scaled to [-1, 1] except
+three that pass 1 near a bound or at a stop: ``theta_in_bounds`` and ``phi_in_range``
+(clipped at +-2) and ``cuff_force`` (clipped to [0, 2]; docs/envs.md, "Which observation
+values pass 1"). The formulas are in :mod:`rehabbot.tasks.agent_observation`:
 
 | index | observation | scale |
 |---|---|---|

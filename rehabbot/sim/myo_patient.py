@@ -42,7 +42,7 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.extras import missing_module_message
-from rehabbot.common.native_output import dropping_stderr_lines
+from rehabbot.sim.mujoco_warnings import handling_mujoco_warnings
 from rehabbot.sim.patient import PatientProfile
 
 PATIENT_MODELS: tuple[str, ...] = ("rigid", "myo")
@@ -69,8 +69,9 @@ SEGMENT_GEOM_BODIES: dict[str, tuple[str, ...]] = {
 # The leg cuff: this fraction of the knee-to-ankle distance below the knee (as the rigid
 # patient's LEG_CUFF_FRACTION).
 LEG_CUFF_FRACTION = 0.75
-# MuJoCo warns, in Python and on the C stderr, each time myo-sim attaches one of its parts
-# without a name prefix while it composes a model.
+# MuJoCo warns each time myo-sim attaches one of its parts without a name prefix while it
+# composes a model (harmless here: the composed spec is attached to ours with MYO_PREFIX, and
+# never saved as XML). MuJoCo's default handler would print it and write MUJOCO_LOG.TXT.
 EMPTY_PREFIX_WARNING = "Attaching a spec with an empty prefix"
 
 
@@ -88,14 +89,16 @@ class MyoModelMissingError(ImportError):
 
 def build_myo_spec(name: str) -> mujoco.MjSpec:
     """myo-sim's model ``name`` (a ``myo_sim.build.compose`` registry name: ``"myolegs"``,
-    ``"myoarm_r"``, ...) as an ``MjSpec``, built without MuJoCo's empty-prefix warnings.
-    Raises :class:`MyoModelMissingError` without myo-sim."""
+    ``"myoarm_r"``, ...) as an ``MjSpec``. MuJoCo's empty-prefix warnings are dropped by our
+    handler (:func:`rehabbot.sim.mujoco_warnings.handling_mujoco_warnings`), so nothing is
+    printed and no ``MUJOCO_LOG.TXT`` is written. Raises :class:`MyoModelMissingError`
+    without myo-sim."""
     try:
         from myo_sim.build.compose import build_spec
     except ImportError as err:
         raise MyoModelMissingError(missing_module_message(
             "patient_model='myo' (MyoSuite's models)", "myo_sim")) from err
-    with dropping_stderr_lines(EMPTY_PREFIX_WARNING):
+    with handling_mujoco_warnings(EMPTY_PREFIX_WARNING):
         return build_spec(name)
 
 

@@ -18,6 +18,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from rehabbot.common.checks import as_dataclass
 from rehabbot.sim.conditions import PatientCondition, as_condition
 from rehabbot.sim.patient import PatientProfile
@@ -53,6 +55,56 @@ class PatientPopulation:
     def patients(self) -> tuple[tuple[PatientProfile, PatientCondition], ...]:
         """Every patient of the cohort, profiles outermost."""
         return tuple((p, c) for p in self.profiles for c in self.conditions)
+
+    def with_conditions(self, conditions: Any) -> PatientPopulation:
+        """The cohort of this population's profiles with only ``conditions``: an index into
+        :attr:`conditions`, one of its conditions (a :class:`PatientCondition` or a dict of its
+        fields), or a non-empty sequence of them; kept in this population's order and named
+        ``"<name>[conditions i, j]"``. ``ValueError`` naming a bad or repeated entry and
+        listing the valid ones (a condition that is not this population's is refused: make a
+        :class:`PatientPopulation` of it instead)."""
+        entries = conditions if isinstance(conditions, Sequence) and not isinstance(
+            conditions, (str, bytes)) else [conditions]
+        if not entries:
+            raise ValueError(f"conditions={conditions!r} must name at least one condition of "
+                             f"population {self.name!r}; valid: {self._valid_conditions()}")
+        chosen: list[int] = []
+        for entry in entries:
+            index = self._condition_index(entry)
+            if index in chosen:
+                raise ValueError(f"conditions={conditions!r} names condition {index} "
+                                 f"({self.conditions[index].describe()}) twice")
+            chosen.append(index)
+        chosen.sort()
+        return PatientPopulation(
+            f"{self.name}[conditions {', '.join(map(str, chosen))}]", self.profiles,
+            tuple(self.conditions[k] for k in chosen))
+
+    def _condition_index(self, entry: Any) -> int:
+        count = len(self.conditions)
+        if isinstance(entry, (int, np.integer)) and not isinstance(entry, bool):
+            if 0 <= int(entry) < count:
+                return int(entry)
+            raise ValueError(f"condition {entry!r} is not an index into the conditions of "
+                             f"population {self.name!r}; valid: {self._valid_conditions()}")
+        if isinstance(entry, (PatientCondition, Mapping)):
+            try:
+                condition = as_condition(entry)
+            except (ValueError, TypeError) as err:
+                raise ValueError(f"condition {entry!r}: {err}; valid: "
+                                 f"{self._valid_conditions()}") from None
+            if condition in self.conditions:
+                return self.conditions.index(condition)
+            raise ValueError(f"condition {condition.describe()!r} is not one of the conditions "
+                             f"of population {self.name!r} (valid: "
+                             f"{self._valid_conditions()}); for other conditions make a "
+                             "PatientPopulation of them (patients=PatientPopulation(...))")
+        raise ValueError(f"condition {entry!r} must be an index into the conditions of "
+                         f"population {self.name!r}, or one of them (a PatientCondition or a "
+                         f"dict of its fields); valid: {self._valid_conditions()}")
+
+    def _valid_conditions(self) -> str:
+        return "; ".join(f"{k} ({c.describe()})" for k, c in enumerate(self.conditions))
 
     def to_dict(self) -> dict[str, Any]:
         """The population as plain data (JSON-able)."""

@@ -35,7 +35,7 @@ from typing import overload
 import mujoco
 import numpy as np
 
-from rehabbot.sim.robots import fr3, ur5e
+from rehabbot.sim.robots import bounds, fr3, ur5e
 from rehabbot.sim.robots.base import ImpedanceGains, RobotBuildOptions, RobotModel
 
 ROBOTS: dict[str, RobotModel] = {ur5e.UR5E.name: ur5e.UR5E, fr3.FR3.name: fr3.FR3}
@@ -94,7 +94,9 @@ def register_robot(model: RobotModel, *, replace: bool = False) -> RobotModel:
     ``robot=model.name``; returns it.
 
     The model is checked first (:func:`check_robot_model`: its fields, then its ``build``
-    run once and compiled, then its ``ik_seed``); a model that breaks the plug-in contract, or
+    run once and compiled, then its ``ik_seed``; every physical quantity they set in its
+    plausible range, :mod:`rehabbot.sim.robots.bounds`); a model that breaks the plug-in
+    contract, or
     whose name is already registered (unless ``replace=True``), raises ``ValueError`` naming
     the problem and nothing is registered. Replacing a robot changes the scenes built after
     the call, never an env already built.
@@ -115,7 +117,18 @@ def check_robot_model(model: RobotModel) -> None:
     """``ValueError`` naming the first way ``model`` breaks the plug-in contract of the module
     docstring: its name and fields, then what its ``build`` adds to a spec (bodies, hinge
     joints with the model's ranges and torque clamps, the tool and cuff sites, the servo and
-    motor of every joint in their groups), then what its ``ik_seed`` returns."""
+    motor of every joint in their groups), then what its ``ik_seed`` returns.
+
+    Every physical quantity the model holds (torque limits, joint ranges and speeds, gains,
+    stand offsets) or its build sets (masses, inertias, positions, sizes, joint limits,
+    armature, damping, friction, actuator parameters; checked in the spec before compiling,
+    the masses and inertias again after) must be finite and inside the range
+    :mod:`rehabbot.sim.robots.bounds` gives with its reason; the build must leave the
+    scene's physics options and compiler settings (timestep, gravity, angle unit, inertia
+    rules) as it found them. The error names the
+    robot, the element, the field and the value. Checking at registration runs the build
+    once, when the user's own line registers the robot, and never lets a bad robot into
+    :data:`ROBOTS`."""
     if not isinstance(model, RobotModel):
         raise ValueError(f"a robot must be a RobotModel, got {type(model).__name__}")
     name = model.name
@@ -150,6 +163,16 @@ def _check_fields(model: RobotModel) -> None:
         model.check_gains(model.default_gains)
     except ValueError as error:
         raise _fail(model, f"default_gains: {error}") from None
+    gains = model.default_gains
+    ranged = (("torque_limit_nm", model.torque_limit_nm, bounds.TORQUE),
+              ("max_joint_speed_rad_s", model.max_joint_speed_rad_s, bounds.JOINT_SPEED),
+              ("joint_range_rad", model.joint_range_rad, bounds.JOINT_LIMIT),
+              ("default_gains.kp_nm_per_rad", gains.kp_nm_per_rad, bounds.STIFFNESS),
+              ("default_gains.kv_nms_per_rad", gains.kv_nms_per_rad, bounds.DAMPING))
+    for field_name, field_values, bound in ranged:
+        problem = bounds.value_problem(field_name, field_values, bound)
+        if problem is not None:
+            raise _fail(model, problem)
     for field_name in ("build", "ik_seed"):
         if not callable(getattr(model, field_name)):
             raise _fail(model, f"{field_name}={getattr(model, field_name)!r} is not callable")
@@ -164,10 +187,18 @@ def _check_fields(model: RobotModel) -> None:
         raise _fail(model, f"cuffed_links={cuffed!r} must be an integer in [1, {n}]")
     for entry in model.base_offset_m:
         ok = (isinstance(entry, tuple) and len(entry) == 2 and entry[0] in PLACEMENTS
-              and len(entry[1]) == 3 and all(math.isfinite(float(v)) for v in entry[1]))
+              and isinstance(entry[1], Sequence) and len(entry[1]) == 3
+              and all(_real(v) for v in entry[1]))
         if not ok:
             raise _fail(model, f"base_offset_m entry {entry!r} must be (placement, (x, y, z)) "
                                f"with a placement in {list(PLACEMENTS)}")
+        problem = bounds.value_problem(f"base_offset_m[{entry[0]!r}]", entry[1], bounds.LENGTH)
+        if problem is not None:
+            raise _fail(model, problem)
+
+
+def _real(value: object) -> bool:
+    return isinstance(value, (int, float, np.number)) and not isinstance(value, bool)
 
 
 def _positive(value: object) -> bool:
@@ -180,13 +211,27 @@ def _check_build(model: RobotModel) -> None:
     spec = mujoco.MjSpec()
     spec.compiler.degree = False
     spec.option.timestep = 0.002
+    settings = _scene_settings(spec)
     try:
         model.build(spec.worldbody, spec, RobotBuildOptions(prefix=p),
                     pos=np.array([0.1, 0.2, 0.5]), quat=np.array([1.0, 0.0, 0.0, 0.0]))
-        compiled = spec.compile()
     except Exception as error:  # any failure of foreign code: named, with its cause
         raise _fail(model, f"build(parent, spec, options, pos, quat) failed: "
                            f"{type(error).__name__}: {error}") from error
+    for problem in bounds.spec_problems(spec, p):
+        raise _fail(model, f"build sets {problem}")
+    changed = {name: value for name, value in _scene_settings(spec).items()
+               if value != settings[name]}
+    if changed:
+        raise _fail(model, f"build changes the scene's settings {changed} (spec.option and "
+                           "spec.compiler belong to the scene, not to a robot)")
+    try:
+        compiled = spec.compile()
+    except Exception as error:  # any failure of foreign code: named, with its cause
+        raise _fail(model, f"build(parent, spec, options, pos, quat) gives a spec that does "
+                           f"not compile: {type(error).__name__}: {error}") from error
+    for problem in bounds.model_problems(compiled, p):
+        raise _fail(model, f"build gives {problem}")
 
     def find(kind: str, name: str):
         try:
@@ -227,6 +272,21 @@ def _check_build(model: RobotModel) -> None:
             if compiled.actuator_group[aid] != group:
                 raise _fail(model, f"actuator {joint_name}_{role} is in group "
                                    f"{compiled.actuator_group[aid]}, not {role}_group={group}")
+
+
+# The scene's settings a robot's build must leave alone: its physics options and how its
+# compiler reads angles and inertias (they hold for the patient's bodies too).
+_SCENE_SETTINGS = (("option", ("timestep", "gravity", "wind", "magnetic", "density",
+                               "viscosity", "integrator", "impratio", "o_margin")),
+                   ("compiler", ("degree", "autolimits", "inertiafromgeom",
+                                 "inertiagrouprange", "boundmass", "boundinertia",
+                                 "settotalmass", "balanceinertia", "alignfree")))
+
+
+def _scene_settings(spec: mujoco.MjSpec) -> dict[str, object]:
+    return {f"spec.{part}.{name}": np.array(getattr(getattr(spec, part), name),
+                                            dtype=float).tolist()
+            for part, names in _SCENE_SETTINGS for name in names}
 
 
 def _check_ik_seed(model: RobotModel) -> None:
