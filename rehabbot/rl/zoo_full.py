@@ -367,9 +367,9 @@ def _candidates(source: str, model: FullModel) -> Iterator[tuple[str, Chunks | N
         yield (f"{model.history_path} in the git history of {clone} at commit "
                f"{HISTORY_COMMIT[:12]}"), _git_chunks(clone, model), ""
     else:
-        yield str(path), None, (f"not a git clone whose history holds {model.history_path} at "
-                            f"{HISTORY_COMMIT} (a shallow clone lacks it: git fetch "
-                            "--unshallow)")
+        yield str(path.resolve()), None, (
+            f"not a git clone whose history holds {model.history_path} at {HISTORY_COMMIT} "
+            "(a shallow clone lacks it: git fetch --unshallow)")
 
 
 class _MismatchError(ZooError):
