@@ -33,7 +33,10 @@ def test_zoo_show_prints_the_agents_metadata(capsys) -> None:
 
 @pytest.mark.parametrize(("name", "words"), [("knee", "is not ENV/ALGO"),
                                              ("rehab-knee-v9/sac", "has no agent"),
-                                             ("../../etc/sac", "not a zoo name")])
+                                             ("../sac", "not a zoo name"),
+                                             ("../../etc/sac", "is not a rehabbot id"),
+                                             ("evilmod:rehabbot/rehab-knee-v2/sac",
+                                              "is not a rehabbot id")])
 def test_a_bad_agent_name_is_one_line(capsys, name: str, words: str) -> None:
     assert main(["zoo", "show", name]) == 2
     err = capsys.readouterr().err

@@ -1,15 +1,24 @@
 """The zoo of trained agents (``rehabbot.rl.zoo``, ``rehabbot.zoo``): exported NumPy actors
-reproduce the models they come from, damaged files are refused, ``zoo:ENV/ALGO`` runs in
-``rehabbot evaluate`` / ``render``, and every agent shipped in ``rehabbot/zoo/`` loads and
-succeeds as often as its metadata says."""
+reproduce the models they come from, damaged files and files naming anything but a registered
+id are refused, ``zoo:ENV/ALGO`` runs in ``rehabbot evaluate`` / ``render``, every agent
+shipped in ``rehabbot/zoo/`` loads and succeeds as often as its metadata says, and full
+models (not shipped) are fetched verified from a file, a folder, a URL or a clone's history
+(``rehabbot.rl.zoo_full``)."""
 
 from __future__ import annotations
 
+import errno
+import functools
+import hashlib
+import http.server
 import json
 import os
+import shutil
 import subprocess
 import sys
+import threading
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import gymnasium as gym
@@ -20,7 +29,7 @@ import rehabbot
 import rehabbot.zoo
 from rehabbot.common.errors import UsageError
 from rehabbot.envs.registration import env_short_name
-from rehabbot.rl import zoo
+from rehabbot.rl import zoo, zoo_full
 from rehabbot.rl.zoo import (
     ZooError,
     available,
@@ -56,6 +65,14 @@ def observations(env) -> np.ndarray:
     env.observation_space.seed(0)
     resets = [env.reset(seed=k)[0] for k in range(4)]
     return np.stack(resets + [env.observation_space.sample() for _ in range(60)])
+
+
+@pytest.fixture(autouse=True)
+def cache_root(tmp_path, monkeypatch) -> Path:
+    """A cache folder of the test's own (full models fetched go there, never to ~/.cache)."""
+    root = tmp_path / "cache"
+    monkeypatch.setenv(zoo_full.CACHE_DIR_ENV, str(root))
+    return root
 
 
 @pytest.fixture
@@ -318,6 +335,87 @@ def test_available_and_unknown_ids_or_algorithms(env, zoo_root) -> None:
         load(ENV, "td3")
 
 
+def _with_metadata(path: Path, **changes) -> Path:
+    """``path`` with metadata entries changed behind the writer's back (the arrays' SHA-256
+    does not cover the metadata)."""
+
+    def change(arrays: dict) -> None:
+        arrays["metadata"] = np.array(json.dumps({**json.loads(str(arrays["metadata"])),
+                                                  **changes}))
+
+    _rewrite(path, change)
+    return path
+
+
+EVIL_MODULE = "rehabbot_test_evilmod"
+
+
+@pytest.fixture
+def evil_module(tmp_path, monkeypatch) -> Iterator[Path]:
+    """A module on ``sys.path`` that leaves a marker file when imported: importing it is the
+    attack (``gym.make("module:id")`` imports ``module``)."""
+    folder = tmp_path / "site"
+    folder.mkdir()
+    marker = tmp_path / "imported"
+    (folder / f"{EVIL_MODULE}.py").write_text(f"open({str(marker)!r}, 'w').close()\n")
+    monkeypatch.syspath_prepend(str(folder))
+    yield marker
+    sys.modules.pop(EVIL_MODULE, None)
+
+
+def sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+@pytest.mark.parametrize("named", [f"{EVIL_MODULE}:{FULL_ID}", "rehabbot/rehab-bogus-v9",
+                                   f"other/{ENV}", ENV, 42])
+def test_a_zoo_file_names_only_a_registered_id_exactly(named, env, zoo_root,
+                                                       evil_module) -> None:
+    """A file whose env_id is anything but a registered rehabbot/ id is refused by name
+    before anything makes its env, so no module it names is imported."""
+    path = linear_tracker(env, zoo_root / ENV / "sac.npz", backend="sb3")
+    model = b"the bytes of a full model"
+    path.with_suffix(".zip").write_bytes(model)
+    _with_metadata(path, env_id=named, full_model_sha256=sha256(model))
+    attempts = {"load": lambda: load(ENV, "sac"), "load_file": lambda: load_file(path),
+                "load_full_model": lambda: zoo_full.load_full_model(ENV, "sac"),
+                "spec": lambda: zoo.load_spec(f"zoo:{ENV}/sac")}
+    for name, attempt in attempts.items():
+        with pytest.raises(ZooError, match="not a registered rehabbot/ id") as err:
+            attempt()
+        assert str(path) in str(err.value) and repr(named) in str(err.value), name
+    assert not evil_module.exists() and EVIL_MODULE not in sys.modules
+    with pytest.raises(ZooError, match="not a registered rehabbot/ id"):  # nor written
+        linear_tracker(env, zoo_root / ENV / "td3.npz", env_id=named)
+    assert not (zoo_root / ENV / "td3.npz").exists()
+
+
+def test_the_id_asked_for_is_a_rehabbot_id_matched_whole(env, zoo_root, evil_module) -> None:
+    linear_tracker(env, zoo_root / ENV / "sac.npz")
+    for asked in (f"{EVIL_MODULE}:{FULL_ID}", f"other/{ENV}", f"x/{FULL_ID}"):
+        with pytest.raises(UsageError, match="is not a rehabbot id"):
+            load(asked, "sac")
+        with pytest.raises(UsageError, match="is not a rehabbot id"):
+            zoo.load_spec(f"zoo:{asked}/sac")
+    # The file of another id, in this id's folder: the whole id is compared.
+    linear_tracker(env, zoo_root / "rehab-reach-l-v0" / "sac.npz")
+    with pytest.raises(ZooError, match="holds an agent for 'rehabbot/rehab-reach-v0', not "
+                                       "'rehabbot/rehab-reach-l-v0'"):
+        load("rehabbot/rehab-reach-l-v0", "sac")
+    assert not evil_module.exists()
+
+
+def test_export_refuses_a_note_that_sets_a_reserved_key(tmp_path) -> None:
+    """The exporter writes the env id, algorithm, provenance and hashes; a note adds keys of
+    its own only (checked before the model is read)."""
+    for key in ("env_id", "algo", "weights_sha256", "full_model_sha256", "env_kwargs"):
+        with pytest.raises(UsageError, match=f"the metadata '{key}' cannot be set by a note"):
+            export_policy(object(), ENV, "sac", tmp_path / "x.npz",
+                          metadata={key: f"{EVIL_MODULE}:{FULL_ID}", "why": "test"})
+    assert not (tmp_path / "x.npz").exists()
+    assert set(REQUIRED_METADATA) <= zoo.RESERVED_METADATA
+
+
 def test_loading_and_acting_import_no_torch_or_jax(env, tmp_path) -> None:
     root = tmp_path / "zoo"
     linear_tracker(env, root / ENV / "sac.npz")
@@ -377,13 +475,20 @@ def test_render_runs_a_zoo_spec(env, zoo_root, tmp_path) -> None:
     assert out.stat().st_size > 0
 
 
-def test_export_command_writes_the_zoo_file(env, zoo_root, tmp_path, capsys) -> None:
+@pytest.fixture
+def td3_run(env, tmp_path) -> Path:
+    """A run folder of a (perturbed, untrained) SB3 TD3 model on rehab-reach-v0."""
     pytest.importorskip("stable_baselines3")
     run = tmp_path / "run"
     run.mkdir()
     _perturbed(_sb3_model("td3", env)).save(run / "model")
     (run / "manifest.json").write_text(json.dumps({"env_id": FULL_ID, "algo": "td3",
                                                    "seed": 3, "timesteps_done": 10}))
+    return run
+
+
+def test_export_command_writes_the_zoo_file(td3_run, zoo_root, tmp_path, capsys) -> None:
+    run = td3_run
     from rehabbot.cli import main
 
     assert main(["zoo", "export", str(run), "--episodes", "0", "--note", '{"why": "test"}']) == 0
@@ -397,6 +502,56 @@ def test_export_command_writes_the_zoo_file(env, zoo_root, tmp_path, capsys) -> 
     with pytest.raises(SystemExit) as stop:  # argparse: --note must be a JSON object
         main(["zoo", "export", str(run), "--note", "[1]"])
     assert stop.value.code == 2 and "must be a JSON object" in capsys.readouterr().err
+
+
+def test_export_command_refuses_bad_numbers_folders_and_notes(td3_run, zoo_root, tmp_path,
+                                                              capsys) -> None:
+    """Every number is bounded, --out's folder must exist (nothing is created above it), a
+    note cannot set a reserved key: exit 2, one line naming the value, nothing written."""
+    from rehabbot.cli import main
+
+    for option, value in (("--episodes", "-1"), ("--episodes", "1e9"), ("--seed", "-5"),
+                          ("--seed", "1e20")):
+        with pytest.raises(SystemExit) as stop:
+            main(["zoo", "export", str(td3_run), option, value])
+        err = capsys.readouterr().err
+        assert stop.value.code == 2, (option, value)
+        assert f"{option}: must be an integer in [0, " in err and repr(value) in err
+    missing = tmp_path / "no" / "such" / "agent.npz"
+    assert main(["zoo", "export", str(td3_run), "--episodes", "0", "--out", str(missing)]) == 2
+    assert f"its folder {str(missing.parent)!r} does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "no").exists()
+    assert main(["zoo", "export", str(td3_run), "--out", str(tmp_path / "agent.txt")]) == 2
+    assert "a zoo file ends in .npz" in capsys.readouterr().err
+    note = json.dumps({"env_id": f"{EVIL_MODULE}:{FULL_ID}"})
+    assert main(["zoo", "export", str(td3_run), "--episodes", "0", "--note", note]) == 2
+    assert "the metadata 'env_id' cannot be set by a note" in capsys.readouterr().err
+    assert list(zoo_root.rglob("*")) == [] and not (tmp_path / "agent.txt").exists()
+
+
+def _no_space(*_args) -> None:
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+@pytest.mark.parametrize("full", [True, False])
+def test_a_full_disk_names_the_file_export_cannot_write(full, td3_run, tmp_path, monkeypatch,
+                                                         capsys) -> None:
+    """A full disk (simulated: flushing a written file fails with ENOSPC) exits 1 with one
+    line naming the file: the full model's copy first (--full), else the zoo file; nothing
+    is left, temporaries included."""
+    from rehabbot.cli import main
+
+    out = tmp_path / "out"
+    out.mkdir()
+    named = out / ("agent.zip" if full else "agent.npz")
+    with monkeypatch.context() as patch:
+        patch.setattr(os, "fsync", _no_space)
+        code = main(["zoo", "export", str(td3_run), "--episodes", "0", "--out",
+                     str(out / "agent.npz"), *(["--full"] if full else [])])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1, err
+    assert f"cannot write {str(named)!r}: No space left on device" in err
+    assert list(out.iterdir()) == []
 
 
 # --------------------------------------------------------------------------- shipped agents
@@ -434,12 +589,213 @@ def test_each_shipped_agent_succeeds_as_recorded(env_id, algo) -> None:
 
 # --------------------------------------------------------------------------- full models
 
+REPOSITORY = Path(__file__).resolve().parents[1]
+MODEL_BYTES = b"the bytes of a full model, " * 1000
+
+
+@pytest.fixture
+def agent_with_model(env, zoo_root) -> zoo_full.FullModel:
+    """A zoo agent whose metadata pins the SHA-256 of ``MODEL_BYTES`` as its full model's."""
+    linear_tracker(env, zoo_root / ENV / "sac.npz", backend="sb3",
+                   full_model_sha256=sha256(MODEL_BYTES))
+    return zoo_full.full_model(ENV, "sac")
+
+
+def _cached_files(cache: Path) -> list[Path]:
+    return sorted(p for p in cache.rglob("*") if p.is_file()) if cache.exists() else []
+
+
+def test_a_full_model_is_found_beside_the_actor_or_in_the_cache(agent_with_model,
+                                                                cache_root) -> None:
+    model = agent_with_model
+    assert model.cached.parent == cache_root / "full-models" / ENV
+    assert model.cached.name == f"sac-{model.sha256[:16]}.zip"
+    with pytest.raises(ZooError, match="is not on this machine") as err:
+        zoo_full.find_full_model(ENV, "sac")
+    assert str(model.beside) in str(err.value) and str(model.cached) in str(err.value)
+    assert f"rehabbot zoo fetch {ENV}/sac --from" in str(err.value)
+    model.cached.parent.mkdir(parents=True)
+    model.cached.write_bytes(MODEL_BYTES)
+    assert zoo_full.find_full_model(ENV, "sac") == model.cached
+    model.beside.write_bytes(MODEL_BYTES)  # a zoo exported with --full: beside comes first
+    assert zoo_full.find_full_model(ENV, "sac") == model.beside
+    model.beside.write_bytes(MODEL_BYTES + b"\0")
+    with pytest.raises(ZooError, match="not the model this agent was exported from") as err:
+        zoo_full.find_full_model(ENV, "sac")
+    assert str(model.beside) in str(err.value)
+
+
+def test_fetch_copies_a_verified_file_from_a_file_or_a_folder(agent_with_model, tmp_path,
+                                                              cache_root) -> None:
+    model = agent_with_model
+    wrong = tmp_path / "wrong.zip"
+    wrong.write_bytes(MODEL_BYTES + b"!")
+    with pytest.raises(ZooError, match=f"its SHA-256 is {sha256(MODEL_BYTES + b'!')}, not "
+                                       "the agent's") as err:
+        zoo_full.fetch_full_model(ENV, "sac", wrong)
+    assert str(wrong) in str(err.value)
+    assert _cached_files(cache_root) == []  # nothing, temporaries included
+    with pytest.raises(UsageError, match="no such file or folder, and not an http"):
+        zoo_full.fetch_full_model(ENV, "sac", tmp_path / "nowhere")
+    for layout in (f"{ENV}/sac.zip", f"rehabbot/zoo/{ENV}/sac.zip", "model.zip", None):
+        source = tmp_path / "sources" / str(layout).replace("/", "_")
+        given = source / layout if layout else source.with_suffix(".zip")
+        given.parent.mkdir(parents=True, exist_ok=True)
+        given.write_bytes(MODEL_BYTES)
+        fetched = zoo_full.fetch_full_model(ENV, "sac", source if layout else given)
+        assert fetched.path == model.cached and fetched.origin == str(given)
+        assert model.cached.read_bytes() == MODEL_BYTES
+        assert zoo_full.find_full_model(ENV, "sac") == model.cached
+        again = zoo_full.fetch_full_model(ENV, "sac", source / "not-read")
+        assert again.origin is None and again.path == model.cached  # already here
+        model.cached.unlink()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ZooError, match="not a git clone whose history holds"):
+        zoo_full.fetch_full_model(ENV, "sac", empty)
+
+
+@pytest.fixture
+def http_folder(tmp_path, monkeypatch) -> Iterator[tuple[str, Path]]:
+    """A folder served over HTTP on 127.0.0.1 (a free port) for the test, then stopped."""
+    served = tmp_path / "served"
+    served.mkdir()
+    monkeypatch.setenv("no_proxy", "127.0.0.1")
+    monkeypatch.setenv("NO_PROXY", "127.0.0.1")
+
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *_args) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(
+        ("127.0.0.1", 0), functools.partial(Quiet, directory=str(served)))
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}", served
+    finally:
+        server.shutdown()
+        server.server_close()
+        thread.join()
+
+
+def test_fetch_downloads_a_verified_file_over_http(agent_with_model, http_folder,
+                                                   cache_root) -> None:
+    model = agent_with_model
+    url, served = http_folder
+    with pytest.raises(ZooError, match="HTTP 404") as err:
+        zoo_full.fetch_full_model(ENV, "sac", url)
+    assert f"{url}/{ENV}/sac.zip" in str(err.value)
+    (served / ENV).mkdir()
+    (served / ENV / "sac.zip").write_bytes(MODEL_BYTES[::-1])  # the wrong bytes
+    with pytest.raises(ZooError, match="not the agent's full_model_sha256"):
+        zoo_full.fetch_full_model(ENV, "sac", url + "/")
+    assert _cached_files(cache_root) == []
+    (served / ENV / "sac.zip").write_bytes(MODEL_BYTES)
+    fetched = zoo_full.fetch_full_model(ENV, "sac", url + "/")  # a folder laid out as the zoo
+    assert fetched.origin == f"{url}/{ENV}/sac.zip" and fetched.path == model.cached
+    model.cached.unlink()
+    (served / "renamed.zip").write_bytes(MODEL_BYTES)
+    fetched = zoo_full.fetch_full_model(ENV, "sac", f"{url}/renamed.zip")  # the file itself
+    assert fetched.origin == f"{url}/renamed.zip"
+    assert _cached_files(cache_root) == [model.cached]
+    assert model.cached.read_bytes() == MODEL_BYTES
+
+
+def _git(folder: Path, *args: str) -> str:
+    return subprocess.run(["git", "-C", str(folder), "-c", "user.name=test", "-c",
+                           "user.email=test@example.org", "-c", "commit.gpgsign=false", *args],
+                          check=True, capture_output=True, text=True).stdout.strip()
+
+
+def test_fetch_reads_a_clones_history(agent_with_model, tmp_path, monkeypatch,
+                                      capsys) -> None:
+    """A clone of the repository holds the full models in its history (the pinned commit)
+    after its tree dropped them; the error of load_full_model, run in the clone, gives the
+    command that fetches from it."""
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    from rehabbot.cli import main
+
+    model = agent_with_model
+    clone = (tmp_path / "clone").resolve()
+    clone.mkdir()
+    _git(clone, "init", "-q")
+    tracked = clone / "rehabbot" / "zoo" / ENV / "sac.zip"
+    tracked.parent.mkdir(parents=True)
+    tracked.write_bytes(MODEL_BYTES)
+    (clone / "rehabbot" / "__init__.py").write_text("")
+    _git(clone, "add", "-A")
+    _git(clone, "commit", "-q", "-m", "with the full models")
+    monkeypatch.setattr(zoo_full, "HISTORY_COMMIT", _git(clone, "rev-parse", "HEAD"))
+    _git(clone, "rm", "-q", str(tracked.relative_to(clone)))
+    _git(clone, "commit", "-q", "-m", "without them")
+    monkeypatch.chdir(clone / "rehabbot")  # anywhere in the clone
+    with pytest.raises(ZooError) as err:
+        zoo_full.load_full_model(ENV, "sac")
+    assert f"get it with `rehabbot zoo fetch {ENV}/sac --from {clone}`" in str(err.value)
+    assert main(["zoo", "fetch", f"{ENV}/sac", "--from", str(clone)]) == 0
+    out = capsys.readouterr().out
+    assert f"{ENV}/sac: verified (sha256 {model.sha256[:12]})" in out
+    assert f"in the git history of {clone}" in out
+    assert model.cached.read_bytes() == MODEL_BYTES
+    assert main(["zoo", "fetch", "--all", "--from", str(clone)]) == 0
+    assert f"{ENV}/sac: already here, verified: {model.cached}" in capsys.readouterr().out
+
+
+def test_zoo_fetch_says_what_it_refuses(env, agent_with_model, zoo_root, tmp_path,
+                                        capsys) -> None:
+    from rehabbot.cli import main
+
+    linear_tracker(env, zoo_root / ENV / "td3.npz")  # exported without --full
+    wrong = tmp_path / "wrong.zip"
+    wrong.write_bytes(b"not it")
+    cases = [(["--from", str(tmp_path)], 2, "name the agents (ENV/ALGO ...) or give --all"),
+             ([f"{ENV}/sac", "--all", "--from", str(tmp_path)], 2, "not both"),
+             ([f"{ENV}/td3", "--from", str(tmp_path)], 2, "keeps only the actor of "
+                                                          f"{ENV}/td3"),
+             ([f"{ENV}/sac", "--from", str(tmp_path / "x")], 2, "no such file or folder"),
+             ([f"{ENV}/sac", "--from", str(wrong)], 1, "no verified copy of "
+                                                       f"{ENV}/sac's full model")]
+    for args, code, words in cases:
+        assert main(["zoo", "fetch", *args]) == code, args
+        err = capsys.readouterr().err
+        assert words in err and err.count("\n") == 1, (args, err)
+    with pytest.raises(SystemExit) as stop:
+        main(["zoo", "fetch", f"{ENV}/sac"])  # --from is required
+    assert stop.value.code == 2 and "--from" in capsys.readouterr().err
+
+
+def test_an_agent_without_a_full_model_says_so(env, zoo_root) -> None:
+    linear_tracker(env, zoo_root / ENV / "sac.npz")
+    with pytest.raises(UsageError, match=f"keeps only the actor of {ENV}/sac"):
+        zoo_full.load_full_model(ENV, "sac")
+    linear_tracker(env, zoo_root / ENV / "td3.npz", full_model_sha256="not a hash")
+    with pytest.raises(ZooError, match="has full_model_sha256 'not a hash', not a SHA-256"):
+        zoo_full.load_full_model(ENV, "td3")
+
+
+@pytest.mark.skipif(bool(os.environ.get("REHABBOT_ZOO_DIR")), reason="another zoo")
+def test_the_pinned_commit_holds_every_shipped_full_model() -> None:
+    """Every shipped agent that has a full model can be fetched from a clone: the pinned
+    commit's tree holds a file with its SHA-256 (run where the repository's history is)."""
+    models = zoo_full.full_models()
+    assert len(models) == 15
+    if shutil.which("git") is None or zoo_full.history_clone(REPOSITORY, models[0]) is None:
+        pytest.skip(f"not in a git clone that holds commit {zoo_full.HISTORY_COMMIT}")
+    for model in models:
+        blob = subprocess.run(["git", "-C", str(REPOSITORY), "cat-file", "blob",
+                               f"{zoo_full.HISTORY_COMMIT}:{model.history_path}"],
+                              check=True, capture_output=True).stdout
+        assert sha256(blob) == model.sha256, model.name
+
 
 @pytest.mark.slow
 def test_the_full_model_ships_beside_the_actor_and_fine_tunes(zoo_root, tmp_path) -> None:
     """``--full`` keeps the run's model.zip beside the .npz, bound by its SHA-256:
     ``load_full_model`` gives the model (critics included) whose actor the .npz holds, ready
-    to ``learn``; a changed zip is refused; an agent without one says so."""
+    to ``learn``; a changed zip is refused; a missing one is fetched back, verified, into
+    the cache, and loads from there."""
     pytest.importorskip("sbx")
     from rehabbot.rl.training import train_run
 
@@ -452,8 +808,10 @@ def test_the_full_model_ships_beside_the_actor_and_fine_tunes(zoo_root, tmp_path
 
     assert main(["zoo", "export", str(run_dir), "--episodes", "0", "--full"]) == 0
     agent = load(env_id, "sac")
-    assert zoo.full_model_path(env_id, "sac").is_file()
-    model = zoo.load_full_model(env_id, "sac")
+    full = zoo_full.full_model(env_id, "sac")
+    assert full.beside == zoo_root / "rehab-knee-v2" / "sac.zip" and full.beside.is_file()
+    assert full.sha256 == sha256((run_dir / "model.zip").read_bytes())
+    model = zoo_full.load_full_model(env_id, "sac")
     env = gym.make(env_id)
     observations = np.stack([env.reset(seed=k)[0] for k in range(5)])
     expected = model.predict(observations, deterministic=True)[0]
@@ -461,10 +819,14 @@ def test_the_full_model_ships_beside_the_actor_and_fine_tunes(zoo_root, tmp_path
     model.learn(60, reset_num_timesteps=False)  # fine-tuning: critics and optimisers came too
     assert model.num_timesteps >= 260
 
-    zip_path = zoo.full_model_path(env_id, "sac")
-    zip_path.write_bytes(zip_path.read_bytes() + b"\0")
+    full.beside.write_bytes(full.beside.read_bytes() + b"\0")
     with pytest.raises(ZooError, match="not the model this agent was exported from"):
-        zoo.load_full_model(env_id, "sac")
-    zip_path.unlink()
-    with pytest.raises(UsageError, match="keeps only the actor of rehab-knee-v2/sac"):
-        zoo.load_full_model(env_id, "sac")
+        zoo_full.load_full_model(env_id, "sac")
+    full.beside.unlink()
+    with pytest.raises(ZooError, match="rehabbot zoo fetch rehab-knee-v2/sac --from"):
+        zoo_full.load_full_model(env_id, "sac")
+    assert main(["zoo", "fetch", "rehab-knee-v2/sac", "--from", str(run_dir)]) == 0
+    again = zoo_full.load_full_model(env_id, "sac")
+    assert zoo_full.find_full_model(env_id, "sac") == full.cached
+    assert np.max(np.abs(again.predict(observations, deterministic=True)[0] - expected)) \
+        < TOLERANCE

@@ -6,8 +6,17 @@
 Frames go to the writer as they are rendered, so memory stays flat however long the episode:
 ``.mp4`` through imageio's FFmpeg plugin (``imageio-ffmpeg``), ``.gif`` through Pillow, which
 keeps each frame until the end as a 256-colour image (one byte per pixel). Both come with
-``pip install "rehabbot[video]"``. The output path (suffix, folder) is checked before the
-episode starts. The file is written under a temporary name, re-opened and its frames counted
+``pip install "rehabbot[video]"``.
+
+A GIF gets a palette of its own for each frame by default. ``gif_colors=N`` (``rehabbot
+render --gif-colors N``) draws every frame's colours from one palette of ``N`` colours chosen
+from the whole episode, without dithering: a pixel that does not change keeps its exact
+colour, so Pillow stores only the part of each frame that moved, and a rendered scene's file
+is several times smaller. The frames are then kept, zlib-compressed, until the palette is
+chosen at the end.
+
+The output path (suffix, folder) is checked before the episode starts. The file is written
+under a temporary name, re-opened and its frames counted
 (:func:`verify_video`), and renamed only then (usual permissions, ``0666`` minus the umask):
 an interrupted render, a full disk or a writer that fails silently leaves no half-written
 video and keeps an earlier file of the same name.
@@ -22,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -35,6 +45,9 @@ from rehabbot.common.files import atomic_save_verified, check_output_file
 from rehabbot.rl.policies import env_for, load_policy
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
+GIF_COLORS_RANGE = (2, 256)
+# The palette of gif_colors is chosen from evenly spaced frames of at most this many pixels.
+PALETTE_SAMPLE_PIXELS = 4_000_000
 
 
 def check_video_path(out_path: Path) -> Path:
@@ -46,12 +59,29 @@ def check_video_path(out_path: Path) -> Path:
     return out_path
 
 
-class _FrameWriter:
-    """Appends RGB frames to an ``.mp4`` or ``.gif`` file as they come."""
+def check_gif_colors(gif_colors: int | None, out_path: Path) -> None:
+    """:class:`UsageError` unless ``gif_colors`` is None, or an integer in [2, 256] for a
+    ``.gif``."""
+    if gif_colors is None:
+        return
+    low, high = GIF_COLORS_RANGE
+    if isinstance(gif_colors, bool) or not isinstance(gif_colors, int) \
+            or not low <= gif_colors <= high:
+        raise UsageError(f"gif_colors={gif_colors!r} must be an integer in [{low}, {high}]")
+    if Path(out_path).suffix.lower() != ".gif":
+        raise UsageError(f"--gif-colors applies to a .gif, not {str(out_path)!r}")
 
-    def __init__(self, path: str, fps: float) -> None:
+
+class _FrameWriter:
+    """Appends RGB frames to an ``.mp4`` or ``.gif`` file as they come (with ``gif_colors``:
+    keeps them compressed, and writes the GIF with one palette on :meth:`close`)."""
+
+    def __init__(self, path: str, fps: float, gif_colors: int | None = None) -> None:
         self._gif = path.lower().endswith(".gif")
-        if self._gif:
+        self._palette_gif = _PaletteGif(path, fps, gif_colors) if gif_colors else None
+        if self._palette_gif is not None:
+            self._file: Any = self._palette_gif
+        elif self._gif:
             iio = _imageio()
             self._file: Any = iio.imopen(path, "w", plugin="pillow")
             self._options = {"duration": 1000.0 / fps, "loop": 0, "bits": 8}
@@ -65,7 +95,9 @@ class _FrameWriter:
         self.frames = 0
 
     def append(self, frame: Any) -> None:
-        if self._gif:
+        if self._palette_gif is not None:
+            self._palette_gif.append(frame)
+        elif self._gif:
             self._file.write(frame, is_batch=False, **self._options)
         else:
             self._file.append_data(frame)
@@ -88,6 +120,52 @@ class _FrameWriter:
         half-written file raises is dropped, and nothing is left for ``__del__`` to do."""
         with contextlib.suppress(Exception):
             self.close()
+
+
+class _PaletteGif:
+    """A GIF whose frames share one palette of ``colors`` colours, chosen from the whole
+    episode (median cut over evenly spaced frames, no dithering): the frames are kept
+    zlib-compressed until :meth:`close` writes the file through Pillow."""
+
+    def __init__(self, path: str, fps: float, colors: int) -> None:
+        _imageio()  # Pillow comes with imageio (rehabbot[video])
+        self._path, self._duration_ms, self._colors = path, 1000.0 / fps, colors
+        self._frames: list[bytes] = []
+        self._shape: tuple[int, ...] = ()
+
+    def append(self, frame: Any) -> None:
+        import numpy as np
+
+        array = np.ascontiguousarray(frame, dtype=np.uint8)
+        self._shape = array.shape
+        self._frames.append(zlib.compress(array.tobytes(), 1))
+
+    def _frame(self, index: int) -> Any:
+        import numpy as np
+
+        return np.frombuffer(zlib.decompress(self._frames[index]),
+                             dtype=np.uint8).reshape(self._shape)
+
+    def close(self) -> None:
+        import numpy as np
+        from PIL import Image
+
+        count = len(self._frames)
+        if count == 0:
+            return
+        pixels = int(np.prod(self._shape[:2]))
+        sample = np.linspace(0, count - 1, max(1, min(count, PALETTE_SAMPLE_PIXELS // pixels)))
+        mosaic = Image.fromarray(np.concatenate([self._frame(int(k)) for k in
+                                                 np.unique(sample.round())], axis=0))
+        palette = mosaic.quantize(self._colors, method=Image.Quantize.MEDIANCUT,
+                                  dither=Image.Dither.NONE)
+        frames = (Image.fromarray(self._frame(k)).quantize(palette=palette,
+                                                            dither=Image.Dither.NONE)
+                  for k in range(count))
+        first = next(frames)
+        first.save(self._path, format="GIF", save_all=True, append_images=frames,
+                   duration=self._duration_ms, loop=0)
+        self._frames = []
 
 
 def _disarm(file: Any) -> None:
@@ -194,8 +272,11 @@ def _record_episode(env: gym.Env, policy: Any, writer: _FrameWriter, seed: int,
 def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
                    width: int = 640, height: int = 480, camera: str | None = "overview",
                    frame_every: int = 2, env_kwargs: dict | None = None,
-                   deterministic: bool = True, progress: Progress | None = None) -> dict:
+                   deterministic: bool = True, progress: Progress | None = None,
+                   gif_colors: int | None = None) -> dict:
     """Render one episode of a policy to ``out_path`` (.mp4 or .gif); return what happened.
+    ``gif_colors`` (a .gif only, 2 to 256): one palette of that many colours for every
+    frame, a much smaller file (the module's docstring).
 
     Every argument and the output path are checked before the episode starts
     (:class:`UsageError`, :class:`OutputError`). The video is written under a temporary
@@ -207,6 +288,7 @@ def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
     out_path = check_output_file(check_video_path(out_path), VIDEO_SUFFIXES, "--out")
     if isinstance(frame_every, bool) or not isinstance(frame_every, int) or frame_every < 1:
         raise UsageError(f"frame_every={frame_every!r} must be an integer >= 1")
+    check_gif_colors(gif_colors, out_path)
     check_video_writer(out_path)
     env_id, kwargs = env_for([spec], env_id, env_kwargs)
     env = make_env(env_id, render_mode="rgb_array", width=width, height=height,
@@ -219,7 +301,7 @@ def render_episode(spec: str, env_id: str | None, out_path: Path, seed: int = 0,
         out_path.parent.mkdir(parents=True, exist_ok=True)
 
         def write(tmp: str) -> None:
-            writer = _FrameWriter(tmp, fps)
+            writer = _FrameWriter(tmp, fps, gif_colors)
             try:
                 result.update(_record_episode(env, policy, writer, seed, frame_every,
                                               deterministic, progress))

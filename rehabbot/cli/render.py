@@ -11,6 +11,7 @@ from rehabbot.cli.errors import (
     EXIT_OK,
     EXIT_USAGE,
     CliError,
+    bounded_int,
     cli_command,
     env_kwargs_object,
     non_negative_int,
@@ -57,6 +58,9 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
                         help="overview, front or side (default: overview)")
     parser.add_argument("--frame-every", type=int, default=2, metavar="K",
                         help="keep every K-th decision as a frame (default: 2, 25 fps)")
+    parser.add_argument("--gif-colors", type=bounded_int(2, 256), default=None, metavar="N",
+                        help="a .gif with one palette of N colours (2 to 256) for every frame, "
+                             "several times smaller (default: a palette per frame)")
     parser.add_argument("--env-kwargs", type=env_kwargs_object, default=None, metavar="JSON",
                         help="extra RehabEnv keyword arguments (not render_mode, width, "
                              "height or camera_name: render sets them)")
@@ -78,7 +82,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     one_torch_thread([args.policy])
     result = render_episode(args.policy, args.env, args.out, args.seed, args.width,
                             args.height, args.camera, args.frame_every, args.env_kwargs,
-                            progress=ProgressLine("rehabbot render"))
+                            progress=ProgressLine("rehabbot render"),
+                            gif_colors=args.gif_colors)
     outcome = "success" if result["success"] else (result["safety_violation"] or "time limit")
     print(f"wrote {result['path']}: {result['frames']} frames at {result['fps']:.0f} fps, "
           f"{result['policy']} on {result['env_id']} (seed {result['seed']}): "

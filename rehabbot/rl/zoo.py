@@ -7,9 +7,10 @@ PyTorch, JAX or Stable-Baselines3, no download).
                                      ``predict``); also ``rehabbot.zoo.load``
 ``available()``                      the ``(env_id, algo)`` pairs shipped
 ``load_file(path)``                  an agent from any zoo file
-``load_full_model(env_id, algo)``    the whole trained SB3/SBX model behind an agent, where the
-                                     zoo keeps it (``<algo>.zip`` beside the ``.npz``): for
-                                     ``learn`` (fine-tuning), critics included
+``load_full_model(env_id, algo)``    the whole trained SB3/SBX model behind an agent, for
+                                     ``learn`` (fine-tuning), critics included: not shipped in
+                                     the package, fetched once (:mod:`rehabbot.rl.zoo_full`,
+                                     ``rehabbot zoo fetch``)
 ``zoo_export.export_policy(...)``    write a zoo file (:mod:`rehabbot.rl.zoo_export`; ``model,
                                      env_id, algo, out_path, metadata``) from a trained SB3
                                      model (SAC, TD3, PPO; TQC, CrossQ from sb3-contrib) or SBX
@@ -48,6 +49,12 @@ actor, the command that trained it, the rehabbot version, and ``weights_sha256``
 SHA-256 of every other array (name, dtype, shape and bytes). A file whose arrays do not match
 that hash, or that lacks an array, is refused with :class:`ZooError` naming the file.
 
+**Which env a file names.** Its ``env_id`` is made (``gym.make``) to run and fine-tune the
+agent, and Gymnasium's ``gym.make("module:id")`` imports ``module``: so a file's ``env_id``
+must be a registered ``rehabbot/`` id, exactly (no ``module:`` part), and :func:`load`
+checks it against the id asked for, whole. The keys the exporter writes
+(:data:`RESERVED_METADATA`) cannot be set by a user's note (``rehabbot zoo export --note``).
+
 The actor is deterministic: ``predict(..., deterministic=False)`` raises
 :class:`~rehabbot.common.errors.UsageError` (a ``ValueError``), since the exploration noise
 of the trained model is not exported.
@@ -68,7 +75,7 @@ import gymnasium as gym
 import numpy as np
 
 from rehabbot.common.errors import DataError, UsageError
-from rehabbot.common.files import atomic_write
+from rehabbot.common.files import atomic_save_verified
 from rehabbot.envs.registration import NAMESPACE, env_short_name
 from rehabbot.tasks.observation import tracking_slices
 
@@ -83,6 +90,14 @@ METADATA_KEY = "metadata"
 BATCHED_BACKENDS = ("rsl_rl",)
 DEFAULT_EPISODES = 20
 DEFAULT_SEED = 1000
+#: The metadata keys the exporter and the writer fill in (provenance, the env the agent runs
+#: in, the hashes that bind the arrays and the full model): never taken from a user's note.
+RESERVED_METADATA = frozenset({
+    "env_id", "env_kwargs", "algo", "backend", "policy_class", "training_steps", "seed",
+    "train_command", "git_commit", "hyperparameters", "training_versions",
+    "rehabbot_version", "format", "weights_sha256", "full_model_sha256", "success_rate",
+    "evaluation",
+})
 # op name -> the parameters it needs
 OP_PARAMS: dict[str, tuple[str, ...]] = {
     "normalize": ("mean", "var", "epsilon", "clip"),
@@ -95,10 +110,9 @@ OP_PARAMS: dict[str, tuple[str, ...]] = {
     "unscale": ("low", "high"),
 }
 
-__all__ = ["ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy", "available",
-           "full_model_path", "is_zoo_spec", "load", "load_file", "load_full_model", "load_spec",
-           "parse_spec", "ship_full_model", "weights_sha256", "write_zoo_file", "zoo_dir",
-           "zoo_path"]
+__all__ = ["RESERVED_METADATA", "ZOO_DIR", "ZOO_PREFIX", "ZooError", "ZooPolicy",
+           "available", "check_env_id", "is_zoo_spec", "load", "load_file", "load_spec",
+           "parse_spec", "weights_sha256", "write_zoo_file", "zoo_dir", "zoo_path"]
 
 
 class ZooError(DataError):
@@ -197,8 +211,15 @@ def write_zoo_file(path: Path, ops: Sequence[tuple[str, Mapping[str, Any]]],
                    observation_space: gym.spaces.Box, action_space: gym.spaces.Box,
                    metadata: Mapping[str, Any]) -> dict[str, Any]:
     """Write the program ``ops`` (``(name, params)`` pairs) with the spaces and
-    ``metadata`` to ``path`` (atomically); returns the metadata written, with the format
-    version and ``weights_sha256`` filled in."""
+    ``metadata`` to ``path`` (atomically, read back before it takes the name); returns the
+    metadata written, with the format version and ``weights_sha256`` filled in.
+
+    Raises:
+        ZooError: a metadata ``env_id`` that is not a registered id (:func:`check_env_id`).
+        OutputError: the file cannot be written (a full disk), naming it.
+    """
+    if "env_id" in metadata:
+        check_env_id(metadata["env_id"], path)
     arrays = _program_arrays(ops)
     arrays.update(observation_low=np.asarray(observation_space.low, np.float32),
                   observation_high=np.asarray(observation_space.high, np.float32),
@@ -208,8 +229,14 @@ def write_zoo_file(path: Path, ops: Sequence[tuple[str, Mapping[str, Any]]],
     arrays[METADATA_KEY] = np.array(json.dumps(meta, sort_keys=True, default=_json_default))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(path, lambda handle: np.savez_compressed(handle, **arrays))
+    # Read back before the rename; a full disk is an OutputError naming the file.
+    atomic_save_verified(path, lambda tmp: _save_arrays(tmp, arrays), ZooPolicy.from_file)
     return meta
+
+
+def _save_arrays(path: str, arrays: Mapping[str, np.ndarray]) -> None:
+    with open(path, "wb") as stream:  # a stream: NumPy adds no .npz to the name
+        np.savez_compressed(stream, **arrays)
 
 
 def _json_default(value: Any) -> Any:
@@ -287,6 +314,8 @@ class ZooPolicy:
         if metadata.get("format") != FORMAT_VERSION:
             raise ZooError(f"{path} has zoo format {metadata.get('format')!r}; this rehabbot "
                            f"reads format {FORMAT_VERSION}")
+        if "env_id" in metadata:
+            check_env_id(metadata["env_id"], path)
         policy = cls(arrays, metadata, path)  # ZooError: an array it lacks, an unknown op
         expected = metadata.get("weights_sha256")
         actual = weights_sha256(arrays)
@@ -330,8 +359,30 @@ def zoo_dir() -> Path:
     return Path(override) if override else ZOO_DIR
 
 
+def check_env_id(env_id: object, path: str | Path) -> str:
+    """``env_id`` if it is a registered ``rehabbot/`` id, exactly: the id a zoo file may name.
+
+    Raises:
+        ZooError: anything else (an unregistered id, another namespace, a ``module:`` prefix,
+            which ``gym.make`` would import), naming the file ``path`` and the value.
+    """
+    if (not isinstance(env_id, str) or not env_id.startswith(f"{NAMESPACE}/")
+            or env_id not in gym.registry):
+        raise ZooError(f"{path} names the env {env_id!r}, which is not a registered "
+                       f"{NAMESPACE}/ id; a zoo file names one exactly")
+    return env_id
+
+
 def _short(env_id: str) -> str:
-    return env_short_name(str(env_id).strip())
+    """The short name of an id asked for: ``rehab-knee-v2`` or ``rehabbot/rehab-knee-v2``
+    (nothing else: another namespace or a ``module:`` prefix is a :class:`UsageError`)."""
+    text = str(env_id).strip()
+    namespace, sep, short = text.rpartition("/")
+    if sep and namespace != NAMESPACE:
+        raise UsageError(f"{env_id!r} is not a {NAMESPACE} id (ENV is rehab-knee-v2 or "
+                         f"{NAMESPACE}/rehab-knee-v2); zoo: specs name files inside the zoo "
+                         "only")
+    return _check_zoo_name(short, "env")
 
 
 # The two parts of a zoo file's path: folder names, never a way out of the zoo.
@@ -399,9 +450,10 @@ def load(env_id: str, algo: str) -> ZooPolicy:
     if not path.is_file():
         raise UsageError(f"the zoo has no agent {_short(env_id)}/{str(algo).strip().lower()}; "
                          f"{_listing()}")
-    policy = ZooPolicy.from_file(path)
-    if _short(policy.env_id) != _short(env_id):
-        raise ZooError(f"{path} holds an agent for {policy.env_id!r}, not {env_id!r}")
+    policy = ZooPolicy.from_file(path)  # ZooError: an env_id that is not a registered id
+    wanted = f"{NAMESPACE}/{_short(env_id)}"
+    if policy.env_id != wanted:
+        raise ZooError(f"{path} holds an agent for {policy.env_id!r}, not {wanted!r}")
     name = agent_name(policy.algo, policy.metadata.get("env_kwargs"),
                       policy.metadata.get("backend"))
     if name != path.stem:
@@ -434,55 +486,3 @@ def parse_spec(spec: str) -> tuple[str, str]:
 def load_spec(spec: str) -> ZooPolicy:
     """The agent a ``zoo:ENV/ALGO`` spec names."""
     return load(*parse_spec(spec))
-
-
-# --------------------------------------------------------------------------- full models
-
-FULL_MODEL_SUFFIX = ".zip"
-
-
-def full_model_path(env_id: str, algo: str, root: Path | None = None) -> Path:
-    """``<zoo>/<env-short-name>/<algo>.zip``: where the zoo keeps an agent's whole model."""
-    return zoo_path(env_id, algo, root).with_suffix(FULL_MODEL_SUFFIX)
-
-
-def load_full_model(env_id: str, algo: str, env: gym.Env | None = None) -> Any:
-    """The trained model (SB3 or SBX, with its critics) behind the zoo's agent for ``env_id``
-    and ``algo``, loaded without unpickling anything
-    (:func:`rehabbot.rl.safe_load.load_safely`): ``model.learn(...)`` fine-tunes it. ``env``
-    (default: the agent's env, made with its kwargs) gives the spaces and is the env it
-    trains on.
-
-    Raises:
-        UsageError: no such agent, or the zoo keeps only its actor.
-        ZooError: the model file is not the one the agent was exported with (SHA-256).
-    """
-    from rehabbot.rl.algorithms import algo_class
-    from rehabbot.rl.safe_load import load_safely
-
-    meta = load(env_id, algo).metadata
-    path = full_model_path(meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs"),
-                                                      meta.get("backend")))
-    if not path.is_file():
-        raise UsageError(f"the zoo keeps only the actor of {_short(meta['env_id'])}/"
-                         f"{path.stem} (no {path.name}); load(...) gives the actor")
-    if hashlib.sha256(path.read_bytes()).hexdigest() != meta.get("full_model_sha256"):
-        raise ZooError(f"{path} is not the model this agent was exported from (its SHA-256 "
-                       "differs from the agent's full_model_sha256)")
-    env = env if env is not None else gym.make(meta["env_id"], **(meta.get("env_kwargs") or {}))
-    manifest = {"algo": meta["algo"], "hyperparameters": meta.get("hyperparameters")}
-    return load_safely(algo_class(meta["algo"], meta["backend"]), path, env, meta["algo"],
-                       meta["backend"], manifest)
-
-
-def ship_full_model(model_path: str | Path, out_npz: Path) -> dict[str, str]:
-    """Copy a run's ``model.zip`` beside the zoo file ``out_npz`` (atomically); the metadata
-    entry that binds the two (``full_model_sha256``)."""
-    source = Path(model_path)
-    if source.is_dir():
-        source = source / "model.zip"
-    target = Path(out_npz).with_suffix(FULL_MODEL_SUFFIX)
-    data = source.read_bytes()
-    target.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(target, lambda stream: stream.write(data))
-    return {"full_model_sha256": hashlib.sha256(data).hexdigest()}

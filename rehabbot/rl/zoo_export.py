@@ -42,12 +42,13 @@ from rehabbot.rl.safe_load import is_sbx
 from rehabbot.rl.zoo import (
     DEFAULT_EPISODES,
     DEFAULT_SEED,
+    RESERVED_METADATA,
     ZooPolicy,
     agent_name,
-    ship_full_model,
     write_zoo_file,
     zoo_path,
 )
+from rehabbot.rl.zoo_full import ship_full_model
 
 Op = tuple[str, dict[str, Any]]
 # JAX activation function name -> zoo op (with its default parameter)
@@ -303,11 +304,27 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
     ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
     train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
     command, and its ``vecnormalize.json`` the observation normalisation). ``metadata`` adds
-    or overrides metadata fields. ``full`` also keeps the model zip beside the zoo file
-    (:func:`ship_full_model`, for :func:`load_full_model`). The exported actor then runs
+    fields of its own (a note: how the seed was chosen); the keys the exporter writes
+    (:data:`~rehabbot.rl.zoo.RESERVED_METADATA`: the env id, the algorithm, the hashes ...)
+    are refused. ``full`` also keeps the model zip beside the zoo file
+    (:func:`~rehabbot.rl.zoo_full.ship_full_model`, for
+    :func:`~rehabbot.rl.zoo_full.load_full_model`). The exported actor then runs
     ``episodes`` episodes (seeds ``seed, seed + 1, ...``; 0: none) and its success rate is
     recorded. Returns the metadata written. Imports the model's library (PyTorch or JAX).
+
+    Raises:
+        UsageError: a reserved metadata key, a negative ``episodes`` or ``seed``, a model the
+            zoo cannot hold.
+        OutputError: a file cannot be written (a full disk), naming it.
     """
+    reserved = sorted(RESERVED_METADATA.intersection(metadata or {}))
+    if reserved:
+        raise UsageError(f"the metadata {', '.join(map(repr, reserved))} cannot be set by a "
+                         "note: the exporter writes it (reserved keys: "
+                         f"{', '.join(sorted(RESERVED_METADATA))})")
+    for name, value in (("episodes", episodes), ("seed", seed)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise UsageError(f"{name}={value!r} must be an integer >= 0")
     ops, model, meta = load_source(model_or_run_dir, algo, env_id)
     env_id = env_id or meta.get("env_id")
     if not env_id:

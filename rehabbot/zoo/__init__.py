@@ -10,12 +10,14 @@
     env = gym.make(agent.env_id, **agent.metadata.get("env_kwargs", {}))
     obs, info = env.reset(seed=0)
     action, _ = agent.predict(obs)                # SB3's signature; deterministic only
-    model = rehabbot.zoo.load_full_model("rehab-knee-v2", "sac")  # SBX/SB3, for .learn()
+    # The whole SBX/SB3 model, for .learn(): fetched once (rehabbot zoo fetch, docs/zoo.md)
+    model = rehabbot.zoo.load_full_model("rehab-knee-v2", "sac")
 
-This package is the data folder: ``<env-short-name>/<algo>.npz``, one file per agent. The
-loader lives in :mod:`rehabbot.rl.zoo` (the ``rl`` layer), which also builds the files
-(``rehabbot zoo export RUN_DIR``) and documents their
-format; this module only re-exports it. Importing it loads neither PyTorch nor JAX.
+This package is the data folder: ``<env-short-name>/<algo>.npz``, one file per agent (the
+agents' full models are not shipped: :mod:`rehabbot.rl.zoo_full` fetches and loads them).
+The loader lives in :mod:`rehabbot.rl.zoo` (the ``rl`` layer), which also builds the files
+(``rehabbot zoo export RUN_DIR``) and documents their format; this module only re-exports
+it. Importing it loads neither PyTorch nor JAX.
 """
 
 from __future__ import annotations
@@ -26,9 +28,9 @@ from rehabbot.rl.zoo import (
     available,
     load,
     load_file,
-    load_full_model,
     zoo_dir,
 )
+from rehabbot.rl.zoo_full import fetch_full_model, find_full_model, load_full_model
 
-__all__ = ["ZooError", "ZooPolicy", "available", "load", "load_file", "load_full_model",
-           "zoo_dir"]
+__all__ = ["ZooError", "ZooPolicy", "available", "fetch_full_model", "find_full_model", "load",
+           "load_file", "load_full_model", "zoo_dir"]
