@@ -83,7 +83,8 @@ def test_a_figure_shown_as_its_repr_is_found(browser, tmp_path):
 
 
 def test_a_repr_quoted_in_the_prose_is_not_a_lost_figure(browser, tmp_path):
-    body = "<p>A figure prints as <code>&lt;Figure size 8x6 with 1 Axes&gt;</code>.</p>"
+    body = ("<p>A figure prints as <code>&lt;Figure size 8x6 with 1 Axes&gt;</code>.</p>"
+            "<table><tr><td><code>&lt;Figure size 8x6 with 1 Axes&gt;</code></td></tr></table>")
     assert findings(browser, tmp_path, body) == []
 
 

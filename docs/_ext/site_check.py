@@ -1,8 +1,8 @@
 """Check the built documentation site in a real browser (headless Chromium, through Selenium).
 
 ``python docs/_ext/site_check.py docs/_build/html`` (``make docs-check``) opens every page of
-the built site at a laptop's window width and reports, page by page, what a reader would see
-broken:
+the built site in a laptop's window and a phone's, and reports, page by page, what a reader
+would see broken:
 
 - ``table as text``: a paragraph (or list item, definition, table cell, output) outside code
   whose text holds a Markdown table's separator row (``| --- |``): a table not rendered;
@@ -16,10 +16,10 @@ broken:
   (outputs wrap: docs/_static/rehabbot.css), hidden until the reader scrolls sideways;
 - ``image not loaded``: an ``<img>`` whose file is missing or does not decode.
 
-Each finding is one line, ``page: what: element: detail``; the exit status is 1 when there is
-any, 2 for bad usage (no built site, no browser), 0 for a clean site. The browser is Debian's
-``chromium`` with its ``chromium-driver`` (``.ci/run`` installs both); nothing is downloaded:
-the driver's path is given, so Selenium Manager is never asked for one.
+Each finding is one line, ``page @ width: what: element: detail``; the exit status is 1 when
+there is any, 2 for bad usage (no built site, no browser), 0 for a clean site. The browser is
+Debian's ``chromium`` with its ``chromium-driver`` (``.ci/run`` installs both); nothing is
+downloaded: the driver's path is given, so Selenium Manager is never asked for one.
 """
 
 from __future__ import annotations
@@ -30,13 +30,14 @@ import os
 import shutil
 import sys
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from pathlib import Path
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"
-# A laptop's window; Furo shows its three columns (navigation, content, contents) from 82em.
-WINDOW_WIDTH_PX = 1366
+# A laptop's window (Furo shows its three columns: navigation, content, contents) and a phone's
+# (one column).
+WINDOW_WIDTHS_PX = (1366, 390)
 WINDOW_HEIGHT_PX = 900
 # Sphinx's own pages: the search page fills itself by script, the indexes are lists of links.
 SKIPPED_PAGES = {"search.html", "genindex.html", "py-modindex.html"}
@@ -123,8 +124,8 @@ const IMAGE_WAIT_MS = 10000;
     const match = node.textContent.match(REPR);
     if (!match) continue;
     const el = node.parentElement;
-    // A repr quoted in the prose's inline code is text about the repr, not a lost figure.
-    if (el.closest("p code, li code, dd code")) continue;
+    // A repr quoted in inline code (prose, a table) is text about the repr, not a lost figure.
+    if (el.closest("code") && !el.closest("pre")) continue;
     if (!visible(el)) continue;
     findings.push(["repr shown", describe(el), match[0]]);
   }
@@ -189,12 +190,13 @@ class Finding:
     """One thing a reader would see broken on one page."""
 
     page: str
+    width_px: int
     kind: str
     element: str
     detail: str
 
     def __str__(self) -> str:
-        return f"{self.page}: {self.kind}: {self.element}: {self.detail}"
+        return f"{self.page} @ {self.width_px} px: {self.kind}: {self.element}: {self.detail}"
 
 
 def pages_of(site: Path) -> list[Path]:
@@ -219,7 +221,7 @@ def browser_missing() -> str | None:
 class Browser:
     """One headless Chromium for a whole check; a fresh, throwaway profile."""
 
-    def __init__(self, width_px: int = WINDOW_WIDTH_PX, height_px: int = WINDOW_HEIGHT_PX):
+    def __init__(self, width_px: int = WINDOW_WIDTHS_PX[0], height_px: int = WINDOW_HEIGHT_PX):
         from selenium import webdriver
         from selenium.webdriver.chrome.service import Service
 
@@ -237,11 +239,17 @@ class Browser:
             shutil.rmtree(self._profile, ignore_errors=True)
             raise
         self._driver.set_script_timeout(60)
+        self.width_px = width_px
+
+    def resize(self, width_px: int) -> None:
+        self._driver.set_window_size(width_px, WINDOW_HEIGHT_PX)
+        self.width_px = width_px
 
     def check(self, page: Path, name: str) -> list[Finding]:
         self._driver.get(page.resolve().as_uri())
         rows = self._driver.execute_async_script(CHECK_PAGE_JS)
-        return [Finding(name, kind, element, detail) for kind, element, detail in rows]
+        return [Finding(name, self.width_px, kind, element, detail)
+                for kind, element, detail in rows]
 
     def close(self) -> None:
         try:
@@ -256,18 +264,16 @@ class Browser:
         self.close()
 
 
-def check_pages(pages: Iterable[tuple[Path, str]], width_px: int = WINDOW_WIDTH_PX
-                ) -> Iterator[Finding]:
-    """The findings of each (file, name) page, in one browser."""
-    with Browser(width_px) as browser:
-        for page, name in pages:
-            yield from browser.check(page, name)
-
-
-def check_site(site: Path, width_px: int = WINDOW_WIDTH_PX) -> list[Finding]:
-    """The findings of every page of a built site."""
+def check_site(site: Path, widths_px: Iterable[int] = WINDOW_WIDTHS_PX) -> list[Finding]:
+    """The findings of every page of a built site, at each window width, in one browser."""
     pages = [(page, page.relative_to(site).as_posix()) for page in pages_of(site)]
-    return list(check_pages(pages, width_px))
+    findings: list[Finding] = []
+    with Browser() as browser:
+        for width_px in widths_px:
+            browser.resize(width_px)
+            for page, name in pages:
+                findings += browser.check(page, name)
+    return findings
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -277,11 +283,13 @@ def main(argv: list[str] | None = None) -> int:
                     "shown as text, reprs shown instead of figures, content wider than the "
                     "page, clipped code or output, and images that do not load.")
     parser.add_argument("site", type=Path, help="the built HTML (docs/_build/html)")
-    parser.add_argument("--width", type=int, default=WINDOW_WIDTH_PX, metavar="PX",
-                        help=f"browser window width in px (default {WINDOW_WIDTH_PX})")
+    parser.add_argument("--width", type=int, nargs="+", default=list(WINDOW_WIDTHS_PX),
+                        metavar="PX", help="browser window widths in px, each checked (default "
+                        f"{' '.join(map(str, WINDOW_WIDTHS_PX))}: a laptop and a phone)")
     args = parser.parse_args(argv)
-    if not 320 <= args.width <= 4000:
-        parser.error(f"--width {args.width}: must be 320 to 4000 px")
+    for width in args.width:
+        if not 320 <= width <= 4000:
+            parser.error(f"--width {width}: must be 320 to 4000 px")
     if not (args.site / "index.html").is_file():
         parser.error(f"{args.site}: no index.html there; build the site first (make docs)")
     missing = browser_missing()
@@ -292,7 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     findings = check_site(args.site, args.width)
     for finding in findings:
         print(finding)
-    print(f"site_check.py: {len(pages)} pages at {args.width} px, {len(findings)} findings")
+    widths = " and ".join(f"{width} px" for width in args.width)
+    print(f"site_check.py: {len(pages)} pages at {widths}, {len(findings)} findings")
     return 1 if findings else 0
 
 
