@@ -8,7 +8,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 
-.PHONY: venv test test-fast demo docs lint bench images clean distclean
+.PHONY: venv test test-fast demo docs docs-check lint bench images clean distclean
 
 venv: $(STAMP)
 
@@ -41,9 +41,27 @@ demo: $(STAMP)
 
 # The documentation site (Sphinx, MyST, Furo) into docs/_build/html, in strict mode: a warning,
 # a broken cross-reference (-n) or a tutorial that fails to execute fails the build; every
-# problem is reported before it stops (--keep-going).
-docs: $(STAMP)
-	MUJOCO_GL=$(MUJOCO_GL) $(PY) -m sphinx -W --keep-going -n -b html docs docs/_build/html
+# problem is reported before it stops (--keep-going). It is built in a venv of its own,
+# .venv-docs, with `.[docs]` alone: so the build proves that extra is enough (an API page that
+# needs another extra's library fails it: docs/_ext/optional_imports.py).
+DOCS_VENV := .venv-docs
+DOCS_PY := $(DOCS_VENV)/bin/python
+DOCS_STAMP := $(DOCS_VENV)/.installed
+
+$(DOCS_STAMP): pyproject.toml rehabbot/common/version.py
+	test -x $(DOCS_PY) || $(PYTHON_BOOTSTRAP) -m venv $(DOCS_VENV)
+	$(DOCS_PY) -m pip install --upgrade pip
+	$(DOCS_PY) -m pip install -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	MUJOCO_GL=$(MUJOCO_GL) $(DOCS_PY) -m sphinx -W --keep-going -n -b html docs docs/_build/html
+
+# The built site, page by page, in headless Chromium (Debian's chromium and chromium-driver):
+# tables shown as text, reprs instead of figures, content wider than the page, clipped code or
+# output, images that do not load (docs/_ext/site_check.py). Run `make docs` first.
+docs-check: $(DOCS_STAMP)
+	$(DOCS_PY) docs/_ext/site_check.py docs/_build/html
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
@@ -71,6 +89,6 @@ clean:
 	rm -rf build dist *.egg-info .pytest_cache .ruff_cache .hypothesis docs/_build docs/_generated
 	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +
 
-# Everything `clean` removes, plus the virtual environment.
+# Everything `clean` removes, plus the virtual environments.
 distclean: clean
-	rm -rf $(VENV)
+	rm -rf $(VENV) $(DOCS_VENV)

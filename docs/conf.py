@@ -16,7 +16,9 @@ ROOT = DOCS.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(DOCS / "_ext"))
 
-import rehabbot  # noqa: E402  (after the path is set)
+import optional_imports  # noqa: E402  (docs/_ext, after the path is set)
+
+import rehabbot  # noqa: E402
 
 project = "RehabBot"
 author = "RehabBot developers"
@@ -55,8 +57,16 @@ nb_execution_timeout = 600
 nb_execution_excludepatterns: list[str] = []
 nb_merge_streams = True
 nb_execution_show_tb = True  # a failing tutorial prints its traceback in the build log
+# A cell's Markdown output (IPython.display.Markdown: the clinical tables) is parsed as MyST,
+# which has tables; MyST-NB's default, CommonMark, has none and shows a table as a paragraph.
+nb_render_markdown_format = "myst"
 
 # -- autodoc ---------------------------------------------------------------------------------
+# The docs build needs `pip install ".[docs]"` alone (CI builds them in such a venv: make docs):
+# the libraries of other extras that documented modules import ([gpu]: JAX, Flax, Warp, MJX,
+# rsl_rl) are mocked where missing, with stand-ins for the two names that shape a documented
+# class (docs/_ext/optional_imports.py).
+autodoc_mock_imports = optional_imports.mocked_imports()
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
 autodoc_typehints_format = "short"
@@ -88,7 +98,8 @@ nitpick_ignore: list[tuple[str, str]] = []
 # -- HTML ------------------------------------------------------------------------------------
 html_theme = "furo"
 html_title = f"RehabBot {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["rehabbot.css"]  # docs/_static/rehabbot.css: wide tables, cell outputs
 html_show_sourcelink = False
 
 # -- the env modules' docstrings are Markdown (Gymnasium-v5 tables): the env pages render them

@@ -162,3 +162,46 @@ def test_cli_help_cites_only_files_in_the_repository() -> None:
             if is_repository_path(token) and not path_exists(token):
                 problems.append(f"{name}: {token}")
     assert not problems, problems
+
+
+def sections(text: str) -> dict[str, str]:
+    """A Markdown page's ``## `` sections by title, each up to the next ``## `` heading."""
+    parts = re.split(r"^## (.+)$", text, flags=re.MULTILINE)
+    return {title.strip(): body for title, body in zip(parts[1::2], parts[2::2], strict=True)}
+
+
+def python_blocks(text: str) -> list[str]:
+    return re.findall(r"^```python\n(.*?)^```", text, flags=re.MULTILINE | re.DOTALL)
+
+
+def test_the_landing_page_leads_with_a_picture_install_and_quickstart() -> None:
+    text = (DOCS / "index.md").read_text(encoding="utf-8")
+    before_toctree = text[:text.index("```{toctree}")]
+    titles = list(sections(before_toctree))
+    assert titles[:2] == ["Install", "Quickstart"], titles
+    intro = before_toctree[:before_toctree.index("## Install")]
+    pictures = re.findall(r"!\[[^\]]+\]\((images/[\w.-]+\.png)\)", intro)
+    assert pictures and all((DOCS / picture).is_file() for picture in pictures), pictures
+    install = sections(before_toctree)["Install"]
+    assert re.search(r"^pip install \.\s", install, flags=re.MULTILINE), install
+    assert python_blocks(sections(before_toctree)["Quickstart"])
+    # How the site is built is a page of its own, not the landing page's business.
+    assert "How this site is built" not in text
+    assert "building-the-docs" in text[text.index("```{toctree}"):]
+
+
+def test_the_readme_and_the_landing_page_give_the_same_quickstart() -> None:
+    readme = sections((ROOT / "README.md").read_text(encoding="utf-8"))
+    landing = sections((DOCS / "index.md").read_text(encoding="utf-8"))
+    assert python_blocks(readme["Quickstart"])[0] == python_blocks(landing["Quickstart"])[0]
+    assert list(readme).index("Install") < list(readme).index("Quickstart")
+
+
+def test_the_quickstart_runs_as_typed(capsys) -> None:
+    """The landing page's first code, with nothing but a core install: a zoo agent finishes
+    its knee episode."""
+    code = python_blocks(sections((DOCS / "index.md").read_text(encoding="utf-8"))
+                         ["Quickstart"])[0]
+    exec(compile(code, "docs/index.md, Quickstart", "exec"), {"__name__": "quickstart"})
+    success, force_n = capsys.readouterr().out.split()
+    assert success == "True" and 0 < float(force_n) < 130, (success, force_n)

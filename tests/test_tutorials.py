@@ -78,3 +78,44 @@ def test_the_cell_reader_finds_cells_and_reports_syntax_errors():
     compile(ipython_to_python(cells[0]), "cell", "exec")
     with pytest.raises(SyntaxError):
         compile(ipython_to_python(cells[2]), "cell", "exec")
+
+
+# The widest code line that the site's content column shows without scrolling (Furo, a
+# laptop's 1366 px window: 89 characters of its code font); longer lines hide their end.
+CODE_LINE_MAX_CHARS = 88
+
+
+@pytest.mark.parametrize("path", TUTORIALS, ids=[p.name for p in TUTORIALS])
+def test_tutorial_code_lines_fit_the_page(path: Path):
+    long_lines = [f"code cell {k + 1}: {len(line)} characters: {line.strip()[:60]}"
+                  for k, cell in enumerate(code_cells(path.read_text(encoding="utf-8")))
+                  for line in cell.splitlines() if len(line) > CODE_LINE_MAX_CHARS]
+    assert not long_lines, f"{path.name}: lines wider than the page's column: {long_lines}"
+
+
+# `rehabbot evaluate mymodule:GentleExpert`: a policy given as module:attribute in a command.
+COMMAND_POLICY_RE = re.compile(r"(?<![\w/.:-])([a-z_][a-z0-9_]*):([A-Z]\w*)")
+SHELL_BLOCK_RE = re.compile(r"^```(?:console|bash|shell|sh)\n(?P<body>.*?)^```",
+                            re.DOTALL | re.MULTILINE)
+
+
+@pytest.mark.parametrize("path", TUTORIALS, ids=[p.name for p in TUTORIALS])
+def test_a_module_a_command_imports_is_one_the_page_says_to_write(path: Path):
+    """A command that loads ``mymodule:GentleExpert`` works only if the reader saved the class
+    in ``mymodule.py``: the page must say so (outside the command)."""
+    text = path.read_text(encoding="utf-8")
+    prose = SHELL_BLOCK_RE.sub("", text)
+    for block in SHELL_BLOCK_RE.finditer(text):
+        for module, attribute in COMMAND_POLICY_RE.findall(block["body"]):
+            assert f"`{module}.py`" in prose, (
+                f"{path.name}: a command uses {module}:{attribute}, but the page never says to "
+                f"save {attribute} as `{module}.py`")
+            assert re.search(rf"\bclass {attribute}\b", text), \
+                f"{path.name}: {module}:{attribute} is not defined on the page"
+
+
+def test_the_command_policy_reader_finds_module_attributes():
+    block = ("```console\nrehabbot evaluate expert mymodule:GentleExpert zoo:rehab-knee-v2/sac "
+             "--env-kwargs '{\"a\": 1}' runs/x:Y\n```\n")
+    found = [COMMAND_POLICY_RE.findall(m["body"]) for m in SHELL_BLOCK_RE.finditer(block)]
+    assert found == [[("mymodule", "GentleExpert")]]

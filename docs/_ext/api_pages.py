@@ -1,14 +1,14 @@
 """Sphinx extension: the API reference, one page per layer of the package, written at build time.
 
-Every module of ``rehabbot`` (found with ``pkgutil.walk_packages``, so that a new module is
-documented without editing the docs) gets an ``automodule`` block on its layer's page,
+Every module of ``rehabbot`` (found in the source tree, so that a new module is documented
+without editing the docs, and without importing anything: listing needs no optional extra)
+gets an ``automodule`` block on its layer's page,
 ``docs/_generated/api/<layer>.md`` (not committed); ``docs/_generated/api/index.md`` lists the
 layers in the order of the import-linter contract (pyproject.toml), top to bottom.
 """
 
 from __future__ import annotations
 
-import pkgutil
 from pathlib import Path
 from typing import Any
 
@@ -27,20 +27,33 @@ LAYERS: tuple[tuple[str, str], ...] = (
 SKIP = {"rehabbot.__main__"}
 
 
+PACKAGE_DIR = Path(__file__).resolve().parents[2] / "rehabbot"
+
+
+def source_of(module: str) -> Path:
+    """The folder of a package, or the file of a module, of ``rehabbot``."""
+    path = PACKAGE_DIR.parent.joinpath(*module.split("."))
+    return path if path.is_dir() else path.with_suffix(".py")
+
+
+def is_package(module: str) -> bool:
+    return (source_of(module) / "__init__.py").is_file()
+
+
 def modules_of(layer: str) -> list[str]:
-    import importlib
-
-    package = importlib.import_module(layer)
-    if layer == "rehabbot" or not hasattr(package, "__path__"):
+    """A layer's package and every module under it, from the source files (not imported)."""
+    if layer == "rehabbot" or not is_package(layer):
         return [layer]
-    found = [info.name for info in pkgutil.walk_packages(package.__path__, layer + ".")]
-    return [layer, *sorted(name for name in found if name not in SKIP)]
-
-
-def is_package(name: str) -> bool:
-    import importlib
-
-    return hasattr(importlib.import_module(name), "__path__")
+    root = PACKAGE_DIR.parent
+    found = []
+    for path in source_of(layer).rglob("*.py"):
+        folder = path.parent.relative_to(root).parts
+        # Only files inside packages all the way up (not a folder of scripts or data).
+        if not all((root.joinpath(*folder[:k]) / "__init__.py").is_file()
+                   for k in range(1, len(folder) + 1)):
+            continue
+        found.append(".".join(folder if path.stem == "__init__" else (*folder, path.stem)))
+    return [layer, *sorted(name for name in found if name != layer and name not in SKIP)]
 
 
 def write_pages(out_dir: Path) -> None:

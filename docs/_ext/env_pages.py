@@ -3,7 +3,8 @@
 Every ``rehabbot/`` id in ``gymnasium.registry`` is sorted into a family (arm, hip, knee, both
 arms, condition variants, populations). Each family's page (``docs/_generated/envs/<family>.md``,
 not committed) has a table of its ids with their registered kwargs, ``max_episode_steps`` and
-the observation and action spaces of the env that ``gym.make`` builds, followed by the env
+the observation and action spaces of the env that ``gym.make`` builds (for a ``-myo`` id, its
+base id's, which are the same: no ``[myo]`` extra needed), followed by the env
 class's module docstring (Gymnasium-v5 style Markdown sections and tables), whose
 reStructuredText roles (``:class:`x```) become MyST roles (``{class}`x```). The page
 ``docs/_generated/envs/ids.md`` lists every id, one table, so that no page types them by hand.
@@ -120,6 +121,7 @@ def registered_ids() -> list[dict[str, Any]]:
     import gymnasium as gym
 
     import rehabbot  # noqa: F401  (registers the ids)
+    from rehabbot.envs.registration import MYO_VARIANTS
 
     rows = []
     for env_id, spec in gym.registry.items():
@@ -127,9 +129,12 @@ def registered_ids() -> list[dict[str, Any]]:
             continue
         entry_point = str(spec.entry_point)
         kwargs = dict(spec.kwargs)
+        # A -myo id has its base id's spaces (tests/test_myo_patient.py checks it): they are
+        # read from the base id, so that the docs build needs no [myo] extra and no muscles.
+        made_as = MYO_VARIANTS.get(env_id, env_id)
         with warnings.catch_warnings():  # Gymnasium advises -v2 for the -v0 and -v1 ids
             warnings.simplefilter("ignore")
-            env = gym.make(env_id)
+            env = gym.make(made_as)
         try:
             observation, action = (describe_space(env.observation_space),
                                    describe_space(env.action_space))
@@ -138,7 +143,6 @@ def registered_ids() -> list[dict[str, Any]]:
         rows.append({"id": env_id, "entry_point": entry_point, "kwargs": kwargs,
                      "max_episode_steps": spec.max_episode_steps,
                      "family": family_of(env_id, entry_point, kwargs),
-                     "version": env_id.rsplit("-", 1)[-1],
                      "observation": observation, "action": action})
     return rows
 
@@ -148,13 +152,15 @@ def format_kwargs(kwargs: dict[str, Any]) -> str:
 
 
 def ids_table(rows: list[dict[str, Any]], link_family: bool = False) -> str:
-    head = ["id", "version", "registered kwargs", "max_episode_steps", "observation space",
+    """The ids' table, narrow enough for the page's column: the version is in the id, and the
+    steps' header (the spec's ``max_episode_steps``) is words that wrap."""
+    head = ["id", "registered kwargs", "max. episode steps", "observation space",
             "action space"]
     if link_family:
         head.insert(1, "family")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in rows:
-        cells = [f"`{row['id']}`", f"`-{row['version']}`", format_kwargs(row["kwargs"]),
+        cells = [f"`{row['id']}`", format_kwargs(row["kwargs"]),
                  str(row["max_episode_steps"]), row["observation"], row["action"]]
         if link_family:
             cells.insert(1, f"[{row['family']}]({row['family']}.md)")
