@@ -43,9 +43,13 @@ def test_the_session_is_the_one_of_the_help() -> None:
 
 
 def test_the_core_simulation_hides_the_extras_and_keeps_the_core() -> None:
+    import importlib.util
+
     hidden = set(hidden_names()["modules"])
-    assert {"stable_baselines3", "torch", "yaml", "sbx", "jax", "matplotlib", "imageio",
-            "ray", "myo_sim", "warp", "rsl_rl", "mujoco.mjx"} <= hidden
+    for module in ("stable_baselines3", "torch", "yaml", "sbx", "jax", "matplotlib", "imageio",
+                   "ray", "myo_sim", "warp", "rsl_rl", "mujoco.mjx"):
+        if importlib.util.find_spec(module) is not None:  # installed here: hidden there
+            assert module in hidden, module
     assert not {"mujoco", "gymnasium", "numpy", "rehabbot"} & hidden
 
 
