@@ -133,28 +133,34 @@ def test_unknown_camera_exits_2_and_lists_cameras(tmp_path: Path, capsys) -> Non
     assert not (tmp_path / "x.png").exists()
 
 
+def _usage_error(argv: list[str], capsys) -> str:
+    """``main(argv)`` refused by argparse (exit 2); its one-line message."""
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    return capsys.readouterr().err.strip().splitlines()[-1]
+
+
 def test_image_larger_than_offscreen_buffer_is_a_usage_error(tmp_path: Path, capsys) -> None:
-    code = main(["snapshot", SCENE, "--out", str(tmp_path / "x.png"), "--width", "100000"])
-    assert code == 2
-    err = capsys.readouterr().err
-    assert "offwidth" in err and len(err.strip().splitlines()) == 1
+    err = _usage_error(["snapshot", SCENE, "--out", str(tmp_path / "x.png"), "--width",
+                        "100000"], capsys)
+    assert "--width" in err and "1,280" in err and "'100000'" in err
 
 
 def test_invalid_profile_is_a_usage_error(tmp_path: Path, capsys) -> None:
-    code = main(["snapshot", SCENE, "--out", str(tmp_path / "x.png"), "--profile-height", "9"])
-    assert code == 2
-    err = capsys.readouterr().err
-    assert "height" in err and len(err.strip().splitlines()) == 1
+    err = _usage_error(["snapshot", SCENE, "--out", str(tmp_path / "x.png"),
+                        "--profile-height", "9"], capsys)
+    assert "--profile-height" in err and "[1.2, 2.2]" in err
 
 
-def test_unwritable_output_path_fails_with_one_line(tmp_path: Path, capsys) -> None:
+def test_an_out_below_a_file_is_a_usage_error_with_one_line(tmp_path: Path, capsys) -> None:
     blocker = tmp_path / "a_file"
     blocker.write_text("not a directory")
     code = main(["snapshot", SCENE, "--out", str(blocker / "shot.png"), "--width", "64",
                  "--height", "48"])
-    assert code == 1
+    assert code == 2
     err = capsys.readouterr().err
-    assert str(blocker / "shot.png") in err
+    assert str(blocker / "shot.png") in err and "is not a folder" in err
     assert len(err.strip().splitlines()) == 1
 
 
@@ -170,8 +176,7 @@ def test_view_without_display_fails_fast(monkeypatch, capsys) -> None:
 
 
 def test_view_rejects_non_positive_seconds(capsys) -> None:
-    assert main(["view", SCENE, "--seconds", "0"]) == 2
-    assert "--seconds" in capsys.readouterr().err
+    assert "--seconds" in _usage_error(["view", SCENE, "--seconds", "0"], capsys)
 
 
 @pytest.fixture(scope="module")

@@ -225,22 +225,6 @@ def test_render_rejects_bad_suffix(tmp_path: Path, capsys) -> None:
 # --------------------------------------------------------------------------- list, bench
 
 
-def test_list_shows_every_id_with_its_spaces(capsys) -> None:
-    from rehabbot.envs.registration import BILATERAL_IDS, ENV_SPECS
-
-    assert main(["list"]) == 0
-    lines = capsys.readouterr().out.strip().splitlines()
-    assert len(lines) == 1 + len(ENV_SPECS)
-    for env_id, (kwargs, description) in ENV_SPECS.items():
-        line = next(line for line in lines if line.startswith(env_id))
-        assert kwargs["limb"] in line and kwargs["task_type"] in line
-        v2 = env_id.endswith("-v2")
-        obs, act = (("(98,)" if v2 else "(44,)", "(12,)") if env_id in BILATERAL_IDS else
-                    ("(50,)" if v2 else "(23,)", "(6,)"))
-        assert obs in line and act in line and description in line
-        assert ("1.00000" if v2 else "0.00785") in line  # Box(-1, 1) or pi/400
-
-
 # --------------------------------------------------------------------------- listings
 
 

@@ -121,7 +121,7 @@ def test_an_output_file_is_checked_before_work(tmp_path: Path) -> None:
 @pytest.mark.parametrize("out, code, message", [
     ("x.avi", 2, "must end in .mp4 or .gif"),
     ("folder.mp4", 2, "is a folder"),
-    ("a-file/x.mp4", 1, "cannot write to folder of --out"),
+    ("a-file/x.mp4", 2, "is not a folder"),
 ])
 def test_render_checks_its_output_before_the_episode(tmp_path, monkeypatch, capsys, out, code,
                                                      message) -> None:
@@ -396,7 +396,8 @@ def test_a_negative_seed_is_refused_by_the_parser(command, tmp_path, capsys) -> 
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err
-    assert "argument --seed: must be an integer >= 0, got -1" in err.splitlines()[-1]
+    assert "argument --seed: must be an integer" in err.splitlines()[-1]
+    assert "-1" in err.splitlines()[-1]
 
 
 @pytest.mark.parametrize("error", [

@@ -544,7 +544,11 @@ def test_user_errors_name_the_bad_value(tmp_path: Path) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("")
     err = _cli_error(_parse(V2, "--algo", "sac", "--out", str(blocker / "runs")))
-    assert str(blocker / "runs") in str(err) and err.exit_code == 1
+    assert str(blocker / "runs") in str(err) and "is not a folder" in str(err)
+    assert err.exit_code == 2
+    err = _cli_error(_parse(V2, "--algo", "sac", "--out", str(tmp_path / "no" / "runs")))
+    assert "does not exist" in str(err) and err.exit_code == 2
+    assert not (tmp_path / "no").exists()
     err = _cli_error(_parse(V2, "--algo", "sac", "--out", str(out), "--env-kwargs", "{oops"))
     assert "--env-kwargs" in str(err)
     err = _cli_error(_parse(V2, "--algo", "sac", "--out", str(out),
@@ -580,7 +584,7 @@ def test_existing_runs_need_resume_or_overwrite(tmp_path: Path) -> None:
 def test_parser_defaults_short_ids_and_help() -> None:
     args = _parse(ENV, "--algo", "SAC")
     assert (args.timesteps, args.seeds, args.n_envs, args.out, args.resume) == \
-        (None, None, None, "runs", False)
+        (None, None, None, None, False)  # --out: runs, created with its parents
     assert args.func is cmd_train
     assert _parse(FULL_ID, "--algo", "ppo", "--timesteps", "2e5").timesteps == 200_000
     assert _parse(ENV, "--algo", "td3", "--seeds", "0", "1", "2").seeds == [0, 1, 2]
@@ -589,7 +593,7 @@ def test_parser_defaults_short_ids_and_help() -> None:
     add_train_parser(commands)
     text = commands.choices["train"].format_help()
     for needle in ("examples:", "--resume", "--hyperparams", "--checkpoint-freq",
-                   "--eval-episodes", "--env-kwargs", "--no-progress", "rehab-knee-v0"):
+                   "--eval-episodes", "--env-kwargs", "--no-progress", "rehabbot list"):
         assert needle in text, needle
 
 

@@ -4,7 +4,7 @@ arguments, calls a library function and maps its exceptions to exit codes
 
 Examples::
 
-    rehabbot list                                  # the registered env ids
+    rehabbot list                                  # the registered env ids (the registry)
     rehabbot train rehab-reach-v2 --algo sac --seeds 0 1 2  # the shipped settings
     rehabbot sweep sweeps/example.yaml             # a grid of runs on Ray Tune, resumable
     rehabbot evaluate runs/rehab-reach-v2/sac/seed0/model.zip expert random
@@ -23,6 +23,10 @@ Heavy imports (Stable-Baselines3, matplotlib) happen inside the command function
 from __future__ import annotations
 
 import argparse
+import os
+import select
+import signal
+import sys
 from collections.abc import Sequence
 
 from rehabbot.cli.display import has_display, use_headless_gl_by_default
@@ -36,8 +40,30 @@ from rehabbot.cli.errors import (
     report,
 )
 
-__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_SIGINT", "EXIT_USAGE", "CliError", "build_parser",
-           "has_display", "main", "use_headless_gl_by_default"]
+EXIT_SIGPIPE = 128 + signal.SIGPIPE  # the reader of stdout went away, as a shell reports it
+
+__all__ = ["EXIT_FAILURE", "EXIT_OK", "EXIT_SIGINT", "EXIT_SIGPIPE", "EXIT_USAGE",
+           "TYPICAL_SESSION", "CliError", "build_parser", "has_display", "main",
+           "use_headless_gl_by_default"]
+
+
+# The session of `rehabbot --help`, with the extra of `pip install "rehabbot[EXTRA]"` each
+# command needs (rehabbot.cli.needs; tests/test_cli_session.py runs it on a core install).
+TYPICAL_SESSION = """\
+a typical session, with the extra each command needs:
+  rehabbot list                                           # the core install
+  rehabbot train rehab-reach-v2 --algo sac --seeds 0 1 2  # [train]
+  rehabbot evaluate runs/rehab-reach-v2/sac/seed0/model.zip expert random  # [train]
+  rehabbot plot runs/rehab-reach-v2                       # [plot]
+  rehabbot render runs/rehab-reach-v2/sac/seed0/model.zip --out sac.mp4  # [video], [train]
+
+pip install "rehabbot[train,plot,video]" brings them all. With "rehabbot[jax]" too, train
+uses SBX (JAX) instead of Stable-Baselines3 (PyTorch), and its models need [jax] to load.
+A command whose extra is missing stops at once, naming the pip install that brings it.
+
+`rehabbot COMMAND --help` describes each command. Exit codes: 0 success, 1 failure (a
+missing extra included), 2 bad usage, 130 interrupted by Ctrl-C (training: resumable; 143
+for SIGTERM). Every failure is one line on stderr."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -58,15 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="RehabBot: a UR5e strapped to a humanoid patient, simulated in MuJoCo. "
                     "Train, evaluate, plot and render RL agents on its therapy exercises.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="a typical session:\n"
-               "  rehabbot list\n"
-               "  rehabbot train rehab-reach-v2 --algo sac --seeds 0 1 2  # the shipped settings\n"
-               "  rehabbot evaluate runs/rehab-reach-v2/sac/seed0/model.zip expert random\n"
-               "  rehabbot plot runs/rehab-reach-v2\n"
-               "  rehabbot render runs/rehab-reach-v2/sac/seed0/model.zip --out sac.mp4\n\n"
-               "`rehabbot COMMAND --help` describes each command. Exit codes: 0 success, "
-               "1 failure, 2 bad usage, 130 interrupted by Ctrl-C (training: resumable; "
-               "143 for SIGTERM). Every failure is one line on stderr.",
+        epilog=TYPICAL_SESSION,
     )
     parser.add_argument("--version", action="version", version=f"rehabbot {VERSION}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -93,5 +111,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         with quiet_third_parties():
             return int(args.func(args))
+    except BrokenPipeError as err:
+        if stdout_is_closed():  # `rehabbot list | head`: the reader has what it wanted
+            return EXIT_SIGPIPE
+        return report(err)
     except (Exception, KeyboardInterrupt) as err:  # every failure: one line
         return report(err)
+
+
+def stdout_is_closed() -> bool:
+    """Whether the reader of stdout has gone away (a pipe closed by ``head``: polling it
+    reports an error); if so, stdout is pointed at the null device so that nothing more
+    fails on exit."""
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        events = poller.poll(0)
+    except (AttributeError, OSError, ValueError):  # no file (captured), or no poll()
+        return False
+    if not any(mask & (select.POLLERR | select.POLLHUP) for _fd, mask in events):
+        return False
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, fd)
+    os.close(null)
+    return True

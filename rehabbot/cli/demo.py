@@ -35,7 +35,8 @@ import argparse
 import time
 from pathlib import Path
 
-from rehabbot.cli.errors import cli_command, non_negative_int
+from rehabbot.cli import limits
+from rehabbot.cli.errors import cli_command
 from rehabbot.envs.registration import env_short_name
 
 ENV_ID = "rehabbot/rehab-knee-v2"
@@ -47,25 +48,30 @@ EVAL_SEED = 1000  # evaluation episodes use seeds the training never reset with
 VIDEO_WIDTH_PX, VIDEO_HEIGHT_PX, VIDEO_FRAME_EVERY = 480, 360, 3  # 16.7 fps, software GL
 HYPERPARAMS = "sac"  # rehabbot/rl/hyperparams/sac.yml: plain MlpPolicy for the -v2 ids
 BACKEND = "auto"  # SBX (JAX) when installed (make demo installs it), else Stable-Baselines3
+DEFAULT_OUT = Path("runs/demo")  # created with its parents; a user's --out needs its parent
 
 
 def add_demo_parser(commands: argparse._SubParsersAction) -> None:
     """Add ``demo`` to the ``rehabbot`` subcommands."""
     parser = commands.add_parser("demo", help="the main job: train SAC (plain network), evaluate, "
                                  "plot, render, summarise (make demo)",
-                                 description=__doc__.split("\n\n")[0],
+                                 description=__doc__.split("\n\n")[0] + '\n\nNeeds pip '
+                                 'install "rehabbot[train,plot,video]" ([video]: not with '
+                                 "--no-video).",
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=Path("runs/demo"), metavar="DIR",
-                        help="output folder (default: runs/demo)")
-    parser.add_argument("--timesteps", type=int, default=DEFAULT_TIMESTEPS, metavar="N",
-                        help=f"SAC training steps (default: {DEFAULT_TIMESTEPS})")
-    parser.add_argument("--demos", type=int, default=DEFAULT_DEMOS, metavar="N",
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help=f"output folder (default: {DEFAULT_OUT}); its parent folder must "
+                             "exist")
+    parser.add_argument("--timesteps", type=limits.timesteps, default=DEFAULT_TIMESTEPS,
+                        metavar="N", help=f"SAC training steps (default: {DEFAULT_TIMESTEPS})")
+    parser.add_argument("--demos", type=limits.demos, default=DEFAULT_DEMOS, metavar="N",
                         help=f"scripted-expert episodes put into the replay buffer before "
                         f"training (default: {DEFAULT_DEMOS})")
-    parser.add_argument("--episodes", type=int, default=DEFAULT_EPISODES, metavar="N",
+    parser.add_argument("--episodes", type=limits.episodes, default=DEFAULT_EPISODES,
+                        metavar="N",
                         help=f"evaluation episodes per policy (default: {DEFAULT_EPISODES})")
-    parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
-                        help="training seed (default: 0; S >= 0)")
+    parser.add_argument("--seed", type=limits.seed, default=0, metavar="S",
+                        help=f"training seed (default: 0; 0 <= S <= {limits.MAX_SEED})")
     parser.add_argument("--hyperparams", default=HYPERPARAMS, metavar="FILE.yml|NAME",
                         help="SAC hyperparameters (default: sac, shipped with rehabbot)")
     parser.add_argument("--no-video", action="store_true", help="skip the video")
@@ -76,6 +82,14 @@ def add_demo_parser(commands: argparse._SubParsersAction) -> None:
 @cli_command
 def cmd_demo(args: argparse.Namespace) -> int:
     """Run the demo; an interrupted training says how to resume (run the demo again)."""
+    from rehabbot.cli.needs import MP4_MODULES, NOTHING, PLOT_MODULES, TRAIN_MODULES, require
+    from rehabbot.common.files import check_parent_exists
+
+    require("rehabbot demo", TRAIN_MODULES, PLOT_MODULES, NOTHING if args.no_video else MP4_MODULES)
+    if args.out is None:
+        args.out = DEFAULT_OUT
+    else:
+        check_parent_exists(args.out)
     from rehabbot.rl.training import TrainingInterrupted
 
     try:

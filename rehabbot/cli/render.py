@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from rehabbot.cli import limits
 from rehabbot.cli.errors import (
     EXIT_OK,
     EXIT_USAGE,
@@ -14,7 +15,6 @@ from rehabbot.cli.errors import (
     bounded_int,
     cli_command,
     env_kwargs_object,
-    non_negative_int,
 )
 
 RENDER_KWARGS = ("render_mode", "width", "height", "camera_name")  # set by render itself
@@ -34,7 +34,9 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
                     "failure (a full disk) exits 1 and keeps an earlier file of that name. "
                     "Software rendering is slow (minutes for a few seconds of video): a "
                     "progress line on stderr says how many frames are done of at most how "
-                    "many, the time elapsed and the time left.",
+                    "many, the time elapsed and the time left. Needs pip install "
+                    '"rehabbot[video]" (and, for a model zip, the library that trained it: '
+                    '"rehabbot[train]" for Stable-Baselines3, "rehabbot[jax]" for SBX).',
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n"
                "  rehabbot render expert --env rehab-reach-v2 --out expert.mp4\n"
@@ -49,15 +51,18 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
                         help="env id (default: the model's run manifest or the zoo agent's "
                              "env; required for expert, aan and random)")
     parser.add_argument("--out", type=Path, required=True, metavar="FILE.mp4|FILE.gif",
-                        help="video file to write")
-    parser.add_argument("--seed", type=non_negative_int, default=0, metavar="S",
-                        help="reset seed (default: 0; S >= 0)")
-    parser.add_argument("--width", type=int, default=640, metavar="W", help="pixels (640)")
-    parser.add_argument("--height", type=int, default=480, metavar="H", help="pixels (480)")
+                        help="video file to write (its folder must exist)")
+    parser.add_argument("--seed", type=limits.seed, default=0, metavar="S",
+                        help=f"reset seed (default: 0; 0 <= S <= {limits.MAX_SEED})")
+    parser.add_argument("--width", type=limits.width_px, default=640, metavar="W",
+                        help=f"pixels (default 640, at most {limits.MAX_IMAGE_WIDTH_PX})")
+    parser.add_argument("--height", type=limits.height_px, default=480, metavar="H",
+                        help=f"pixels (default 480, at most {limits.MAX_IMAGE_HEIGHT_PX})")
     parser.add_argument("--camera", default="overview",
                         help="overview, front or side (default: overview)")
-    parser.add_argument("--frame-every", type=int, default=2, metavar="K",
-                        help="keep every K-th decision as a frame (default: 2, 25 fps)")
+    parser.add_argument("--frame-every", type=limits.frame_every, default=2, metavar="K",
+                        help="keep every K-th decision as a frame (default: 2, 25 fps; "
+                             f"at most {limits.MAX_FRAME_EVERY})")
     parser.add_argument("--gif-colors", type=bounded_int(2, 256), default=None, metavar="N",
                         help="a .gif with one palette of N colours (2 to 256) for every frame, "
                              "several times smaller (default: a palette per frame)")
@@ -70,6 +75,11 @@ def add_render_parser(commands: argparse._SubParsersAction) -> None:
 @cli_command
 def cmd_render(args: argparse.Namespace) -> int:
     """Run ``rehabbot render``."""
+    from rehabbot.cli.needs import policy_modules, require, video_modules
+    from rehabbot.common.files import check_parent_exists
+
+    require("rehabbot render", video_modules(args.out), policy_modules(args.policy))
+    check_parent_exists(args.out)
     from rehabbot.analysis.video import render_episode
     from rehabbot.cli.progress import ProgressLine
     from rehabbot.cli.threads import one_torch_thread
@@ -85,7 +95,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                             progress=ProgressLine("rehabbot render"),
                             gif_colors=args.gif_colors)
     outcome = "success" if result["success"] else (result["safety_violation"] or "time limit")
-    print(f"wrote {result['path']}: {result['frames']} frames at {result['fps']:.0f} fps, "
+    print(f"wrote {result['path']}: {result['frames']} frames at {result['fps']:.3g} fps, "
           f"{result['policy']} on {result['env_id']} (seed {result['seed']}): "
           f"{result['steps']} steps, return {result['return']:.1f}, {outcome}")
     return EXIT_OK

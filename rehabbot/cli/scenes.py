@@ -10,6 +10,7 @@ import time
 import warnings
 from typing import TYPE_CHECKING, Any
 
+from rehabbot.cli import limits
 from rehabbot.cli.display import has_display
 from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError
 
@@ -68,6 +69,15 @@ def cmd_scenes(args: argparse.Namespace) -> int:
 
 def cmd_snapshot(args: argparse.Namespace) -> int:
     """Render one offscreen image of a scene and write it as PNG."""
+    from rehabbot.cli.needs import GIF_MODULES, require
+    from rehabbot.common.errors import UsageError
+    from rehabbot.common.files import check_parent_exists
+
+    require("rehabbot snapshot", GIF_MODULES)  # imageio writes the PNG
+    try:
+        check_parent_exists(args.out)
+    except UsageError as err:
+        raise CliError(str(err), EXIT_USAGE) from err
     scene = _load_scene(args)
     from rehabbot.analysis.images import save_png
     from rehabbot.envs.rendering import render_rgb
@@ -168,8 +178,6 @@ def _join_viewer_threads(threads_before: set[threading.Thread], timeout_s: float
 
 def cmd_view(args: argparse.Namespace) -> int:
     """Open MuJoCo's interactive viewer on a scene."""
-    if args.seconds is not None and not args.seconds > 0:
-        raise CliError(f"--seconds must be positive, got {args.seconds}", EXIT_USAGE)
     scene = _load_scene(args)
     _check_viewer_can_open()
     if args.seconds is None:
@@ -182,21 +190,16 @@ def cmd_view(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
-    return value
-
-
 def _add_scene_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", help="scene preset (see `rehabbot scenes`)")
     group = parser.add_argument_group("patient profile (defaults: the PatientProfile defaults)")
-    group.add_argument("--profile-height", type=float, metavar="M", help="body height [m]")
-    group.add_argument("--profile-mass", type=float, metavar="KG", help="body mass [kg]")
+    group.add_argument("--profile-height", type=limits.library_float("height_m"), metavar="M",
+                       help="body height [m] (the range of PatientProfile)")
+    group.add_argument("--profile-mass", type=limits.library_float("mass_kg"), metavar="KG",
+                       help="body mass [kg] (the range of PatientProfile)")
     group.add_argument("--profile-sex", choices=("male", "female"), help="anthropometric tables")
     parser.add_argument(
-        "--weight-level", type=int, default=0, metavar="L",
+        "--weight-level", type=limits.library_int("weight_level"), default=0, metavar="L",
         help="wrist weight level of the exercise (default: 0, no weight)",
     )
     parser.add_argument(
@@ -223,17 +226,24 @@ def add_scene_parsers(commands: argparse._SubParsersAction) -> None:
     view = commands.add_parser("view", help="open the interactive MuJoCo viewer on a scene")
     _add_scene_arguments(view)
     view.add_argument(
-        "--seconds", type=float, metavar="S",
-        help="simulate S seconds in real time, then close the viewer and report",
+        "--seconds", type=limits.view_seconds, metavar="S",
+        help="simulate S seconds in real time, then close the viewer and report (0 < S <= "
+             f"{limits.MAX_VIEW_SECONDS:g})",
     )
     view.set_defaults(func=cmd_view)
 
-    snapshot = commands.add_parser("snapshot", help="render a scene offscreen to a PNG file")
+    snapshot = commands.add_parser(
+        "snapshot", help="render a scene offscreen to a PNG file",
+        description='Render a scene offscreen to a PNG file. Needs pip install "rehabbot[video]" '
+                    "(imageio writes the PNG).")
     _add_scene_arguments(snapshot)
-    snapshot.add_argument("--out", required=True, metavar="FILE.png", help="output PNG path")
+    snapshot.add_argument("--out", required=True, metavar="FILE.png",
+                          help="output PNG path (its folder must exist)")
     snapshot.add_argument("--camera", help="camera name (default: the scene's first camera)")
-    snapshot.add_argument("--width", type=_positive_int, default=DEFAULT_WIDTH_PX, metavar="W",
-                          help=f"image width [px] (default: {DEFAULT_WIDTH_PX})")
-    snapshot.add_argument("--height", type=_positive_int, default=DEFAULT_HEIGHT_PX,
-                          metavar="H", help=f"image height [px] (default: {DEFAULT_HEIGHT_PX})")
+    snapshot.add_argument("--width", type=limits.width_px, default=DEFAULT_WIDTH_PX,
+                          metavar="W", help=f"image width [px] (default: {DEFAULT_WIDTH_PX}, "
+                                            f"at most {limits.MAX_IMAGE_WIDTH_PX})")
+    snapshot.add_argument("--height", type=limits.height_px, default=DEFAULT_HEIGHT_PX,
+                          metavar="H", help=f"image height [px] (default: {DEFAULT_HEIGHT_PX}, "
+                                            f"at most {limits.MAX_IMAGE_HEIGHT_PX})")
     snapshot.set_defaults(func=cmd_snapshot)

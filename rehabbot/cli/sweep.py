@@ -8,6 +8,7 @@ import shlex
 import signal
 import sys
 
+from rehabbot.cli import limits
 from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, cli_command
 
 SWEEP_EPILOG = """\
@@ -28,18 +29,11 @@ skips finished trials and continues interrupted ones from their newest
 checkpoint (--resume does the same, and insists that OUT holds a sweep). `rehabbot plot OUT`
 and benchmarks/results/results_table.py OUT read the sweep's runs.
 
-exit codes: 0 every trial finished, 1 a trial failed or Ray failed, 2 bad usage (unknown key,
-env id or algorithm in the file), 130 interrupted (run the command again to resume)."""
+Needs pip install "rehabbot[train,sweep]" (--dry-run: "rehabbot[train]").
 
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
-    return value
+exit codes: 0 every trial finished, 1 a trial failed, Ray failed or an extra is missing, 2 bad
+usage (unknown key, env id or algorithm in the file), 130 interrupted (run the command again to
+resume)."""
 
 
 def add_sweep_parser(commands: argparse._SubParsersAction) -> None:
@@ -55,11 +49,12 @@ def add_sweep_parser(commands: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("config", metavar="CONFIG.yaml", help="the sweep file")
     parser.add_argument("--out", metavar="DIR",
-                        help="root of the sweep's run folders (default: the file's `out`)")
+                        help="root of the sweep's run folders (default: the file's `out`); "
+                             "its parent folder must exist")
     where = parser.add_mutually_exclusive_group()
-    where.add_argument("--cpus", type=_positive_int, metavar="N",
+    where.add_argument("--cpus", type=limits.cpus, metavar="N",
                        help="CPUs of the local Ray started for the sweep (default: all, "
-                            "os.cpu_count())")
+                            f"os.cpu_count(); at most {limits.MAX_CPUS})")
     where.add_argument("--address", metavar="ADDR",
                        help="join an existing Ray cluster instead (e.g. 'auto', "
                             "'ray://head:10001'); rehabbot must be installed on its nodes "
@@ -76,6 +71,13 @@ def add_sweep_parser(commands: argparse._SubParsersAction) -> None:
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run ``rehabbot sweep``: 0 when every trial finished, 1 if one failed, 130 when
     interrupted."""
+    from rehabbot.cli.needs import NOTHING, SWEEP_MODULES, TRAIN_MODULES, require
+    from rehabbot.common.files import check_parent_exists
+
+    require("rehabbot sweep" + (" --dry-run" if args.dry_run else ""), TRAIN_MODULES,
+            NOTHING if args.dry_run else SWEEP_MODULES)
+    if args.out is not None:
+        check_parent_exists(args.out)
     from rehabbot.rl.sweep import format_table, run_sweep
     from rehabbot.rl.sweep_config import load_sweep_config
 

@@ -5,20 +5,20 @@ resumes an interrupted one."""
 from __future__ import annotations
 
 import argparse
-import math
 import shlex
 import signal
 import sys
 from collections.abc import Sequence
 from typing import Any
 
+from rehabbot.cli import limits
 from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_kwargs_object
+from rehabbot.cli.help_levels import add_help_levels
 from rehabbot.cli.train_batch import BATCH_BACKEND, train_batched_cli
-from rehabbot.envs.registration import ENV_SPECS, env_short_name
+from rehabbot.envs.registration import env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS, OFF_POLICY
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
 from rehabbot.rl.hyperparams import (
-    coerce_number,
     library_defaults,
     settings_names,
     settings_path,
@@ -37,40 +37,6 @@ DEFAULT_SEEDS = (0,)
 DEFAULT_OUT = "runs"
 
 
-def _count(text: str) -> int:
-    """A step count: 200000, 200_000 or 2e5."""
-    value = coerce_number(text)
-    if isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if not isinstance(value, int):
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}")
-    return value
-
-
-def _positive_count(text: str) -> int:
-    value = _count(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return value
-
-
-def _non_negative_count(text: str) -> int:
-    value = _count(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return value
-
-
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0, got {text}")
-    return value
-
-
 def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
     """``--env-kwargs`` as a dict (None if not given); :class:`CliError` (usage) otherwise."""
     if text is None:
@@ -80,6 +46,25 @@ def parse_env_kwargs(text: str | None) -> dict[str, Any] | None:
     except argparse.ArgumentTypeError as err:
         raise CliError(f"--env-kwargs: {err}", EXIT_USAGE) from None
 
+
+# What `rehabbot train --help` shows; `--help-all` shows every option and TRAIN_EPILOG.
+ESSENTIAL_OPTIONS = ("env", "algo", "timesteps", "seeds", "out", "resume", "overwrite",
+                     "backend")
+
+TRAIN_BRIEF_EPILOG = """\
+examples:
+  rehabbot train rehab-reach-v2 --algo sac            # the shipped settings (printed)
+  rehabbot train rehab-knee-v2 --algo td3 --timesteps 500000 --seeds 0 1 2
+  rehabbot train rehab-reach-v2 --algo sac --timesteps 400000 --resume   # continue a run
+
+Each seed writes OUT/<env>/<algo>/seed<k>/: manifest.json, checkpoints/, logs and, at the
+end, model.zip. Ctrl-C saves a checkpoint and prints the command that resumes. Needs
+pip install "rehabbot[train]"; with "rehabbot[jax]" too, --backend auto trains on SBX (JAX).
+
+--help-all: every option (settings files, env kwargs, expert episodes, parallel and batched
+envs, checkpoints, evaluation) and the details of each.
+
+exit codes: 0 done, 1 runtime failure, 2 bad usage, 130/143 interrupted (resumable)."""
 
 TRAIN_EPILOG = """\
 examples:
@@ -93,38 +78,40 @@ examples:
   rehabbot train rehab-reach-v0 --algo sac --hyperparams sb3-defaults/sac  # the paper's id,
       # the library's defaults
 
-Without --hyperparams a run uses the settings file shipped for the algorithm (sac, td3, ppo,
-tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id, and prints which; an
+Settings. Without --hyperparams a run uses the settings file shipped for the algorithm (sac,
+td3, ppo, tqc, crossq in rehabbot/rl/hyperparams/), its entry for the id, and prints which; an
 off-policy run then also starts with 20 scripted-expert episodes in its replay buffer, as the
 published results did (--demos N changes that). The files hold entries for the -v2 ids, which
 name only library options (MlpPolicy, n_steps, ...). The -v0 ids (the paper's reference: its
 reward traps agents) and the -v1 ids observe the paper's fields, from which a plain network
-does not learn: without --hyperparams they are refused with the -v2 id to train instead
-(rehabbot trained -v1 with its own networks, removed with issue 26 after commit 51d9d71);
+does not learn: without --hyperparams they are refused with the -v2 id to train instead;
 --hyperparams sb3-defaults/<algo> trains any id with the library's defaults. A run too short
 to update its model (PPO: fewer steps than one rollout, n_steps x n_envs; SAC/TD3/TQC/CrossQ:
 no more steps than learning_starts) is refused.
 
-Each seed writes OUT/<env>/<algo>/seed<k>/ with manifest.json, monitor/train_<i>.monitor.csv,
-eval/evaluations.npz, tb/ (tensorboard --logdir OUT), checkpoints/ and, at the end, model.zip.
-Ctrl+C (or SIGTERM) saves a checkpoint and prints the command that resumes; exit code 130
-(143 for SIGTERM). --resume continues every seed from its newest checkpoint to --timesteps
-(default: the total it was started with); settings come from the run's manifest. Off-policy
-checkpoints keep the replay buffer of the newest checkpoint only (it can take hundreds of MB).
-Runs end at exactly N steps with one env (an off-policy algorithm collects train_freq steps
-at a time, so it may run up to train_freq - 1 steps past N); PPO does not train on a last,
-partial rollout.
+Run folders. Each seed writes OUT/<env>/<algo>/seed<k>/ with manifest.json,
+monitor/train_<i>.monitor.csv, eval/evaluations.npz, tb/ (tensorboard --logdir OUT),
+checkpoints/ and, at the end, model.zip. OUT's parent folder must exist. Ctrl+C (or SIGTERM)
+saves a checkpoint and prints the command that resumes; exit code 130 (143 for SIGTERM). A
+signal that comes once a run has saved its final model lets that run finish: the command
+then stops before the next seed (130/143), or exits 0 when no seed is left. --resume
+continues every seed from its newest checkpoint to --timesteps (default: the total it was
+started with); settings come from the run's manifest. Off-policy checkpoints keep the replay
+buffer of the newest checkpoint only (it can take hundreds of MB). Runs end at exactly N
+steps with one env (an off-policy algorithm collects train_freq steps at a time, so it may
+run up to train_freq - 1 steps past N); PPO does not train on a last, partial rollout.
 
-Backends: --backend auto (the default) trains on SBX (JAX; pip install 'rehabbot[jax]') when
-it is installed and on Stable-Baselines3 (PyTorch) otherwise; sb3 or sbx force one. TQC and
-CrossQ come from sb3-contrib on sb3. A settings file is read for SBX with what only PyTorch
-runs translated or dropped (a PyTorch policy class becomes SBX's MlpPolicy, features
-extractors are dropped, nn.ReLU becomes flax.linen.relu, ...): each change is printed and
-listed in the manifest (hyperparameters.backend_changes). A resumed or evaluated run uses the
-backend it was trained with (manifest.json: backend, backend_version).
+Backends. --backend auto (the default) trains on SBX (JAX; pip install "rehabbot[jax]") when
+it is installed and on Stable-Baselines3 (PyTorch; pip install "rehabbot[train]", which every
+backend but rsl_rl needs) otherwise; sb3 or sbx force one. TQC and CrossQ come from
+sb3-contrib on sb3. A settings file is read for SBX with what only PyTorch runs translated or
+dropped (a PyTorch policy class becomes SBX's MlpPolicy, features extractors are dropped,
+nn.ReLU becomes flax.linen.relu, ...): each change is printed and listed in the manifest
+(hyperparameters.backend_changes). A resumed or evaluated run uses the backend it was
+trained with (manifest.json: backend, backend_version).
 
-Batched: --backend rsl_rl trains rsl_rl's PPO on the batched env (MuJoCo Warp; pip install
-'rehabbot[gpu]'; a GPU makes it fast), e.g.
+Batched. --backend rsl_rl trains rsl_rl's PPO on the batched env (MuJoCo Warp; pip install
+"rehabbot[gpu]"; a GPU makes it fast), e.g.
   rehabbot train rehab-reach-v2 --algo ppo --backend rsl_rl --num-envs 4096
 It writes the same run folder (the actor as policy.npz, which `rehabbot evaluate RUN_DIR` runs
 on the CPU env); --hyperparams takes a YAML mapping of its settings (docs/batch.md);
@@ -136,90 +123,101 @@ n_envs, policy, normalize (true or VecNormalize arguments), noise_type (normal |
 ornstein-uhlenbeck) and noise_std (SAC/TD3). policy_kwargs may be a mapping or a string such
 as "dict(net_arch=[64, 64], activation_fn=nn.ReLU)"; learning_rate may be "lin_3e-4" (linear
 decay to 0). policy is MlpPolicy or a library's policy class by dotted name (rehabbot's own
-classes, rehabbot.rl.features.*, were removed with issue 26 and are refused by name).
---hyperparams takes a path or the name of a file shipped with rehabbot: sac, td3, ppo, tqc
-and crossq hold the settings of the -v2 ids, sb3-defaults/<algo> spells out SB3's defaults
-as a template, ablations/<name> the plain-network diagnoses of the README (`rehabbot train
---help` lists them; the files are in rehabbot/rl/hyperparams/).
+network classes, rehabbot.rl.features.*, are refused by name). --hyperparams takes a path or
+the name of a file shipped with rehabbot: sac, td3, ppo, tqc and crossq hold the settings of
+the -v2 ids, sb3-defaults/<algo> spells out SB3's defaults as a template, ablations/<name>
+the plain-network diagnoses of the README (listed under --hyperparams above; the files are in
+rehabbot/rl/hyperparams/).
 
-exit codes: 0 done, 1 runtime failure, 2 bad usage, 130/143 interrupted (resumable)."""
+""" + f"""
+Bounds: seeds in [0, {limits.MAX_SEED:,}]; step counts up to {limits.MAX_TIMESTEPS:,};
+--n-envs up to {limits.MAX_N_ENVS:,}; --eval-episodes up to {limits.MAX_EPISODES:,}; --demos up to
+{limits.MAX_DEMOS:,}; --time-limit-s up to {limits.MAX_TIME_LIMIT_S:g} s.
+
+exit codes: 0 done, 1 runtime failure (a missing extra included), 2 bad usage, 130/143
+interrupted (resumable)."""
 
 
 def add_train_parser(commands: argparse._SubParsersAction) -> None:
-    """Add the ``train`` subcommand (``func=cmd_train``) to ``commands``."""
+    """Add the ``train`` subcommand (``func=cmd_train``) to ``commands``: ``--help`` shows
+    the essential options, ``--help-all`` every one, grouped."""
     parser = commands.add_parser(
         "train",
         help="train an agent (PPO, SAC, TD3, TQC, CrossQ) with SBX or Stable-Baselines3",
         description="Train an agent on a RehabBot env with SBX (JAX) or Stable-Baselines3 "
-                    "(PyTorch), one run per seed, with checkpoints, evaluation, TensorBoard "
+                    "(PyTorch),\none run per seed, with checkpoints, evaluation, TensorBoard "
                     "logs and a manifest.",
         epilog=TRAIN_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        add_help=False,
     )
-    parser.add_argument("env", metavar="ENV",
-                        help=f"env id, with or without 'rehabbot/': {', '.join(ENV_SPECS)}")
-    parser.add_argument("--algo", required=True, metavar="{" + ",".join(ALGORITHMS) + "}",
-                        help="the algorithm")
-    parser.add_argument("--timesteps", type=_positive_count, metavar="N",
-                        help="env steps per run (default: the hyperparameter file's "
-                             f"n_timesteps, else {DEFAULT_TIMESTEPS}; with --resume, the "
-                             "run's own total)")
-    parser.add_argument("--seeds", type=int, nargs="+", metavar="K",
-                        help="seeds, trained one after the other (default: 0)")
-    parser.add_argument("--n-envs", "--num-envs", dest="n_envs", type=_positive_count,
-                        metavar="K",
-                        help="parallel training envs (default: the file's n_envs, else 1); "
-                             "with --backend rsl_rl, batched worlds (default 4096)")
-    parser.add_argument("--vec", choices=("dummy", "subproc"), default="dummy",
-                        help="vector env: in-process (dummy, default) or one process per env "
-                             "(started with 'spawn': safe after rendering or with threads)")
-    parser.add_argument("--hyperparams", metavar="FILE.yml|NAME",
-                        help="RL-Zoo-style hyperparameter file, or the name of one shipped "
-                             f"with rehabbot ({', '.join(settings_names())}); default: "
-                             "the shipped file named after the algorithm (sac, td3, ppo, tqc, "
-                             "crossq: entries for the -v2 ids, printed); "
-                             "sb3-defaults/<algo> for the library's defaults")
-    parser.add_argument("--env-kwargs", metavar="JSON",
-                        help="keyword arguments for the env, as a JSON object")
-    parser.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
-                        help=f"root of the run directories (default: {DEFAULT_OUT})")
-    parser.add_argument("--resume", action="store_true",
-                        help="continue each seed's run from its newest checkpoint")
-    parser.add_argument("--overwrite", action="store_true",
-                        help="delete an existing run directory and start again")
-    parser.add_argument("--checkpoint-freq", type=_non_negative_count, metavar="N",
-                        help=f"checkpoint every N env steps, 0: only at the end (default: "
-                             f"{DEFAULT_CHECKPOINT_FREQ})")
-    parser.add_argument("--time-limit-s", type=_positive_seconds, metavar="S",
-                        help="--backend rsl_rl: end each run, as finished, after the first "
-                             "PPO iteration that ends past S seconds of wall clock (building "
-                             "the batched env included; docs/batch.md)")
-    parser.add_argument("--eval-freq", type=_non_negative_count, metavar="N",
-                        help=f"evaluate every N env steps on a separate env, 0: never "
-                             f"(default: {DEFAULT_EVAL_FREQ})")
-    parser.add_argument("--eval-episodes", type=_positive_count, metavar="N",
-                        help=f"deterministic episodes per evaluation (default: "
-                             f"{DEFAULT_EVAL_EPISODES})")
-    parser.add_argument("--no-progress", action="store_true",
-                        help="no progress bar")
-    parser.add_argument("--backend", choices=(*BACKEND_CHOICES, BATCH_BACKEND),
-                        default=DEFAULT_BACKEND, type=str.lower,
-                        help="library that trains: sbx (JAX) if installed, else sb3 (auto, "
-                             "default); sb3 (Stable-Baselines3, PyTorch); sbx (fails if "
-                             "sbx-rl is not installed); rsl_rl: PPO of rsl_rl on the batched "
-                             "env (MuJoCo Warp, thousands of worlds; pip install "
-                             "'rehabbot[gpu]'; docs/batch.md)")
-    parser.add_argument("--demos", type=_non_negative_count, metavar="N",
-                        help="run the scripted expert for N episodes of the training env "
-                             "(seeds: run seed + 20000 + i) and add every transition to the "
-                             "replay buffer before learning (sac, td3, tqc, crossq; default "
-                             f"{SHIPPED_DEMOS} with the shipped settings, else 0); with --bc, "
-                             f"the episodes to clone (default {DEFAULT_BC_EPISODES})")
-    parser.add_argument("--bc", action="store_true",
-                        help="PPO only: warm-start PPO's actor by behaviour cloning the "
-                             "expert's episodes (MSE of the mean action, in units of the "
-                             "action bound; Adam, a few epochs; loss before/after in the "
-                             "manifest); both backends (PyTorch on sb3, JAX on sbx)")
+    add_help_levels(parser, ESSENTIAL_OPTIONS, TRAIN_BRIEF_EPILOG)
+    run = parser.add_argument_group("what to train")
+    run.add_argument("env", metavar="ENV",
+                     help="env id, with or without 'rehabbot/' (`rehabbot list` shows them)")
+    run.add_argument("--algo", required=True, metavar="{" + ",".join(ALGORITHMS) + "}",
+                     help="the algorithm")
+    run.add_argument("--timesteps", type=limits.timesteps, metavar="N",
+                     help="env steps per run (default: the hyperparameter file's "
+                          f"n_timesteps, else {DEFAULT_TIMESTEPS}; with --resume, the "
+                          "run's own total)")
+    run.add_argument("--seeds", type=limits.seed, nargs="+", metavar="K",
+                     help="seeds, trained one after the other (default: 0)")
+    run.add_argument("--out", metavar="DIR",
+                     help=f"root of the run folders (default: {DEFAULT_OUT}); its parent "
+                          "folder must exist")
+    run.add_argument("--resume", action="store_true",
+                     help="continue each seed's run from its newest checkpoint")
+    run.add_argument("--overwrite", action="store_true",
+                     help="delete an existing run folder and start again")
+    run.add_argument("--backend", choices=(*BACKEND_CHOICES, BATCH_BACKEND),
+                     default=DEFAULT_BACKEND, type=str.lower,
+                     help="library that trains: auto (default): sbx if installed, else "
+                          "sb3; sb3 (Stable-Baselines3, PyTorch); sbx (SBX, JAX); rsl_rl "
+                          "(PPO on the batched env, MuJoCo Warp; docs/batch.md)")
+    settings = parser.add_argument_group("settings")
+    settings.add_argument("--hyperparams", metavar="FILE.yml|NAME",
+                          help="RL-Zoo-style hyperparameter file, or the name of one shipped "
+                               f"with rehabbot ({', '.join(settings_names())}); default: "
+                               "the shipped file named after the algorithm (sac, td3, ppo, "
+                               "tqc, crossq: entries for the -v2 ids, printed); "
+                               "sb3-defaults/<algo> for the library's defaults")
+    settings.add_argument("--env-kwargs", metavar="JSON",
+                          help="keyword arguments for the env, as a JSON object")
+    settings.add_argument("--demos", type=limits.demos, metavar="N",
+                          help="run the scripted expert for N episodes of the training env "
+                               "(seeds: run seed + 20000 + i) and add every transition to the "
+                               "replay buffer before learning (sac, td3, tqc, crossq; default "
+                               f"{SHIPPED_DEMOS} with the shipped settings, else 0); with "
+                               f"--bc, the episodes to clone (default {DEFAULT_BC_EPISODES})")
+    settings.add_argument("--bc", action="store_true",
+                          help="PPO only: warm-start PPO's actor by behaviour cloning the "
+                               "expert's episodes (MSE of the mean action, in units of the "
+                               "action bound; Adam, a few epochs; loss before/after in the "
+                               "manifest); both backends (PyTorch on sb3, JAX on sbx)")
+    envs = parser.add_argument_group("parallel and batched envs")
+    envs.add_argument("--n-envs", "--num-envs", dest="n_envs", type=limits.n_envs,
+                      metavar="K",
+                      help="parallel training envs (default: the file's n_envs, else 1); "
+                           "with --backend rsl_rl, batched worlds (default 4096)")
+    envs.add_argument("--vec", choices=("dummy", "subproc"), default="dummy",
+                      help="vector env: in-process (dummy, default) or one process per env "
+                           "(started with 'spawn': safe after rendering or with threads)")
+    envs.add_argument("--time-limit-s", type=limits.time_limit_s, metavar="S",
+                      help="--backend rsl_rl: end each run, as finished, after the first "
+                           "PPO iteration that ends past S seconds of wall clock (building "
+                           "the batched env included; docs/batch.md)")
+    logs = parser.add_argument_group("checkpoints and evaluation")
+    logs.add_argument("--checkpoint-freq", type=limits.step_period, metavar="N",
+                      help=f"checkpoint every N env steps, 0: only at the end (default: "
+                           f"{DEFAULT_CHECKPOINT_FREQ})")
+    logs.add_argument("--eval-freq", type=limits.step_period, metavar="N",
+                      help=f"evaluate every N env steps on a separate env, 0: never "
+                           f"(default: {DEFAULT_EVAL_FREQ})")
+    logs.add_argument("--eval-episodes", type=limits.episodes, metavar="N",
+                      help=f"deterministic episodes per evaluation (default: "
+                           f"{DEFAULT_EVAL_EPISODES})")
+    logs.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.set_defaults(func=cmd_train)
 
 
@@ -230,17 +228,54 @@ def _resume_command(args: argparse.Namespace, env_id: str, algo: str, seeds: Seq
                        "--out", str(args.out), "--resume"])
 
 
+class _SeedStop:
+    """The SIGINT/SIGTERM handler of ``rehabbot train`` around its runs: it records the first
+    signal, and the seed loop stops before the next seed. Each run latches signals itself
+    (:mod:`rehabbot.rl.training`), says what it does with one, and hands one that came after
+    its final save back here once the run is whole. A second signal raises
+    KeyboardInterrupt at once."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def __call__(self, signum: int, _frame: Any) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt
+        self.signum = signum
+
+
 @cli_command
 def cmd_train(args: argparse.Namespace) -> int:
-    """Run ``rehabbot train``: each seed in turn; 0 when done, 130/143 when interrupted."""
-    from rehabbot.rl import runs
-    from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
+    """Run ``rehabbot train``: each seed in turn; 0 when every run finished, 130/143 when a
+    signal stopped a run, or stopped the command before a seed it was asked to train."""
+    from rehabbot.cli.needs import require, train_modules
+    from rehabbot.common.files import check_parent_exists
+    from rehabbot.common.signals import handling_signals
 
+    require("rehabbot train" + (f" --backend {args.backend}" if args.backend != "auto"
+                                else ""), train_modules(args.algo, args.backend))
+    if args.out is None:
+        args.out = DEFAULT_OUT  # created with its parents
+    else:
+        check_parent_exists(args.out)
     if args.backend == BATCH_BACKEND:
         return train_batched_cli(args, DEFAULT_SEEDS, parse_env_kwargs(args.env_kwargs))
     if args.time_limit_s is not None:
         raise CliError(f"--time-limit-s {args.time_limit_s:g} is used by --backend "
                        f"{BATCH_BACKEND} only, not --backend {args.backend}", EXIT_USAGE)
+    stop = _SeedStop()
+    with handling_signals(stop):
+        return _train_seeds(args, stop)
+
+
+def _stop_text(signum: int) -> str:
+    return signal.Signals(signum).name
+
+
+def _train_seeds(args: argparse.Namespace, stop: _SeedStop) -> int:
+    from rehabbot.rl import runs
+    from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
+
     hyperparams, demos = args.hyperparams, args.demos
     shipped = hyperparams is None and not args.resume
     if shipped:
@@ -254,6 +289,10 @@ def cmd_train(args: argparse.Namespace) -> int:
                        checkpoint_freq=args.checkpoint_freq, eval_freq=args.eval_freq,
                        eval_episodes=args.eval_episodes, progress_bar=not args.no_progress,
                        vec=args.vec, backend=args.backend, demos=demos, bc=args.bc)
+    if stop.signum is not None:
+        print(f"stopped by {_stop_text(stop.signum)} before training: nothing was written",
+              flush=True)
+        return 128 + stop.signum
     new_runs = [plan for plan in plans if plan.skip is None and plan.resume is None]
     if shipped and new_runs and hyperparams is not None:
         buffer = ""
@@ -267,7 +306,15 @@ def cmd_train(args: argparse.Namespace) -> int:
         used = "dropped" if change["used"] is None else f"-> {change['used']}"
         print(f"note: {new_runs[0].backend} backend: {change['key']} {change['given']!r} "
               f"{used} ({change['why']})", file=sys.stderr, flush=True)
-    for plan in plans:
+    for index, plan in enumerate(plans):
+        left = [p for p in plans[index:] if p.skip is None]
+        if stop.signum is not None and left:
+            command = _resume_command(args, plan.env_id, plan.algo, [p.seed for p in left],
+                                      plan.total_timesteps)
+            print(f"stopped by {_stop_text(stop.signum)} before seed {left[0].seed}: "
+                  f"{len(left)} run{'s' if len(left) > 1 else ''} not trained; continue "
+                  f"with: {command}", flush=True)
+            return 128 + stop.signum
         if plan.skip is not None:
             print(plan.skip, flush=True)
             continue
@@ -291,7 +338,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             print(f"{err.run_dir}: interrupted at {err.timesteps_done} steps, checkpoint "
                   f"{err.checkpoint}; resume with: {command}", flush=True)
             return err.exit_code
-        except KeyboardInterrupt:  # outside learn: while setting up or saving at the end
+        except KeyboardInterrupt:  # a second signal, while setting up or saving at the end
             newest = runs.checkpoints(plan.run_dir)
             if newest:
                 command = _resume_command(args, plan.env_id, plan.algo,
@@ -302,4 +349,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                 print(f"{plan.run_dir}: interrupted before the first checkpoint", flush=True)
             return 128 + signal.SIGINT
         print(runs.run_summary(run_dir), flush=True)
+    if stop.signum is not None:  # after the last run had saved its final model
+        print(f"received {_stop_text(stop.signum)} once the last run had saved its final "
+              "model: every run is finished", file=sys.stderr, flush=True)
     return EXIT_OK

@@ -32,15 +32,18 @@ def _fsync_dir(directory: Path) -> None:
 
 def _produce_then_rename(path: Path, tmp: Path, produce: Callable[[Path], Any]) -> None:
     """Let ``produce(tmp)`` write the temporary file, flush it to disk, rename it to
-    ``path``; remove it if anything fails (interruptions included)."""
+    ``path``; remove it if anything fails (interruptions included). A failed write (a full
+    disk: the writer's OSError names no file) becomes :class:`OutputError` naming ``path``."""
     try:
         produce(tmp)
         with open(tmp, "rb+") as stream:
             os.fsync(stream.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(err, OSError) and not isinstance(err, OutputError):
+            raise _output_error(path, err) from err
         raise
     _fsync_dir(path.parent)
 

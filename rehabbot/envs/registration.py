@@ -157,6 +157,22 @@ for _id, _base_id in MYO_VARIANTS.items():
 V2_IDS: tuple[str, ...] = tuple(i.replace("-v1", "-v2") for i in V1_IDS)
 
 
+# What an id's kwargs need beyond the core install: (kwarg, value) -> the extra of
+# ``pip install "rehabbot[EXTRA]"`` that brings it (read by ``rehabbot list``; a test builds
+# every id on a core install to check it).
+KWARG_EXTRAS: dict[tuple[str, str], str] = {("patient_model", "myo"): "myo"}
+
+
+def required_extra(env_id: str) -> str | None:
+    """The extra that building ``env_id`` needs beyond the core install (``"myo"`` for
+    MyoSuite's models), or None; read from the id's registered kwargs, nothing is built."""
+    kwargs = ENV_SPECS[env_id][0]
+    for (key, value), extra in KWARG_EXTRAS.items():
+        if kwargs.get(key) == value:
+            return extra
+    return None
+
+
 def entry_point_of(env_id: str) -> str:
     """The class an id builds: RehabEnv, PopulationEnv or BilateralEnv."""
     if env_id in BILATERAL_IDS:

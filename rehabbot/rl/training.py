@@ -26,11 +26,11 @@ import signal
 import sys
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from rehabbot.common.errors import DataError
+from rehabbot.common.errors import DataError, OutputError
 from rehabbot.common.files import (
     atomic_write,
     atomic_write_json,
@@ -60,6 +60,29 @@ from rehabbot.rl.vecnormalize_io import load_vecnormalize, save_vecnormalize
 EVAL_SEED_OFFSET = 10_000
 MONITOR_INFO_KEYWORDS = ("is_success", "safety_violation")
 SUBPROC_START_METHOD = "spawn"
+
+
+def _unnamed_write_error(err: BaseException) -> bool:
+    """An OSError of a writer that names no file (a full disk: ``file.write`` raises
+    ``[Errno 28]`` without a name), not one of ours (:class:`OutputError` names its file)."""
+    return isinstance(err, OSError) and not isinstance(err, OutputError) \
+        and err.filename is None
+
+
+def naming_write_errors(func: Callable[..., Any], path: Path) -> Callable[..., Any]:
+    """``func``, with an OSError that names no file raised as :class:`OutputError` naming
+    ``path``, the file ``func`` writes (Stable-Baselines3's monitor and evaluation logs)."""
+
+    @functools.wraps(func)
+    def call(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except OSError as err:
+            if not _unnamed_write_error(err):
+                raise
+            raise OutputError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
+
+    return call
 
 
 class TrainingInterrupted(Exception):  # noqa: N818  (not an error)
@@ -123,9 +146,14 @@ def _make_env(env_id: str, env_kwargs: dict[str, Any], monitor_file: str | None,
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
     env = gym.make(env_id, **env_kwargs)
     override = not (append and monitor_file is not None and os.path.isfile(monitor_file))
-    env = Monitor(env, filename=monitor_file, allow_early_resets=True,
+    monitor = Monitor if monitor_file is None else \
+        naming_write_errors(Monitor, Path(monitor_file))  # it writes the file's header
+    env = monitor(env, filename=monitor_file, allow_early_resets=True,
                   info_keywords=MONITOR_INFO_KEYWORDS if monitor_file is not None else (),
                   override_existing=override)
+    if env.results_writer is not None:
+        writer = env.results_writer
+        writer.write_row = naming_write_errors(writer.write_row, Path(writer.file_handler.name))
     if time_offset_s:
         # Keep the monitor's "t" column running on from the previous segment.
         env.t_start = time.time() - time_offset_s
@@ -416,6 +444,8 @@ def _execute_latched(plan: RunPlan, created_root: Path | None, latch: SignalLatc
                                  eval_freq=max(plan.eval_freq // n_envs, 1),
                                  log_path=str(run_dir / runs.EVAL_DIR), deterministic=True,
                                  verbose=0, warn=False)
+        evaluator._on_step = naming_write_errors(evaluator._on_step,  # writes its .npz
+                                                 run_dir / runs.EVALUATIONS_PATH)
         if previous_evals:
             evaluator.evaluations_timesteps = previous_evals["timesteps"]
             evaluator.evaluations_results = previous_evals["results"]
@@ -446,6 +476,9 @@ def _execute_latched(plan: RunPlan, created_root: Path | None, latch: SignalLatc
             run.write(status="interrupted", timesteps_done=done,
                       last_checkpoint=run.rel(checkpoint))
             raise TrainingInterrupted(run_dir, done, checkpoint, latch.signum)
+        # From here a signal no longer stops the run: it is finished first, then the signal
+        # is handed back (deferring_signals) to the caller's handler.
+        latch.doing = "finishing the run (saving its final model), then stopping"
         checkpoint = checkpointer.save_now()  # final checkpoint, so that --resume can extend
         vec_normalize = model.get_vec_normalize_env()
         if vec_normalize is not None:
@@ -461,6 +494,10 @@ def _execute_latched(plan: RunPlan, created_root: Path | None, latch: SignalLatc
                 run.write(status="interrupted")
             else:
                 run.write(status="failed", error=f"{type(err).__name__}: {err}")
+        if _unnamed_write_error(err):  # a writer of a library's own (TensorBoard's events)
+            raise OutputError(f"cannot write a file in {str(run_dir)!r} (the TensorBoard "
+                              f"log in {runs.TB_DIR}/, or another writer's): "
+                              f"{err.strerror or err}") from err
         raise
     finally:
         venv.close()
