@@ -9,6 +9,8 @@ code  meaning
 2     bad usage: unknown id, algorithm, scene or camera, an invalid value
 130   interrupted by SIGINT (Ctrl-C): any command; training is resumable (143 for
       SIGTERM during training)
+141   standard output was closed early (``rehabbot list | head``), as a shell reports
+      SIGPIPE; nothing is printed
 ====  ============================================================================
 
 Every failure reaches the user as one line on stderr, ``rehabbot: error: ...``, never a

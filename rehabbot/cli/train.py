@@ -14,7 +14,7 @@ from typing import Any
 from rehabbot.cli import limits
 from rehabbot.cli.errors import EXIT_OK, EXIT_USAGE, CliError, cli_command, env_kwargs_object
 from rehabbot.cli.help_levels import add_help_levels
-from rehabbot.cli.train_batch import BATCH_BACKEND, train_batched_cli
+from rehabbot.cli.train_batch import BATCH_BACKEND, SeedStop, train_batched_cli
 from rehabbot.envs.registration import env_short_name
 from rehabbot.rl.algorithms import ALGORITHMS, OFF_POLICY
 from rehabbot.rl.backends import BACKEND_CHOICES, DEFAULT_BACKEND
@@ -228,22 +228,6 @@ def _resume_command(args: argparse.Namespace, env_id: str, algo: str, seeds: Seq
                        "--out", str(args.out), "--resume"])
 
 
-class _SeedStop:
-    """The SIGINT/SIGTERM handler of ``rehabbot train`` around its runs: it records the first
-    signal, and the seed loop stops before the next seed. Each run latches signals itself
-    (:mod:`rehabbot.rl.training`), says what it does with one, and hands one that came after
-    its final save back here once the run is whole. A second signal raises
-    KeyboardInterrupt at once."""
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-
-    def __call__(self, signum: int, _frame: Any) -> None:
-        if self.signum is not None:
-            raise KeyboardInterrupt
-        self.signum = signum
-
-
 @cli_command
 def cmd_train(args: argparse.Namespace) -> int:
     """Run ``rehabbot train``: each seed in turn; 0 when every run finished, 130/143 when a
@@ -263,7 +247,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.time_limit_s is not None:
         raise CliError(f"--time-limit-s {args.time_limit_s:g} is used by --backend "
                        f"{BATCH_BACKEND} only, not --backend {args.backend}", EXIT_USAGE)
-    stop = _SeedStop()
+    stop = SeedStop()
     with handling_signals(stop):
         return _train_seeds(args, stop)
 
@@ -272,7 +256,7 @@ def _stop_text(signum: int) -> str:
     return signal.Signals(signum).name
 
 
-def _train_seeds(args: argparse.Namespace, stop: _SeedStop) -> int:
+def _train_seeds(args: argparse.Namespace, stop: SeedStop) -> int:
     from rehabbot.rl import runs
     from rehabbot.rl.training import TrainingInterrupted, execute, plan_seeds
 

@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import signal
+import sys
 from pathlib import Path
 from typing import Any
 
 from rehabbot.cli.errors import EXIT_OK, CliError
 from rehabbot.common.errors import UsageError
+from rehabbot.common.signals import handling_signals
 from rehabbot.envs.registration import env_short_name, resolve_env_id
 from rehabbot.rl import runs
 
@@ -17,6 +20,22 @@ BATCH_BACKEND = "rsl_rl"
 # Options of the CPU trainers that a batched run has no use for: (attribute, flag).
 CPU_ONLY_OPTIONS = (("eval_freq", "--eval-freq"), ("eval_episodes", "--eval-episodes"),
                     ("demos", "--demos"), ("bc", "--bc"))
+
+
+class SeedStop:
+    """The SIGINT/SIGTERM handler of ``rehabbot train`` around its runs: it records the first
+    signal, and the seed loop stops before the next seed. Each run latches signals itself
+    (:mod:`rehabbot.rl.training`), says what it does with one, and hands one that came after
+    its final save back here once the run is whole. A second signal raises
+    KeyboardInterrupt at once."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def __call__(self, signum: int, _frame: Any) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt
+        self.signum = signum
 
 
 def _resume_command(args: argparse.Namespace, env_id: str, seeds: list[int],
@@ -34,12 +53,9 @@ def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
     from rehabbot.rl.batch_training import (
         DEFAULT_NUM_ENVS,
         DEFAULT_TIMESTEPS,
-        BatchRunPlan,
-        BatchTrainingInterrupted,
         RslPpoSettings,
         read_settings,
         share_gpu_with_torch,
-        train_batched,
     )
 
     share_gpu_with_torch()  # JAX and PyTorch share the GPU here
@@ -59,7 +75,24 @@ def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
     seeds = list(args.seeds or default_seeds)
     total = args.timesteps or DEFAULT_TIMESTEPS
     kwargs = {} if args.checkpoint_freq is None else {"checkpoint_freq": args.checkpoint_freq}
-    for seed in seeds:
+    stop = SeedStop()
+    with handling_signals(stop):
+        return _train_seeds(args, env_id, seeds, total, settings, env_kwargs, kwargs, stop)
+
+
+def _train_seeds(args: argparse.Namespace, env_id: str, seeds: list[int], total: int,
+                 settings: Any, env_kwargs: dict[str, Any] | None, kwargs: dict[str, Any],
+                 stop: SeedStop) -> int:
+    from rehabbot.rl.batch_training import BatchRunPlan, BatchTrainingInterrupted, train_batched
+
+    for index, seed in enumerate(seeds):
+        if stop.signum is not None:
+            left = seeds[index:]
+            command = _resume_command(args, env_id, left, total)
+            print(f"stopped by {signal.Signals(stop.signum).name} before seed {left[0]}: "
+                  f"{len(left)} run{'s' if len(left) > 1 else ''} not trained; continue "
+                  f"with: {command}", flush=True)
+            return 128 + stop.signum
         plan = BatchRunPlan(env_id, seed=seed, total_timesteps=total, out_dir=Path(args.out),
                             num_envs=args.n_envs, env_kwargs=dict(env_kwargs or {}),
                             settings=settings, resume=args.resume, overwrite=args.overwrite,
@@ -91,4 +124,7 @@ def train_batched_cli(args: argparse.Namespace, default_seeds: tuple[int, ...],
         ended = (f" at the {limit:g} s time limit" if limit is not None and
                  (runs.read_manifest(run_dir) or {}).get("stopped_by") == "time_limit" else "")
         print(f"{run_dir}: done{ended}; evaluate with: rehabbot evaluate {run_dir}", flush=True)
+    if stop.signum is not None:  # after the last run had saved its final model
+        print(f"received {signal.Signals(stop.signum).name} once the last run had saved its "
+              "final model: every run is finished", file=sys.stderr, flush=True)
     return EXIT_OK

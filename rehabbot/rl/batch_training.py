@@ -39,6 +39,7 @@ import csv
 import io
 import math
 import os
+import signal
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -439,23 +440,30 @@ def train_batched(plan: BatchRunPlan,
 
     started = time.monotonic()  # the run's clock includes building (compiling) the worlds
     old_manifest, resume_from = _plan_start(plan)
-    try:
-        vec = RslVecEnv(plan.env_id, plan.num_envs, plan.seed, plan.env_kwargs)
-    except ValueError as err:  # an id, kwarg or condition the batched env does not build
-        raise UsageError(f"--backend {BACKEND}: {err}") from err
+    latch = SignalLatch("stopping once the worlds are built; nothing is trained or written")
+    with handling_signals(latch):  # compiling is not cut short: a signal is acted on after it
+        try:
+            vec = RslVecEnv(plan.env_id, plan.num_envs, plan.seed, plan.env_kwargs)
+        except ValueError as err:  # an id, kwarg or condition the batched env does not build
+            raise UsageError(f"--backend {BACKEND}: {err}") from err
+    if latch.signum is not None:
+        raise KeyboardInterrupt
+    latch.doing = "saving a checkpoint after this PPO iteration"
     run_dir = plan.run_dir
     runs.check_run_dir(run_dir, plan.out_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     lock = FolderLock(run_dir, runs.LOCK_NAME).acquire("run folder")
-    latch = SignalLatch("saving a checkpoint after this PPO iteration")
     try:
         if old_manifest is None and plan.overwrite:
             remove_contents(run_dir, keep=(runs.LOCK_NAME,))
         with handling_signals(latch):
-            return _train_locked(plan, vec, old_manifest, resume_from, latch, report,
-                                 started)
+            run_dir = _train_locked(plan, vec, old_manifest, resume_from, latch, report,
+                                    started)
     finally:
         lock.release()
+    if latch.signum is not None:  # came while the finished run saved: hand it to the caller
+        signal.raise_signal(latch.signum)
+    return run_dir
 
 
 def _train_locked(plan: BatchRunPlan, vec: Any, old: dict[str, Any] | None,
@@ -552,6 +560,9 @@ def _train_locked(plan: BatchRunPlan, vec: Any, old: dict[str, Any] | None,
     except BaseException as err:
         write(status="failed", error=f"{type(err).__name__}: {err}")
         raise
+    # From here a signal no longer stops the run: it is finished first, then the signal is
+    # handed back to the caller's handler (train_batched).
+    latch.doing = "finishing the run (saving its final model), then stopping"
     _save_checkpoint(alg, run_dir / FULL_MODEL_NAME, iteration, done)
     alg.eval_mode()
     write(status="finished", finished_at=now_iso(), timesteps_done=done,
