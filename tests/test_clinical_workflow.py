@@ -157,7 +157,8 @@ def expert_trace(tmp_path_factory):
 
 
 def _lines(ax) -> dict[str, object]:
-    return {line.get_label(): line for line in ax.get_lines()}
+    """The axes' lines by their gid (what each one is)."""
+    return {line.get_gid(): line for line in ax.get_lines()}
 
 
 def test_patient_joint_figure_draws_angles_path_and_bounds(expert_trace) -> None:
@@ -178,6 +179,8 @@ def test_patient_joint_figure_draws_angles_path_and_bounds(expert_trace) -> None
         bounds = sorted(line.get_ydata()[0] for line in ax.get_lines()
                         if line.get_linestyle() == ":")
         assert bounds == [low, high] and low < high
+        assert lines["rom-low"].get_label() == (f"range of motion {low:g}° to {high:g}°\n"
+                                                "(AAOS normal range; stop 2° beyond)")
 
 
 def test_cuff_force_and_work_figures(expert_trace) -> None:
@@ -187,13 +190,15 @@ def test_cuff_force_and_work_figures(expert_trace) -> None:
     trace, raw = expert_trace
     ax = build_cuff_force(trace).axes[0]
     lines = _lines(ax)
-    np.testing.assert_array_equal(lines["cuff force"].get_ydata(), raw["interaction_force_n"])
-    assert lines["limit"].get_ydata()[0] == float(trace.cuff_force_limit_n) > 0
+    np.testing.assert_array_equal(lines["cuff-force"].get_ydata(), raw["interaction_force_n"])
+    assert lines["force-limit"].get_ydata()[0] == float(trace.cuff_force_limit_n) == 140.0
+    assert lines["force-limit"].get_label() == ("limit 140 N\n(ISO/TS 15066 quasi-static, "
+                                                "hands and fingers)")
     ax = build_work(trace).axes[0]
     lines = _lines(ax)
-    robot = lines["robot"].get_ydata()
+    robot = lines["robot-work"].get_ydata()
     assert robot[0] == 0.0 and robot[-1] > 0.0  # the robot does the work of a passive limb
-    np.testing.assert_array_equal(lines["patient"].get_ydata(), raw["patient_work_j"])
+    np.testing.assert_array_equal(lines["patient-work"].get_ydata(), raw["patient_work_j"])
 
 
 def test_plot_cli_writes_the_patient_figures(expert_trace, tmp_path, capsys) -> None:
@@ -214,18 +219,17 @@ def test_evaluate_refuses_an_earlier_evaluation_without_overwrite(tmp_path, caps
                                                                   monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
     args = ["evaluate", "expert", "--env", ENV, "--episodes", "1"]
-    assert main(args) == 0  # the default folder, runs/evaluation/rehab-reach-v0
-    default = tmp_path / "runs" / "evaluation" / ENV
+    assert main(args) == 0  # its default folder, runs/evaluation/rehab-reach-v0/expert
+    default = tmp_path / "runs" / "evaluation" / ENV / "expert"
     first = (default / "expert" / "evaluation.json").read_text()
     capsys.readouterr()
-    assert main(["evaluate", "random", "--env", ENV, "--episodes", "1"]) == 2  # would mix
+    assert main([*args, "--seed", "3"]) == 2  # the same comparison again: would mix
     err = capsys.readouterr().err
     assert "already holds an evaluation" in err and "--overwrite" in err
-    assert not (default / "random").exists()
     assert (default / "expert" / "evaluation.json").read_text() == first
-    assert main(["evaluate", "random", "--env", ENV, "--episodes", "1", "--overwrite"]) == 0
-    assert (default / "random" / "evaluation.json").is_file()
-    assert not (default / "expert").joinpath("evaluation.json").exists()  # not mixed
+    assert main([*args, "--seed", "3", "--overwrite"]) == 0
+    report = json.loads((default / "expert" / "evaluation.json").read_text())
+    assert report["episode_seeds"] == [3]
 
 
 # ------------------------------------------------------------------ 6. render's progress, help

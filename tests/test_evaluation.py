@@ -157,8 +157,10 @@ def test_missing_model_unknown_env_and_unwritable_out(tmp_path: Path, capsys) ->
     assert "rehab-bogus-v9" in err and FULL_ID in err
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    assert main(["evaluate", "expert", "--env", ENV, "--out", str(blocker / "sub")]) == 1
+    assert main(["evaluate", "expert", "--env", ENV, "--out", str(blocker)]) == 1
     assert "cannot write" in capsys.readouterr().err
+    assert main(["evaluate", "expert", "--env", ENV, "--out", str(blocker / "sub")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
     assert main(["evaluate", "expert"]) == 2
     assert "--env" in capsys.readouterr().err
 
@@ -192,6 +194,24 @@ def test_ensure_trace_evaluates_a_run_once(tmp_path: Path, sac_model: Path) -> N
         assert int(trace["seed"]) == 7 and str(trace["policy"]) == "sac-seed7"
     stamp = path.stat().st_mtime_ns
     assert ensure_trace(run) == path and path.stat().st_mtime_ns == stamp
+
+
+def test_ensure_trace_never_writes_into_a_live_run(tmp_path: Path, sac_model: Path) -> None:
+    from rehabbot.common.files import FolderLock, FolderLockedError
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "model.zip").write_bytes(sac_model.read_bytes())
+    (run / "manifest.json").write_text(json.dumps(
+        {"env_id": FULL_ID, "algo": "sac", "seed": 7, "env_kwargs": {}}))
+    lock = FolderLock(run, ".lock").acquire("run folder")  # a live `rehabbot train`
+    try:
+        with pytest.raises(FolderLockedError, match=f"run folder {run} is being written"):
+            ensure_trace(run)
+    finally:
+        lock.release()
+    assert not (run / "evaluation").exists()
+    assert ensure_trace(run).is_file()
 
 
 # --------------------------------------------------------------------------- render

@@ -68,6 +68,36 @@ def test_a_bad_policy_fails_before_anything_is_written(trained_run, tmp_path, ca
     assert "need(s) --env ENV" in capsys.readouterr().err
 
 
+def test_the_readme_session_plots_the_comparison_it_evaluated(trained_run, tmp_path,
+                                                             monkeypatch, capsys) -> None:
+    """README: `rehabbot evaluate <run>/model.zip expert random`, then `rehabbot plot
+    runs/<env>`: the plot draws that comparison (and Fig. 10) and evaluates nothing again;
+    an evaluation of other policies before it does not block it."""
+    pytest.importorskip("matplotlib")
+    import shutil
+
+    monkeypatch.chdir(tmp_path)
+    run = Path("runs") / ENV / "ppo" / "seed0"
+    shutil.copytree(trained_run, run, ignore=shutil.ignore_patterns("evaluation"))
+    assert main(["evaluate", "expert", "aan", "--env", ENV, "--episodes", "1"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(run / "model.zip"), "expert", "random", "--episodes",
+                 "1"]) == 0
+    out = capsys.readouterr().out
+    comparison = Path("runs") / ENV / "evaluation" / "ppo-seed0+expert+random"
+    assert out.rstrip().endswith(f"rehabbot plot {comparison}")
+    assert (comparison / "comparison.md").is_file()
+    assert (Path("runs") / "evaluation" / ENV / "expert+aan" / "comparison.md").is_file()
+    assert main(["plot", f"runs/{ENV}", "--formats", "png", "--dpi", "50"]) == 0
+    printed = capsys.readouterr().out
+    assert "has no evaluated episode" not in printed  # nothing evaluated again
+    assert not (run / "evaluation").exists()
+    names = {Path(line).name for line in printed.split()}
+    assert f"fig10_overlay_{ENV}.png" in names and "fig4_learning_curves.png" in names
+    for label in ("ppo-seed0", "expert", "random"):
+        assert f"fig8_cuff_force_{label}_{ENV}.png" in names
+
+
 # -- one id, one pair of spaces -------------------------------------------------------------
 @pytest.mark.parametrize("env_id", [env_id if env_id.endswith("reach-v0") else
                                     pytest.param(env_id, marks=pytest.mark.slow)

@@ -309,13 +309,16 @@ def test_fig6_torques_with_limits(trace_file: Path) -> None:
     assert len(axes) == 6
     limits = [150, 150, 150, 28, 28, 28]
     for j, ax in enumerate(axes):
-        assert ax.get_title() == JOINTS[j]
+        assert ax.get_title() == f"{JOINTS[j]} (limit ±{limits[j]} N·m)"
         lines = ax.get_lines()
         torque = next(line for line in lines if line.get_linestyle() == "-")
         assert np.max(torque.get_ydata()) == pytest.approx(10.0 * (j + 1))
         dashed = sorted(float(line.get_ydata()[0]) for line in lines
                         if line.get_linestyle() == "--")
         assert dashed == [-limits[j], limits[j]]
+        labelled = [line.get_label() for line in lines if line.get_gid() == "torque-limit"
+                    and not line.get_label().startswith("_")]
+        assert labelled == [f"limit ±{limits[j]} N·m\n(source not recorded)"]
         low, high = ax.get_ylim()  # limits and the whole torque curve (wrists exceed) visible
         assert low < -limits[j] and high > limits[j]
         assert low <= -10.0 * (j + 1) and high >= 10.0 * (j + 1)
@@ -594,7 +597,10 @@ def test_cmd_plot_errors(tmp_path: Path, trace_file: Path) -> None:
     err = run(str(trace_file.parent), "--out", str(tmp_path / "a_file"))
     assert err.exit_code == EXIT_USAGE and "a_file" in str(err)
     err = run(str(trace_file.parent), "--out", str(tmp_path / "a_file" / "sub"))
-    assert err.exit_code == EXIT_FAILURE and "a_file" in str(err)
+    assert err.exit_code == EXIT_USAGE and "a_file" in str(err) and "not a folder" in str(err)
+    err = run(str(trace_file.parent), "--out", str(tmp_path / "no" / "such" / "figs"))
+    assert err.exit_code == EXIT_USAGE and "does not exist" in str(err)
+    assert not (tmp_path / "no").exists()  # a user's --out is never built out of typos
 
     bad = tmp_path / "bad"
     bad.mkdir()
@@ -602,10 +608,10 @@ def test_cmd_plot_errors(tmp_path: Path, trace_file: Path) -> None:
     err = run(str(bad))
     assert err.exit_code == EXIT_FAILURE and "trace.npz" in str(err)
 
-    with pytest.raises(SystemExit):
-        parser.parse_args(["plot", str(bad), "--smooth", "0"])
-    with pytest.raises(SystemExit):
-        parser.parse_args(["plot", str(bad), "--source", "test"])
+    for option, value in (("--smooth", "0"), ("--smooth", "1e26"), ("--smooth", "2000000"),
+                          ("--dpi", "10"), ("--dpi", "100000"), ("--source", "test")):
+        with pytest.raises(SystemExit):
+            parser.parse_args(["plot", str(bad), option, value])
 
 
 def test_plot_help_has_examples(capsys: pytest.CaptureFixture[str]) -> None:

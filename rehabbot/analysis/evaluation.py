@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import time
 from collections.abc import Sequence
@@ -40,6 +41,13 @@ from typing import Any
 
 import numpy as np
 
+from rehabbot.analysis.evaluation_folders import (
+    COMPARISON_NAME,
+    PATIENTS_NAME,
+    REPORT_NAME,
+    check_label_folders,
+    lock_run_folders,
+)
 from rehabbot.analysis.metrics import kinematic_summary
 from rehabbot.analysis.patients import format_patient_table, patient_record, per_patient_summary
 from rehabbot.analysis.policy_specs import (
@@ -51,22 +59,23 @@ from rehabbot.analysis.policy_specs import (
     resolve_policy,
 )
 from rehabbot.analysis.quiet import make_env, quiet_known_warnings
+from rehabbot.analysis.range_of_motion import (
+    BEYOND_PRESCRIBED,
+    achieved_fraction,
+    beyond_prescribed,
+    range_of_motion_deg,
+)
 from rehabbot.analysis.recorder import WorkRecorder, patient_limits
 from rehabbot.analysis.traces import TRACE_NAME, load_trace, save_trace_file, trace_from_episode
-from rehabbot.common.errors import DataError, UsageError
+from rehabbot.common.errors import DataError, OutputError, UsageError
 from rehabbot.common.files import atomic_save_all, atomic_write_text
 from rehabbot.common.provenance import package_versions
 from rehabbot.common.tables import markdown_table
-from rehabbot.envs.registration import env_short_name
 from rehabbot.rl import runs
-from rehabbot.rl.policies import POLICY_KEYWORDS, env_for, model_file
+from rehabbot.rl.policies import LoadedPolicy, PolicyError, env_for
 from rehabbot.rl.rollout import Episode, run_episode
-from rehabbot.rl.zoo import is_zoo_spec
 from rehabbot.sim.physics import RULES
 
-REPORT_NAME = "evaluation.json"
-COMPARISON_NAME = "comparison.md"
-PATIENTS_NAME = "patients.md"
 SUMMARY_METRICS = (
     # key in the summary, label in the table, unit
     ("return", "return", ""),
@@ -96,7 +105,6 @@ MUSCLE_METRICS = (
     ("mean_muscle_activation", "mean muscle activation", ""),
     ("mean_muscle_excitation", "mean muscle excitation", ""),
 )
-PRESCRIBED_MIN_DEG = 1.0  # joints the exercise moves less than this are left out of the ROM
 DEFAULT_EPISODES = 10
 
 
@@ -118,7 +126,6 @@ def episode_figures(episode: Episode) -> dict[str, Any]:
     }
     achieved, prescribed = range_of_motion_deg(episode.patient_qpos_rad,
                                                episode.target_patient_deg)
-    moved = prescribed >= PRESCRIBED_MIN_DEG
     figures.update({
         "robot_work_j": episode.robot_work_j,
         "patient_work_j": episode.patient_work_j,
@@ -127,8 +134,7 @@ def episode_figures(episode: Episode) -> dict[str, Any]:
         "peak_patient_torque_nm": float(np.max(np.abs(episode.patient_torque_nm))),
         "rom_achieved_deg": achieved.tolist(),
         "rom_prescribed_deg": prescribed.tolist(),
-        "rom_achieved_fraction": (float(achieved[moved].sum() / prescribed[moved].sum())
-                                  if moved.any() else None),
+        "rom_achieved_fraction": achieved_fraction(achieved, prescribed),
     })
     if episode.muscle_work_j is not None:
         figures.update({key: getattr(episode, key) for key, _label, _unit in MUSCLE_METRICS})
@@ -136,17 +142,6 @@ def episode_figures(episode: Episode) -> dict[str, Any]:
                                      tool_m=episode.tool_pos_m,
                                      torque_nm=episode.robot_torque_nm))
     return figures
-
-
-def range_of_motion_deg(patient_rad: np.ndarray,
-                        targets_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per exercised joint: the excursion achieved in an episode (max - min of the joint's
-    angle, ``patient_rad`` (T + 1, 3) from the reset on) and the excursion prescribed (from the
-    start pose through every target of ``targets_deg`` (N, 3)), both in degrees."""
-    angles = np.degrees(np.asarray(patient_rad, dtype=float))
-    achieved = angles.max(axis=0) - angles.min(axis=0)
-    path = np.vstack([angles[:1], np.asarray(targets_deg, dtype=float)])
-    return achieved, path.max(axis=0) - path.min(axis=0)
 
 
 def _mean_std(values: Sequence[float | None]) -> tuple[float | None, float | None]:
@@ -220,6 +215,111 @@ def run_env_for(specs: Sequence[PolicySpec], env_id: str | None,
     return env_for(named, env_id, env_kwargs)
 
 
+class Evaluator:
+    """The env and the policies of one evaluation, every policy loaded and checked against the
+    env, before any episode runs (:func:`open_evaluator`); :meth:`run` runs them. A context
+    manager: leaving it closes the env."""
+
+    def __init__(self, env_id: str, env_kwargs: dict, env: WorkRecorder,
+                 policies: list[LoadedPolicy], seed: int, deterministic: bool) -> None:
+        self.env_id = env_id
+        self.env_kwargs = env_kwargs
+        self.env = env
+        self.policies = policies
+        self.seed = seed
+        self.deterministic = deterministic
+
+    @property
+    def labels(self) -> list[str]:
+        """The policies' labels, in the order given (each names its output folder)."""
+        return [policy.label for policy in self.policies]
+
+    def run(self, episodes: int = DEFAULT_EPISODES) -> list[tuple[dict, dict]]:
+        """Every policy on episodes seeded ``seed``, ``seed + 1``, ...; returns each one's
+        report (JSON-ready) and first episode's trace (see :func:`evaluate_policies`)."""
+        if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+            raise UsageError(f"episodes={episodes!r} must be an integer >= 1")
+        env, seed = self.env, self.seed
+        results = []
+        for policy in self.policies:
+            started = time.perf_counter()
+            figures, trace = [], None
+            for k in range(episodes):
+                episode = run_episode(env, policy, seed + k, self.deterministic)
+                patient = patient_record(env)
+                figures.append({**episode_figures(episode), "patient": patient})
+                if trace is None:
+                    trace = {**trace_from_episode(episode), **env.series(),
+                             **patient_limits(env), "patient": np.array(patient["description"])}
+            report = {
+                "env_id": self.env_id,
+                "env_kwargs": self.env_kwargs,
+                "policy": policy.describe(),
+                "seed": seed,
+                "episode_seeds": [seed + k for k in range(episodes)],
+                "deterministic": self.deterministic,
+                "summary": summarize(figures),
+                "per_patient": per_patient_summary(figures),
+                "per_episode": figures,
+                "wall_clock_s": time.perf_counter() - started,
+                "versions": package_versions(),
+            }
+            results.append((report, trace))
+        return results
+
+    def close(self) -> None:
+        """Close the env."""
+        self.env.close()
+
+    def __enter__(self) -> Evaluator:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
+def _resolve(spec: PolicySpec, env: WorkRecorder, seed: int) -> LoadedPolicy:
+    """:func:`.policy_specs.resolve_policy`; a policy that ends the program while it is
+    imported or built (``SystemExit``) is a :class:`PolicyError` naming it."""
+    try:
+        policy = resolve_policy(spec, env, seed=seed)
+    except SystemExit as err:
+        raise PolicyError(f"policy {describe_spec(spec)}: loading it called exit({err.code!r}); "
+                          "a policy must not end the program") from err
+    if policy.spec is None and isinstance(spec, str):
+        policy.spec = spec
+    return policy
+
+
+def open_evaluator(specs: Sequence[PolicySpec], env_id: str | None = None,
+                   env_kwargs: dict | None = None, seed: int = 0,
+                   deterministic: bool = True) -> Evaluator:
+    """Make the env and load and check every policy of ``specs`` (see
+    :func:`evaluate_policies`), running nothing yet: the labels are known and a bad spec has
+    failed before the caller picks an output folder. Close it (``with``) when done."""
+    if isinstance(specs, str) or not isinstance(specs, Sequence):
+        raise UsageError(f"specs={specs!r} must be a list of policies (e.g. ['expert'])")
+    env_id, kwargs = run_env_for(specs, env_id, env_kwargs)
+    env = WorkRecorder(make_env(env_id, **kwargs))
+    try:
+        with quiet_known_warnings():
+            policies = [_resolve(spec, env, seed) for spec in specs]
+        for policy in policies:  # before any episode runs
+            if policy.kind == CUSTOM_KIND:
+                check_custom_label(policy.label)
+            else:
+                check_label(policy.label)
+        check_distinct_labels(policies)
+        zoo = [p.label for p in policies if p.kind == "zoo"]
+        if zoo and not deterministic:
+            raise UsageError(f"{', '.join(zoo)}: zoo agents are deterministic only (their "
+                             "exploration noise is not exported); leave out --stochastic")
+    except BaseException:
+        env.close()
+        raise
+    return Evaluator(env_id, kwargs, env, policies, seed, deterministic)
+
+
 def evaluate_policies(specs: Sequence[PolicySpec], env_id: str | None = None,
                       episodes: int = DEFAULT_EPISODES, seed: int = 0,
                       env_kwargs: dict | None = None,
@@ -239,53 +339,16 @@ def evaluate_policies(specs: Sequence[PolicySpec], env_id: str | None = None,
     loaded and checked against the env before the first episode runs, so a bad one fails
     before any work is done. Each episode's figures name its patient (``"patient"``: a
     population env draws one per episode), and ``"per_patient"`` tabulates them.
+
+    Raises:
+        PolicyError: a policy failed to load, or while it ran (an exception or ``exit()`` in
+            its ``predict``, an action that is not a finite array of the action space, a
+            result that is not ``(action, state)``), naming it.
     """
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise UsageError(f"episodes={episodes!r} must be an integer >= 1")
-    if isinstance(specs, str) or not isinstance(specs, Sequence):
-        raise UsageError(f"specs={specs!r} must be a list of policies (e.g. ['expert'])")
-    env_id, kwargs = run_env_for(specs, env_id, env_kwargs)
-    env = WorkRecorder(make_env(env_id, **kwargs))
-    try:
-        with quiet_known_warnings():
-            policies = [resolve_policy(spec, env, seed=seed) for spec in specs]
-        for policy in policies:  # before any episode runs
-            if policy.kind == CUSTOM_KIND:
-                check_custom_label(policy.label)
-            else:
-                check_label(policy.label)
-        check_distinct_labels(policies)
-        zoo = [p.label for p in policies if p.kind == "zoo"]
-        if zoo and not deterministic:
-            raise UsageError(f"{', '.join(zoo)}: zoo agents are deterministic only (their "
-                             "exploration noise is not exported); leave out --stochastic")
-        results = []
-        for policy in policies:
-            started = time.perf_counter()
-            figures, trace = [], None
-            for k in range(episodes):
-                episode = run_episode(env, policy, seed + k, deterministic)
-                figures.append({**episode_figures(episode), "patient": patient_record(env)})
-                if trace is None:
-                    trace = {**trace_from_episode(episode), **env.series(),
-                             **patient_limits(env)}
-            report = {
-                "env_id": env_id,
-                "env_kwargs": kwargs,
-                "policy": policy.describe(),
-                "seed": seed,
-                "episode_seeds": [seed + k for k in range(episodes)],
-                "deterministic": deterministic,
-                "summary": summarize(figures),
-                "per_patient": per_patient_summary(figures),
-                "per_episode": figures,
-                "wall_clock_s": time.perf_counter() - started,
-                "versions": package_versions(),
-            }
-            results.append((report, trace))
-    finally:
-        env.close()
-    return results
+    with open_evaluator(specs, env_id, env_kwargs, seed, deterministic) as evaluator:
+        return evaluator.run(episodes)
 
 
 def evaluate(spec: PolicySpec, env_id: str | None = None, episodes: int = DEFAULT_EPISODES,
@@ -304,9 +367,8 @@ def save_report(report: dict, trace: dict, out_dir: Path) -> tuple[Path, Path]:
     checked) and only then renamed, so a failure (a full disk) raises
     :class:`~rehabbot.common.errors.OutputError` and leaves the earlier pair as it was,
     never a new report beside an old trace."""
-    out_dir = Path(out_dir)
+    out_dir = _real_folder(out_dir)
     json_path, trace_path = out_dir / REPORT_NAME, out_dir / TRACE_NAME
-    out_dir.mkdir(parents=True, exist_ok=True)
     atomic_save_all(
         {json_path: lambda name: save_report_file(name, report),
          trace_path: lambda name: save_trace_file(name, trace)},
@@ -314,6 +376,21 @@ def save_report(report: dict, trace: dict, out_dir: Path) -> tuple[Path, Path]:
          trace_path: load_trace},
     )
     return json_path, trace_path
+
+
+def _real_folder(folder: Path) -> Path:
+    """``folder``, created (with its parents) if missing; a symbolic link is refused, never
+    written through.
+
+    Raises:
+        OutputError: ``folder`` is a symbolic link (naming it and its target).
+    """
+    folder = Path(folder)
+    if folder.is_symlink():
+        raise OutputError(f"refusing to write into {folder}: it is a symbolic link (to "
+                          f"{os.readlink(folder)}); remove the link or choose another folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 def save_report_file(name: str | Path, report: dict) -> None:
@@ -337,11 +414,16 @@ def _cell(stat: Any, key: str) -> str | None:
     if mean is None:
         return None
     digits = 0 if abs(mean) >= 100 else (2 if abs(mean) >= 1 else 3)
-    return f"{mean:.{digits}f} ± {std:.{digits}f}"
+    text = f"{mean:.{digits}f} ± {std:.{digits}f}"
+    if key == "rom_achieved_fraction" and beyond_prescribed(mean):
+        text += f" ⚠ {BEYOND_PRESCRIBED}"
+    return text
 
 
 def format_table(reports: Sequence[dict]) -> str:
-    """A Markdown table, one column per policy (mean ± std over episodes)."""
+    """A Markdown table, one column per policy (mean ± std over episodes). A range of motion
+    achieved / prescribed above 1 (the limb went beyond the prescription) is flagged in its
+    cell: ``1.46 ± 0.02 ⚠ beyond the prescribed range``."""
     header = ["metric"] + [r["policy"]["label"] for r in reports]
     rows = []
     metrics = list(SUMMARY_METRICS)
@@ -374,43 +456,12 @@ def format_patient_tables(reports: Sequence[dict]) -> str:
     return "\n\n".join(parts)
 
 
-def default_out_dir(specs: Sequence[PolicySpec], env_id: str | None) -> Path:
-    """``<run>/evaluation`` for one model of a training run, else ``runs/evaluation/<env>``."""
-    run_dirs = {runs.find_run_dir(model_file(spec)) for spec in specs if is_named_spec(spec)
-                and spec not in POLICY_KEYWORDS and not is_zoo_spec(spec)}
-    if len(specs) == 1 and len(run_dirs) == 1 and None not in run_dirs:
-        return run_dirs.pop() / runs.EVALUATION_DIR
-    return Path("runs") / "evaluation" / (env_short_name(env_id) if env_id else "models")
-
-
-def earlier_evaluation(out_dir: Path) -> list[Path]:
-    """The files of an earlier evaluation in ``out_dir``: ``comparison.md`` and every
-    ``<label>/evaluation.json``, ``<label>/trace.npz`` and ``<label>/patients.md``."""
-    out_dir = Path(out_dir)
-    if not out_dir.is_dir():
-        return []
-    found = [out_dir / COMPARISON_NAME] if (out_dir / COMPARISON_NAME).is_file() else []
-    for name in (REPORT_NAME, TRACE_NAME, PATIENTS_NAME):
-        found += sorted(path for path in out_dir.glob(f"*/{name}") if path.is_file())
-    return found
-
-
-def remove_earlier_evaluation(out_dir: Path, keep: Sequence[Path] = ()) -> list[Path]:
-    """Remove :func:`earlier_evaluation`'s files but those in ``keep`` (the files a new
-    evaluation has just written over them), never following a link; returns the removed."""
-    kept = {Path(path).resolve() for path in keep}
-    removed = [path for path in earlier_evaluation(out_dir) if path.resolve() not in kept]
-    for path in removed:
-        path.unlink()
-    return removed
-
-
 def write_patient_table(out_dir: Path, report: dict) -> Path | None:
     """``out_dir/patients.md``: the report's per-patient table, when it met several patients
     (None, and no file, otherwise)."""
     if not has_several_patients(report):
         return None
-    path = Path(out_dir) / PATIENTS_NAME
+    path = _real_folder(out_dir) / PATIENTS_NAME
     atomic_write_text(path, format_patient_table(report) + "\n")
     return path
 
@@ -437,7 +488,9 @@ def ensure_trace(run_dir: Path, seed: int | None = None) -> Path:
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise DataError(f"{run_dir / runs.MANIFEST_NAME}: seed {seed!r} is not an integer "
                             ">= 0")
-    report, trace = evaluate(str(run_dir / runs.MODEL_NAME), None, episodes=1, seed=seed)
-    _json, trace_path = save_report(report, trace, label_dir(run_dir / runs.EVALUATION_DIR,
-                                                             report["policy"]["label"]))
+    with lock_run_folders(run_dir):  # never into the folder of a run being trained
+        report, trace = evaluate(str(run_dir / runs.MODEL_NAME), None, episodes=1, seed=seed)
+        folder = label_dir(run_dir / runs.EVALUATION_DIR, report["policy"]["label"])
+        check_label_folders(run_dir / runs.EVALUATION_DIR, [report["policy"]["label"]])
+        _json, trace_path = save_report(report, trace, folder)
     return trace_path

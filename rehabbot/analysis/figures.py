@@ -7,6 +7,14 @@ several formats).
 ``plot_*`` build, save and return the written paths. Importing this module does not import
 matplotlib; a missing matplotlib raises an ``ImportError`` that says to
 ``pip install "rehabbot[plot]"``.
+
+What every figure of an evaluated episode shows, so that it reads without its folder: its title
+names the policy, the env and the patient (``patient: female, 1.6 m, 55 kg; MAS 3
+spasticity``, :func:`trace_title`); every limit line is labelled with its value and source
+(``limit ±150 N·m (UR5e rated joint torque, Universal Robots)``); legends sit outside the axes,
+off the data (:func:`legend_outside`); and a safety stop is marked where it happened, with its
+rule (:func:`mark_stop`). Lines carry a ``gid`` naming what they are (:data:`GIDS`), so that a
+reader or a test finds them.
 """
 
 from __future__ import annotations
@@ -22,6 +30,7 @@ import numpy as np
 from rehabbot.analysis.traces import Trace, load_trace
 from rehabbot.common.extras import missing_module_message
 from rehabbot.common.files import atomic_save_verified
+from rehabbot.envs.registration import env_short_name
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -35,7 +44,14 @@ GRID_POINTS = 200
 TOOL_PATH_COLOR = "#8000c0"
 TARGET_PATH_COLOR = "0.5"
 LIMIT_COLOR = "#d62728"
+STOP_COLOR = "#ff7f0e"
 DPI = 150
+SOURCE_NOT_RECORDED = "source not recorded"
+# gid of each kind of line, for readers and tests: ax.get_lines() with line.get_gid() == ...
+GIDS = {"stop": "safety-stop", "torque-limit": "torque-limit", "force-limit": "force-limit",
+        "crossing": "limit-crossing", "rom-low": "rom-low", "rom-high": "rom-high",
+        "measured": "measured", "prescribed": "prescribed", "cuff-force": "cuff-force",
+        "robot-work": "robot-work", "patient-work": "patient-work"}
 
 # Fig. 3 target labels (see :func:`choose_target_labels`)
 TARGET_MERGE_FRACTION = 0.02
@@ -67,6 +83,36 @@ def new_figure(figsize: tuple[float, float]) -> Figure:
     return figure
 
 
+def trace_title(what: str, trace: Trace) -> str:
+    """A figure's title: what it shows, the policy and env, and on a second line the patient
+    (profile and condition), so that a healthy and a MAS 3 run never look alike."""
+    return (f"{what}: {trace.policy} on {env_short_name(trace.env_id)}\n"
+            f"patient: {trace.patient_text}")
+
+
+def legend_outside(ax: Axes, **kwargs) -> object:
+    """``ax``'s legend to the right of the axes, off the data (the constrained layout makes
+    room for it)."""
+    options = {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0), "borderaxespad": 0.0,
+               "fontsize": "small", **kwargs}
+    return ax.legend(**options)
+
+
+def stop_label(trace: Trace) -> str:
+    """``"safety stop: cuff_force rule at 3.42 s"`` (the trace must have stopped)."""
+    return f"safety stop: {trace.safety_violation} rule at {trace.stop_time_s:.2f} s"
+
+
+def mark_stop(ax: Axes, trace: Trace, label: bool = True) -> object | None:
+    """A vertical line at the time a safety rule stopped the episode, labelled with the rule;
+    None (nothing drawn) when no rule stopped it."""
+    if trace.stop_time_s is None:
+        return None
+    return ax.axvline(trace.stop_time_s, color=STOP_COLOR, linestyle="-.", linewidth=1.5,
+                      label=stop_label(trace) if label else "_nolegend_", gid=GIDS["stop"],
+                      zorder=3)
+
+
 def check_formats(formats: Sequence[str]) -> tuple[str, ...]:
     cleaned = tuple(fmt.lower().lstrip(".") for fmt in formats)
     if not cleaned:
@@ -80,8 +126,8 @@ def check_formats(formats: Sequence[str]) -> tuple[str, ...]:
 
 
 def save_figure(figure: Figure, out_dir: Path | str, stem: str,
-                formats: Sequence[str] = DEFAULT_FORMATS) -> list[Path]:
-    """Write ``<out_dir>/<stem>.<fmt>`` for each format; creates ``out_dir``.
+                formats: Sequence[str] = DEFAULT_FORMATS, dpi: int = DPI) -> list[Path]:
+    """Write ``<out_dir>/<stem>.<fmt>`` for each format at ``dpi`` (PNG); creates ``out_dir``.
 
     Each file is written under a temporary name, read back (:func:`verify_figure`) and
     renamed: a full disk raises :class:`~rehabbot.common.errors.OutputError` and keeps an
@@ -93,7 +139,7 @@ def save_figure(figure: Figure, out_dir: Path | str, stem: str,
     for fmt in check_formats(formats):
         target = out / f"{stem}.{fmt}"
         atomic_save_verified(target,
-                             lambda name, fmt=fmt: figure.savefig(name, format=fmt, dpi=DPI),
+                             lambda name, fmt=fmt: figure.savefig(name, format=fmt, dpi=dpi),
                              lambda tmp, fmt=fmt: verify_figure(tmp, fmt))
         written.append(target)
     return written
@@ -147,11 +193,12 @@ def build_kinematics(trace: Trace | Path | str) -> Figure:
     for ax, (values, ylabel) in zip(axes, panels, strict=True):
         for j, name in enumerate(trace.joint_names):
             ax.plot(trace.time_s, values[:, j], linewidth=1.2, label=name)
+        mark_stop(ax, trace)
         ax.set_ylabel(ylabel)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    legend_outside(axes[0])
     axes[-1].set_xlabel("time [s]")
-    figure.suptitle(f"Robot joint kinematics: {trace.policy} on {trace.env_id}")
+    figure.suptitle(trace_title("Robot joint kinematics", trace))
     return figure
 
 
@@ -169,24 +216,40 @@ def _plot_trace(build, prefix: str, trace_path: Trace | Path | str, out_dir: Pat
     return save_figure(build(trace), out_dir, f"{prefix}_{trace.label}", formats)
 
 
+def torque_limit_label(limit_nm: float, trace: Trace) -> str:
+    """``"limit ±150 N·m (UR5e rated joint torque, Universal Robots)"``."""
+    source = trace.torque_limit_source or SOURCE_NOT_RECORDED
+    return f"limit ±{limit_nm:g} N·m\n({source})"
+
+
 def build_torques(trace: Trace | Path | str) -> Figure:
-    """Fig. 6: one panel per joint (2×3 grid): torque versus time, ± limit dashed."""
+    """Fig. 6: one panel per joint (2×3 grid): torque versus time, ± limit dashed and labelled
+    with its value and source; one legend for all panels, below them."""
     trace = _as_trace(trace)
     n_joints = len(trace.joint_names)
     n_cols = min(3, n_joints)
     n_rows = math.ceil(n_joints / n_cols)
-    figure = new_figure((4.0 * n_cols, 2.8 * n_rows))
+    figure = new_figure((4.0 * n_cols, 2.8 * n_rows + 0.8))
     axes = np.atleast_1d(figure.subplots(n_rows, n_cols, sharex=True, squeeze=False)).ravel()
+    legend: dict[str, object] = {}
     for j, ax in enumerate(axes):
         if j >= n_joints:
             ax.set_visible(False)
             continue
         limit = float(trace.torque_limit_nm[j])
-        ax.plot(trace.time_s, trace.robot_torque_nm[:, j], color="#1f77b4", linewidth=1.2,
-                label="torque")
-        ax.axhline(limit, color=LIMIT_COLOR, linestyle="--", linewidth=1.0, label="limit")
-        ax.axhline(-limit, color=LIMIT_COLOR, linestyle="--", linewidth=1.0)
-        ax.set_title(trace.joint_names[j], fontsize="medium")
+        line = ax.plot(trace.time_s, trace.robot_torque_nm[:, j], color="#1f77b4",
+                       linewidth=1.2, label="torque")[0]
+        legend.setdefault("torque", line)
+        label = torque_limit_label(limit, trace)
+        for sign in (1.0, -1.0):
+            line = ax.axhline(sign * limit, color=LIMIT_COLOR, linestyle="--", linewidth=1.0,
+                              label=label if sign > 0 else "_nolegend_",
+                              gid=GIDS["torque-limit"])
+        legend.setdefault(label, line)
+        stop = mark_stop(ax, trace)
+        if stop is not None:
+            legend.setdefault(stop.get_label(), stop)
+        ax.set_title(f"{trace.joint_names[j]} (limit ±{limit:g} N·m)", fontsize="medium")
         peak = float(np.nanmax(np.abs(trace.robot_torque_nm[:, j]), initial=0.0))
         span = max(1.15 * abs(limit), 1.05 * peak, 1e-3)
         ax.set_ylim(-span, span)
@@ -195,8 +258,9 @@ def build_torques(trace: Trace | Path | str) -> Figure:
             ax.set_ylabel("torque [N·m]")
         if j >= n_joints - n_cols:
             ax.set_xlabel("time [s]")
-    axes[0].legend(loc="upper right", fontsize="small")
-    figure.suptitle(f"Actuator torques: {trace.policy} on {trace.env_id}")
+    figure.legend(list(legend.values()), list(legend), loc="outside lower center",
+                  ncols=min(3, len(legend)), fontsize="small")
+    figure.suptitle(trace_title("Actuator torques", trace))
     return figure
 
 
@@ -316,22 +380,29 @@ def build_tool_path(trace: Trace | Path | str) -> Figure:
     except ImportError as err:  # pragma: no cover - ships with matplotlib
         raise ImportError(missing_module_message("plotting", "matplotlib")) from err
     n_robots = trace.tool_pos_m.shape[1] // 3
-    figure = new_figure((7.0 * n_robots, 6.5))
+    figure = new_figure((7.0 * n_robots, 7.5))
     names = ("right robot", "left robot") if n_robots == 2 else (None,) * n_robots
     for k, name in enumerate(names):
         ax = figure.add_subplot(1, n_robots, k + 1, projection="3d")
         columns = slice(3 * k, 3 * k + 3)
-        title = f"Tool path (robot base frame): {trace.policy} on {trace.env_id}"
         _draw_tool_path(ax, trace.tool_pos_m[:, columns], trace.target_tool_pos_m[:, columns],
-                        title if name is None else f"{title}, {name}")
+                        "robot base frame" if name is None else f"{name}, its base frame",
+                        stop=stop_label(trace) if trace.stop_time_s is not None else None)
+    figure.suptitle(trace_title("Tool path", trace))
     return figure
 
 
-def _draw_tool_path(ax, path: np.ndarray, targets: np.ndarray, title: str) -> None:
-    """One robot's tool path and numbered targets on the 3-D axes ``ax``."""
+def _draw_tool_path(ax, path: np.ndarray, targets: np.ndarray, title: str,
+                    stop: str | None = None) -> None:
+    """One robot's tool path and numbered targets on the 3-D axes ``ax``; ``stop`` labels a
+    marker where a safety rule stopped the episode (its last point)."""
     ax.plot(path[:, 0], path[:, 1], path[:, 2], color=TOOL_PATH_COLOR, linewidth=2.0,
             label="tool path")
     ax.scatter(*path[0], color=TOOL_PATH_COLOR, marker="o", s=30, label="start")
+    if stop is not None:
+        ax.scatter(*path[-1], facecolors="none", edgecolors=STOP_COLOR, marker="o", s=140,
+                   linewidths=2.0, depthshade=False, label=stop, gid=GIDS["stop"],
+                   zorder=LABEL_ZORDER)
     if len(targets):
         ax.plot(targets[:, 0], targets[:, 1], targets[:, 2], color=TARGET_PATH_COLOR,
                 linestyle="--", linewidth=1.0, label="target sequence")
@@ -348,10 +419,21 @@ def _draw_tool_path(ax, path: np.ndarray, targets: np.ndarray, title: str) -> No
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
-    ax.set_title(title)
+    ax.set_title(title, fontsize="medium")
+    # The legend goes below the axes, off the data, before the layout is resolved for the
+    # target labels: its height (one row per entry) is final now, and the targets' entry,
+    # named once the labels are chosen, only changes its width, never the layout.
+    provisional = "targets, labelled by number"
     if len(targets):
-        markers.set_label(_draw_target_labels(ax, targets, extent_m=2 * half))
-    ax.legend(loc="upper left", fontsize="small")
+        markers.set_label(provisional)
+    legend = ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.02), borderaxespad=0.0,
+                       fontsize="small")
+    if len(targets):
+        text = _draw_target_labels(ax, targets, extent_m=2 * half)
+        markers.set_label(text)
+        for entry in legend.get_texts():
+            if entry.get_text() == provisional:
+                entry.set_text(text)
 
 
 def _draw_target_labels(ax, targets_m: np.ndarray, extent_m: float) -> str:

@@ -5,6 +5,8 @@
 the population, profile and condition; any other env: its one patient).
 :func:`per_patient_summary` groups a report's episodes by patient (mean over each patient's
 episodes) and :func:`format_patient_table` writes that as a Markdown table.
+:func:`condition_text` words a condition as a therapist reads it (``"MAS 3 spasticity"``,
+``"healthy, passive"``): every table and figure title names the patient with it.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from rehabbot.analysis.range_of_motion import BEYOND_PRESCRIBED, beyond_prescribed
 from rehabbot.common.tables import markdown_table
 
 # key in an episode's figures, column of the per-patient table, digits
@@ -30,10 +33,62 @@ PATIENT_METRICS: tuple[tuple[str, str, int], ...] = (
 )
 
 
+HEALTHY_TEXT = "healthy, passive"
+EFFORT_WORDS = {"active_assisted": "active-assisted", "resistive": "resistive"}
+
+
+def condition_text(condition: dict[str, Any] | None) -> str:
+    """A condition (:meth:`PatientCondition.to_dict`'s fields, None for a healthy limb) as a
+    therapist reads it: ``"MAS 3 spasticity"``, ``"MAS 2 spasticity, stiffness x1.5, ROM
+    x0.8"``, ``"active-assisted (effort 30 %), strength 50 %"``, or ``"healthy, passive"``.
+    Only the fields that differ from a healthy, passive limb are named; a field this function
+    does not know is shown as ``name=value``, so nothing is left out."""
+    if not condition:
+        return HEALTHY_TEXT
+    from rehabbot.sim.conditions import PatientCondition
+
+    default = PatientCondition().to_dict()
+    changed = {key: value for key, value in condition.items() if default.get(key) != value}
+    if not changed:
+        return HEALTHY_TEXT
+    effort = condition.get("effort", default["effort"])
+    words = []
+    if "spasticity_mas" in changed:
+        words.append(f"MAS {changed.pop('spasticity_mas')} spasticity")
+    if "effort" in changed or "effort_fraction" in changed:
+        changed.pop("effort", None)
+        fraction = changed.pop("effort_fraction", default["effort_fraction"])
+        if effort != "passive":
+            words.append(f"{EFFORT_WORDS.get(effort, effort)} (effort "
+                         f"{100 * float(fraction):.0f} %)")
+    described = {
+        "stiffness_scale": lambda v: f"stiffness x{v:g}",
+        "rom_scale": lambda v: f"ROM x{v:g}",
+        "strength_fraction": lambda v: f"strength {100 * v:.0f} %",
+        "reaction_delay_s": lambda v: f"reaction delay {v:g} s",
+        "fatigue_scale": lambda v: f"fatigue x{v:g}",
+    }
+    if "tremor_hz" in changed or "tremor_amplitude_nm" in changed:
+        hz = float(changed.pop("tremor_hz", default["tremor_hz"]))
+        amplitude = float(changed.pop("tremor_amplitude_nm", default["tremor_amplitude_nm"]))
+        words.append(f"tremor {hz:g} Hz, {amplitude:g} N·m")
+    for key, value in changed.items():
+        words.append(described[key](float(value)) if key in described else f"{key}={value!r}")
+    return ", ".join(words) if words else HEALTHY_TEXT
+
+
+def profile_text(profile: dict[str, Any] | None) -> str:
+    """``"male, 1.75 m, 75 kg"`` (empty for an env without a profile)."""
+    if not profile:
+        return ""
+    return f"{profile['sex']}, {profile['height_m']:g} m, {profile['mass_kg']:g} kg"
+
+
 def patient_record(env: gym.Env) -> dict[str, Any]:
     """The patient of ``env``'s current (or last) episode: ``index`` (in the population, else
     None), ``profile`` (height_m, mass_kg, sex), ``condition`` (its fields, None for a
-    healthy, passive limb) and ``description`` (one line)."""
+    healthy, passive limb) and ``description``, one line: ``"#3: female, 1.6 m, 55 kg; MAS 2
+    spasticity"`` (:func:`profile_text`, :func:`condition_text`)."""
     base = env.unwrapped
     index = getattr(base, "current_patient", None)
     patient_env = getattr(base, "current_env", base) if index is not None else base
@@ -45,13 +100,13 @@ def patient_record(env: gym.Env) -> dict[str, Any]:
         "height_m": float(profile.height_m), "mass_kg": float(profile.mass_kg),
         "sex": str(profile.sex)}
     healthy = condition is None or condition.is_healthy
-    text = "" if profile is None else \
-        f"{profile.sex} {profile.height_m:g} m {profile.mass_kg:g} kg"
-    text += ", " + ("healthy, passive" if healthy else condition.describe())
+    condition_dict = None if healthy else condition.to_dict()
+    text = "; ".join(part for part in (profile_text(profile_dict), condition_text(condition_dict))
+                     if part)
     if index is not None:
         text = f"#{index}: {text}"
     return {"index": None if index is None else int(index), "profile": profile_dict,
-            "condition": None if healthy else condition.to_dict(), "description": text}
+            "condition": condition_dict, "description": text}
 
 
 def _mean(values: Sequence[Any]) -> float | None:
@@ -87,6 +142,9 @@ def format_patient_table(report: dict) -> str:
             value = entry[key]
             if value is not None and key == "success":
                 value = 100.0 * value
-            cells.append(None if value is None else f"{value:.{digits}f}")
+            cell = None if value is None else f"{value:.{digits}f}"
+            if key == "rom_achieved_fraction" and beyond_prescribed(value):
+                cell += f" ⚠ {BEYOND_PRESCRIBED}"
+            cells.append(cell)
         rows.append(cells)
     return markdown_table(header, rows)

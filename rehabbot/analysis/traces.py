@@ -25,10 +25,16 @@ key                      what
 ``cuff_force_limit_n``   the cuff's force limit (the safety rule's)
 ``robot_work_j``,        (T + 1,) the robot's and the patient's work on the limb since the
 ``patient_work_j``       reset [J]
+``patient``              who was in the chair: ``"female, 1.6 m, 55 kg; MAS 3 spasticity"``
+``safety_violation``     the safety rule that stopped the episode (empty: none did)
+``robot_name``           the robot (``"ur5e"``, ``"fr3"``)
+``*_source``             where each limit comes from: ``torque_limit_source``,
+                         ``cuff_force_limit_source``, ``patient_range_source``
 ======================== ==================================================================
 
 The patient-side keys (from ``target_patient_deg`` on) are optional: traces written before
-them load with those fields None, and the patient-side figures say what is missing.
+them load with those fields None, and the figures say what is missing ("patient not
+recorded").
 """
 
 from __future__ import annotations
@@ -50,12 +56,18 @@ TRACE_KEYS = ("env_id", "policy", "seed", "dt_s", "time_s", "robot_qpos_rad", "r
               "torque_limit_nm", "joint_names", "tool_pos_m", "target_tool_pos_m",
               "target_robot_rad", "target_index", "patient_qpos_rad", "interaction_force_n",
               "target_patient_deg", "patient_joint_names", "patient_range_deg",
-              "cuff_force_limit_n", "robot_work_j", "patient_work_j")
+              "cuff_force_limit_n", "robot_work_j", "patient_work_j", "patient",
+              "safety_violation", "robot_name", "torque_limit_source", "cuff_force_limit_source",
+              "patient_range_source")
 # optional keys read into :class:`Trace` (None when absent): key -> dtype
 PATIENT_KEYS: dict[str, type] = {
     "patient_qpos_rad": float, "interaction_force_n": float, "target_index": int,
     "target_patient_deg": float, "patient_joint_names": str, "patient_range_deg": float,
     "cuff_force_limit_n": float, "robot_work_j": float, "patient_work_j": float}
+# optional text keys read into :class:`Trace` as a str (None when absent)
+TEXT_KEYS: tuple[str, ...] = ("patient", "safety_violation", "robot_name", "torque_limit_source",
+                              "cuff_force_limit_source", "patient_range_source")
+NOT_RECORDED = "not recorded (evaluated with an earlier rehabbot)"
 REQUIRED_KEYS: tuple[str, ...] = (
     "env_id", "policy", "dt_s", "time_s", "robot_qpos_rad", "robot_torque_nm",
     "torque_limit_nm", "joint_names", "tool_pos_m", "target_tool_pos_m",
@@ -86,11 +98,28 @@ class Trace:
     cuff_force_limit_n: np.ndarray | None = None
     robot_work_j: np.ndarray | None = None
     patient_work_j: np.ndarray | None = None
+    seed: int | None = None
+    patient: str | None = None
+    safety_violation: str | None = None  # None: no rule stopped the episode (or not recorded)
+    robot_name: str | None = None
+    torque_limit_source: str | None = None
+    cuff_force_limit_source: str | None = None
+    patient_range_source: str | None = None
 
     @property
     def label(self) -> str:
         """``<policy>_<env-short>``, safe as part of a file name."""
         return sanitize(f"{self.policy}_{env_short_name(self.env_id)}")
+
+    @property
+    def patient_text(self) -> str:
+        """Who was in the chair, for a figure's title."""
+        return self.patient or NOT_RECORDED
+
+    @property
+    def stop_time_s(self) -> float | None:
+        """When a safety rule stopped the episode (its last row), None if none did."""
+        return float(self.time_s[-1]) if self.safety_violation else None
 
 
 def sanitize(text: str) -> str:
@@ -183,6 +212,8 @@ def _trace_of(data: Mapping[str, np.ndarray], keys: Sequence[str], path: Path) -
                 target_tool_pos_m=_rows_of_points(data["target_tool_pos_m"]),
                 **{key: np.asarray(data[key]).astype(kind) for key, kind in PATIENT_KEYS.items()
                    if key in keys},
+                **{key: _str_item(data[key]) or None for key in TEXT_KEYS if key in keys},
+                seed=int(np.asarray(data["seed"]).reshape(-1)[0]) if "seed" in keys else None,
             )
 
 
@@ -224,6 +255,7 @@ def trace_from_episode(episode: Episode) -> dict[str, np.ndarray]:
         "patient_qpos_rad": episode.patient_qpos_rad,
         "interaction_force_n": episode.interaction_force_n,
         "target_patient_deg": episode.target_patient_deg,
+        "safety_violation": np.array(episode.safety_violation or ""),
     }
 
 

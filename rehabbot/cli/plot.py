@@ -1,5 +1,7 @@
-"""``rehabbot plot RUN_DIR...``: the paper's Figs. 3-6 for the user's own runs
-(:mod:`rehabbot.analysis.plotting`)."""
+"""``rehabbot plot RUN_DIR...``: the paper's Figs. 3-6 for the user's own runs and the
+patient-side Figs. 7-10 for their evaluations (:mod:`rehabbot.analysis.plotting`). An
+evaluation folder that ``rehabbot evaluate`` wrote is drawn from its files, nothing run again;
+matplotlib is checked before anything else."""
 
 from __future__ import annotations
 
@@ -8,8 +10,17 @@ import sys
 import warnings
 from pathlib import Path
 
-from rehabbot.analysis.figures import DEFAULT_FORMATS, DEFAULT_SMOOTH, SOURCES, SUPPORTED_FORMATS
-from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, CliError
+from rehabbot.analysis.figures import (
+    DEFAULT_FORMATS,
+    DEFAULT_SMOOTH,
+    DPI,
+    SOURCES,
+    SUPPORTED_FORMATS,
+)
+from rehabbot.cli.errors import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, CliError, bounded_int
+
+MAX_SMOOTH = 1_000_000  # episodes in the rolling mean: more than any run logs
+MIN_DPI, MAX_DPI = 50, 600
 
 PLOT_DESCRIPTION = """\
 Draw the paper's figures for your own runs:
@@ -20,34 +31,33 @@ Draw the paper's figures for your own runs:
   Fig. 6  fig6_torques_<label>.{png,pdf}    joint torques with the torque limits
   Fig. 3  fig3_tool_path_<label>.{png,pdf}  3-D tool path with the numbered targets
 the patient's side (for every trace that holds it; --no-patient-figures leaves them out):
-  Fig. 7  fig7_patient_joints_<label>.*     the patient's joint angles, the prescribed path
-                                            and the range-of-motion bounds
-  Fig. 8  fig8_cuff_force_<label>.*         the cuff force and its limit
-  Fig. 9  fig9_work_<label>.*               the robot's and the patient's work on the limb
-<label> is <policy>_<env>. RUN_DIR may be a training run, any directory above runs
-(all manifest.json below it are used) or a directory holding trace.npz files. A run with
-model.zip but no evaluation/trace.npz is evaluated first (one deterministic episode; the
-command says so before it starts) unless --no-evaluate is given."""
+  Fig. 7  fig7_patient_joints_<label>.*     the patient's joint angles, the prescribed path,
+                                            the range-of-motion bounds and the range achieved
+                                            against the one prescribed (flagged above 1)
+  Fig. 8  fig8_cuff_force_<label>.*         the cuff force, its ISO/TS 15066 limit and where
+                                            the force went above it
+  Fig. 9  fig9_work_<label>.*               the robot's and the patient's cumulative work on
+                                            the limb (> 0: into the limb)
+  Fig. 10 fig10_overlay_<env>.*             the controllers evaluated together, over each
+                                            other (one per evaluation of 2 policies or more)
+<label> is <policy>_<env>. Every title names the patient and condition, every limit line its
+value and source; a safety stop is marked with its rule. RUN_DIR may be an evaluation folder
+(what `rehabbot evaluate` wrote: drawn from its files, nothing is run again), a training run,
+any directory above them (all manifest.json and trace.npz below it are used). A training run
+with model.zip whose model no evaluation below the RUN_DIRs has evaluated is evaluated first
+(one deterministic episode; the command says so before it starts) unless --no-evaluate is
+given."""
 
 PLOT_EPILOG = """\
 examples:
   rehabbot plot runs/rehab-reach-v2                  # all algorithms and seeds below it
+  rehabbot plot runs/evaluation/rehab-knee-v2/zoo-sac+expert   # what evaluate wrote
   rehabbot plot runs/rehab-reach-v2/sac/seed0 --out figures/
   rehabbot plot runs/a runs/b --smooth 50 --formats png
   rehabbot plot runs --source eval --no-evaluate     # Fig. 4 from eval/evaluations.npz
 
 exit codes: 0 success, 1 unreadable input file, unwritable output or missing matplotlib,
 2 bad usage (missing directory, nothing to plot, bad option value)"""
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {value}")
-    return value
 
 
 def add_plot_parser(commands: argparse._SubParsersAction) -> None:
@@ -63,21 +73,26 @@ def add_plot_parser(commands: argparse._SubParsersAction) -> None:
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", type=Path,
                         help="training run directories, their parents, or trace directories")
     parser.add_argument("--out", type=Path, metavar="DIR",
-                        help="output directory (default: <first RUN_DIR>/figures)")
-    parser.add_argument("--smooth", type=_positive_int, default=DEFAULT_SMOOTH, metavar="N",
-                        help="rolling-mean window of the training curves, in episodes "
-                             f"(default: {DEFAULT_SMOOTH})")
+                        help="output directory; its parent folder must exist (default: "
+                             "<first RUN_DIR>/figures)")
+    parser.add_argument("--smooth", type=bounded_int(1, MAX_SMOOTH), default=DEFAULT_SMOOTH,
+                        metavar="N",
+                        help="rolling-mean window of the training curves, in episodes, 1 to "
+                             f"{MAX_SMOOTH:,} (default: {DEFAULT_SMOOTH})")
     parser.add_argument("--source", choices=SOURCES, default="train",
                         help="Fig. 4 from the training episodes (monitor files, default) or "
                              "from the deterministic evaluations (eval/evaluations.npz)")
     parser.add_argument("--formats", nargs="+", choices=SUPPORTED_FORMATS,
                         default=list(DEFAULT_FORMATS), metavar="FMT",
                         help="file formats to write: png, pdf, svg (default: png pdf)")
+    parser.add_argument("--dpi", type=bounded_int(MIN_DPI, MAX_DPI), default=DPI,
+                        metavar="DPI", help=f"resolution of the PNGs, {MIN_DPI} to {MAX_DPI} "
+                                            f"(default: {DPI})")
     parser.add_argument("--no-evaluate", dest="evaluate", action="store_false",
                         help="do not evaluate runs that have model.zip but no trace.npz")
     parser.add_argument("--no-patient-figures", dest="patient", action="store_false",
-                        help="leave out Figs. 7-9 (the patient's joint angles, cuff force and "
-                             "work)")
+                        help="leave out Figs. 7-10 (the patient's joint angles, cuff force and "
+                             "work, the controllers' overlay)")
     parser.set_defaults(func=cmd_plot)
 
 
@@ -88,8 +103,23 @@ def _own_warnings(caught: list[warnings.WarningMessage]) -> list[warnings.Warnin
             if Path(warning.filename).resolve().is_relative_to(package)]
 
 
+def check_matplotlib() -> None:
+    """:class:`CliError` (exit 1) with the install line when matplotlib is missing: before
+    any run is evaluated or any file read."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError as err:
+        from rehabbot.common.extras import missing_module_message
+
+        raise CliError(missing_module_message("plotting", "matplotlib")) from err
+
+
 def cmd_plot(args: argparse.Namespace) -> int:
     """Run ``rehabbot plot``: write the figures, print each path, return 0."""
+    from rehabbot.common.errors import UsageError
+    from rehabbot.common.files import check_parent_exists
+
+    check_matplotlib()
     from rehabbot.analysis.plotting import plot_all
     from rehabbot.analysis.traces import TRACE_NAME, find_files, find_traces
     from rehabbot.common.errors import OutputError
@@ -101,7 +131,13 @@ def cmd_plot(args: argparse.Namespace) -> int:
         if not path.exists():
             raise CliError(f"{path}: no such file or directory", EXIT_USAGE)
     first = run_dirs[0] if run_dirs[0].is_dir() else run_dirs[0].parent
-    out_dir = Path(args.out) if args.out is not None else first / "figures"
+    if args.out is not None:
+        try:
+            out_dir = check_parent_exists(args.out, "--out")
+        except UsageError as err:
+            raise CliError(str(err), EXIT_USAGE) from err
+    else:
+        out_dir = first / "figures"
     if out_dir.exists() and not out_dir.is_dir():
         raise CliError(f"--out {out_dir}: exists and is not a directory", EXIT_USAGE)
     try:
@@ -118,7 +154,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
             warnings.simplefilter("always")
             written = plot_all(run_dirs, out_dir, smooth=args.smooth, source=args.source,
                                formats=args.formats, evaluate=args.evaluate,
-                               patient=args.patient,
+                               patient=args.patient, dpi=args.dpi,
                                announce=lambda text: print(f"rehabbot plot: {text}",
                                                            flush=True))
     except ImportError as err:

@@ -56,9 +56,9 @@ POLICY_KEYWORDS = ("expert", "aan", "random")
 CONTROLLERS = {"expert": ("rehabbot.rl.experts", "ScriptedExpert"),
                "aan": ("rehabbot.rl.assist_as_needed", "AssistAsNeeded")}
 
-__all__ = ["POLICY_KEYWORDS", "LoadedPolicy", "PolicyError", "RandomPolicy", "check_spaces",
-           "detect_algo", "env_for", "load_model", "load_policy", "load_zoo_policy",
-           "model_file"]
+__all__ = ["POLICY_KEYWORDS", "LoadedPolicy", "PolicyError", "RandomPolicy", "check_action",
+           "check_spaces", "detect_algo", "env_for", "load_model", "load_policy",
+           "load_zoo_policy", "model_file"]
 
 
 class RandomPolicy:
@@ -89,13 +89,41 @@ class LoadedPolicy:
     run_dir: Path | None = None
     manifest: dict = field(default_factory=dict)
     vecnormalize: VecNormalizeStats | None = None  # the run's observation normalisation
+    spec: str | None = None  # what the user named it by: "expert", a path, "module:attr"
 
-    def act(self, observation: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """One action for one observation."""
+    @property
+    def name(self) -> str:
+        """The policy as a message names it: its label, and the spec it came from when that
+        says more (``'Hold' (mymodule:Hold)``)."""
+        shown = repr(self.label)
+        if self.spec is not None and self.spec != self.label:
+            shown += f" ({self.spec})"
+        return shown
+
+    def act(self, observation: np.ndarray, deterministic: bool = True,
+            action_space: gym.spaces.Box | None = None) -> np.ndarray:
+        """One action for one observation.
+
+        The policy's ``predict`` must return ``(action, state)`` with a finite action (of
+        ``action_space``'s shape, when given). Anything else, and any exception ``predict``
+        raises (``SystemExit`` included), is a :class:`PolicyError` that names the policy;
+        Ctrl-C (``KeyboardInterrupt``) passes through.
+
+        Raises:
+            PolicyError: naming the policy and what it did.
+        """
         if self.vecnormalize is not None:
             observation = self.vecnormalize.normalize_obs(observation)
-        action, _ = self.policy.predict(observation, deterministic=deterministic)
-        return action
+        try:
+            result = self.policy.predict(observation, deterministic=deterministic)
+        except SystemExit as err:
+            raise PolicyError(f"policy {self.name}: its predict() called exit({err.code!r}); a "
+                              "policy must return (action, state), not end the "
+                              "program") from err
+        except Exception as err:
+            raise PolicyError(f"policy {self.name}: its predict() raised "
+                              f"{type(err).__name__}: {err}") from err
+        return check_action(result, self.name, action_space)
 
     def describe(self) -> dict:
         """JSON-ready provenance of the policy."""
@@ -106,6 +134,42 @@ class LoadedPolicy:
                 "train_seed": self.manifest.get("seed"),
                 "train_timesteps": self.manifest.get("timesteps_done"),
                 "obs_normalized": self.vecnormalize is not None}
+
+
+def _shown(value: Any) -> str:
+    """A short description of what a policy returned, for a message."""
+    if isinstance(value, np.ndarray):
+        return f"a {value.dtype} array of shape {value.shape}"
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 60 else text[:57] + '...'}"
+
+
+def check_action(result: Any, name: str,
+                 action_space: gym.spaces.Box | None = None) -> np.ndarray:
+    """The action of ``result``, what a policy's ``predict`` returned, once checked: a pair
+    ``(action, state)`` whose action is a finite numeric array (of ``action_space``'s shape,
+    when given).
+
+    Raises:
+        PolicyError: naming the policy (``name``) and what it returned instead.
+    """
+    if not isinstance(result, tuple) or len(result) != 2:
+        raise PolicyError(f"policy {name}: predict() returned {_shown(result)}, not a pair "
+                          "(action, state); return `action, state` (state may be None), as "
+                          "Stable-Baselines3's predict does")
+    action = result[0]
+    try:
+        values = np.asarray(action, dtype=float)
+    except (TypeError, ValueError):
+        raise PolicyError(f"policy {name}: predict() returned the action {_shown(action)}, "
+                          "which is not an array of numbers") from None
+    if action_space is not None and values.shape != action_space.shape:
+        raise PolicyError(f"policy {name}: predict() returned an action of shape "
+                          f"{values.shape}; the env's action space is {action_space}")
+    if not np.all(np.isfinite(values)):
+        raise PolicyError(f"policy {name}: predict() returned a non-finite action "
+                          f"{np.array2string(values, precision=3)}")
+    return action
 
 
 def model_file(spec: str | Path) -> Path:
@@ -240,8 +304,11 @@ def load_policy(spec: str | Path, env: gym.Env, seed: int | None = None) -> Load
         return LoadedPolicy(policy=RandomPolicy(env.action_space, seed), label="random",
                             kind="random")
     if zoo.is_zoo_spec(spec):
-        return load_zoo_policy(str(spec), env)
-    return load_model(model_file(spec), env)
+        loaded = load_zoo_policy(str(spec), env)
+    else:
+        loaded = load_model(model_file(spec), env)
+    loaded.spec = str(spec)
+    return loaded
 
 
 def env_for(specs: Sequence[str], env_id: str | None = None,

@@ -58,7 +58,12 @@ class Episode:
 
 def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
                 deterministic: bool = True) -> Episode:
-    """Reset ``env`` with ``seed`` and run ``policy`` until the episode ends."""
+    """Reset ``env`` with ``seed`` and run ``policy`` until the episode ends.
+
+    Raises:
+        PolicyError: the policy failed or returned something that is not a finite action of
+            the env's action space (:meth:`~rehabbot.rl.policies.LoadedPolicy.act`), naming it.
+    """
     base = env.unwrapped
     layout = base.layout
     theta, p, phi = layout.slice("theta"), layout.slice("p"), layout.slice("phi")
@@ -84,7 +89,7 @@ def run_episode(env: gym.Env, policy: LoadedPolicy, seed: int,
     record(obs, info)
     total, truncated = 0.0, False
     while True:
-        action = policy.act(obs, deterministic=deterministic)
+        action = policy.act(obs, deterministic=deterministic, action_space=env.action_space)
         obs, reward, terminated, truncated, info = env.step(action)
         total += float(reward)
         record(obs, info)
