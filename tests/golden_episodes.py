@@ -22,6 +22,17 @@ Regenerate (only in a commit that says which defect it fixes and why the episode
 recording made on another CPU can differ from the stored one in the last bits). ``--stops``
 re-records only the rollouts in which a safety rule stops an episode (a fix of the safety
 penalty), after checking that every other rollout is reproduced as the test compares it.
+
+What is stored (:func:`stored_form`): every discrete field in every row, and the float fields
+(observation, rewards, forces, torques, positions, work) in the *sampled* rows: every
+``SAMPLE_EVERY``-th row of a rollout, its last row, and each row where an event happens (a
+reset, a termination, a truncation, a safety stop, a target switch, a success: any discrete
+field but ``action_clipped`` differs from the row before) with the row after it. A real change
+moves the floats in every row from its first on (a model, a controller, a reward weight) or
+in the rows of an event (a bonus, a stop), so the sampled rows catch it, and about a third of
+the rows keep the file small (``tests/golden_storage.py`` encodes them losslessly; float64
+fields other than the rewards are stored as float32, far finer than the comparison's
+tolerance).
 """
 
 from __future__ import annotations
@@ -33,9 +44,10 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+import golden_storage
 import numpy as np
 
-GOLDEN_PATH = Path(__file__).with_name("golden") / "episodes.npz"
+GOLDEN_PATH = Path(__file__).with_name("golden") / "episodes.npz.xz"
 IDS = ("rehabbot/rehab-reach-v0", "rehabbot/rehab-reach-l-v0", "rehabbot/rehab-hip-v0",
        "rehabbot/rehab-knee-v0", "rehabbot/rehab-reach-v1", "rehabbot/rehab-reach-l-v1",
        "rehabbot/rehab-hip-v1", "rehabbot/rehab-knee-v1",
@@ -91,6 +103,12 @@ SPREAD_FACTOR = 10.0
 # The fields whose values are discrete: compared for equality.
 DISCRETE_FIELDS = ("kind", "terminated", "truncated", "is_success", "safety_violation",
                    "target_index", "num_targets", "exercise", "weight_level", "action_clipped")
+# What is stored (module docstring): the float fields in every SAMPLE_EVERY-th row and around
+# events, the rows where one of EVENT_FIELDS changes. A stored rollout lists its sampled rows
+# under SAMPLED_ROWS (not an info key: info keys are identifiers).
+SAMPLE_EVERY = 4
+EVENT_FIELDS = tuple(name for name in DISCRETE_FIELDS if name != "action_clipped")
+SAMPLED_ROWS = "@sampled_rows"
 
 
 @dataclass(frozen=True)
@@ -213,10 +231,43 @@ def fork_row(rollout: dict[str, np.ndarray], shadows: list[dict[str, np.ndarray]
     return fork
 
 
+def sampled_rows(rollout: dict[str, np.ndarray]) -> np.ndarray:
+    """The rows of ``rollout`` whose float fields are stored (module docstring), ascending."""
+    rows = len(rollout["kind"])
+    keep = np.arange(rows) % SAMPLE_EVERY == 0
+    keep[-1] = True
+    events = np.stack([rollout[name].astype(np.int64) for name in EVENT_FIELDS
+                       if name in rollout], axis=1)
+    changed = np.zeros(rows, dtype=bool)
+    changed[1:] = (events[1:] != events[:-1]).any(axis=1)
+    keep |= changed
+    keep[1:] |= changed[:-1]  # and the row after an event
+    return np.flatnonzero(keep)
+
+
+def stored_form(rollout: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``rollout`` as the file keeps it: the float fields in the sampled rows only (listed
+    under :data:`SAMPLED_ROWS`), float64 as float32 but for the rewards. A stored rollout is
+    returned as it is."""
+    if SAMPLED_ROWS in rollout:
+        return rollout
+    rows = sampled_rows(rollout)
+    stored = {}
+    for name, values in rollout.items():
+        if values.dtype.kind == "f":
+            values = values[rows]
+            if values.dtype == np.float64 and not name.startswith("reward"):
+                values = values.astype(np.float32)
+        stored[name] = values
+    stored[SAMPLED_ROWS] = rows
+    return stored
+
+
 def first_difference(actual: dict[str, np.ndarray], expected: dict[str, np.ndarray],
                      shadows: list[dict[str, np.ndarray]] | None = None) -> str | None:
     """Where ``actual`` departs from the recorded ``expected`` (a message), or None: tier 1
-    without ``shadows``, tier 2 with them (see the comparison's constants)."""
+    without ``shadows``, tier 2 with them (see the comparison's constants). A stored
+    ``expected`` (:func:`stored_form`) is compared in its sampled rows."""
     rows = len(actual["kind"])
     if shadows is None:
         if rows != len(expected["kind"]):
@@ -228,23 +279,29 @@ def first_difference(actual: dict[str, np.ndarray], expected: dict[str, np.ndarr
         if len(expected["kind"]) < compared:
             return (f"{len(expected['kind'])} rows recorded, but the rollout and its shadow "
                     f"runs agree on {compared}")
+    every_row = np.arange(compared)
+    sampled = expected.get(SAMPLED_ROWS, every_row)
+    sampled = sampled[sampled < compared]
     for name, want in expected.items():
+        if name == SAMPLED_ROWS:
+            continue
         if name not in actual:
             return f"info lost the entry {name!r}"
-        got, want = actual[name][:compared], want[:compared]
+        rows = sampled if want.dtype.kind == "f" else every_row
+        got, want = actual[name][rows], want[:len(rows)]
         if want.dtype.kind == "f":
             allowed = ATOL + RTOL * np.abs(want)
             if shadows is not None:
                 spread = np.zeros_like(got, dtype=float)
                 for shadow in shadows:
-                    spread = np.maximum(spread, np.abs(shadow[name][:compared] - got))
+                    spread = np.maximum(spread, np.abs(shadow[name][rows] - got))
                 allowed = allowed + SPREAD_FACTOR * spread
             bad = ~(np.abs(got - want) <= allowed) & ~(np.isnan(got) & np.isnan(want))
         else:
             bad = got != want
         if bad.any():
-            row = int(np.argwhere(bad.reshape(len(bad), -1).any(axis=1))[0, 0])
-            return f"{name} differs at row {row}: {got[row]!r} != {want[row]!r}"
+            at = int(np.argwhere(bad.reshape(len(bad), -1).any(axis=1))[0, 0])
+            return f"{name} differs at row {rows[at]}: {got[at]!r} != {want[at]!r}"
     return None
 
 
@@ -299,48 +356,17 @@ def record_all(ids=IDS, modes=MODES) -> dict[str, dict[str, np.ndarray]]:
             for env, env_id, mode, exercise, level in each_rollout(ids, modes)}
 
 
-def flatten(rollouts: dict[str, dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """One array per field, the rollouts concatenated in order, plus ``rollout_keys`` and
-    ``rollout_rows``. float64 fields other than the rewards are stored as float32, far finer
-    than the comparison's tolerance, to keep the file small."""
-    keys = list(rollouts)
-    flat = {"rollout_keys": np.array(keys),
-            "rollout_rows": np.array([len(rollouts[k]["kind"]) for k in keys])}
-    names = list(dict.fromkeys(name for k in keys for name in rollouts[k]))
-    for name in names:
-        # A field that an id does not report (the -v0 and -v1 reward terms differ) is stored
-        # as NaN in its rows (missing_fields tells it apart from a NaN value). A field whose
-        # width differs between ids (the bilateral id's two robots) is stored once per width:
-        # the first width under the field's name, the others as "<name>@<width>".
-        shapes = list(dict.fromkeys(rollouts[k][name].shape[1:] for k in keys
-                                    if name in rollouts[k]))
-        for shape in shapes:
-            stored = name if shape == shapes[0] else f"{name}@{'x'.join(map(str, shape))}"
-            parts = []
-            for k in keys:
-                rows = len(rollouts[k]["kind"])
-                if name in rollouts[k] and rollouts[k][name].shape[1:] == shape:
-                    parts.append(rollouts[k][name])
-                else:
-                    parts.append(np.full((rows, *shape), np.nan))
-            values = np.concatenate(parts)
-            if values.dtype == np.float64 and not name.startswith("reward"):
-                values = values.astype(np.float32)
-            flat[stored] = values
-    return flat
-
-
 def load_golden(path: Path = GOLDEN_PATH) -> dict[str, dict[str, np.ndarray]]:
-    """The stored rollouts, ``{rollout: {field: array}}``."""
-    with np.load(path, allow_pickle=False) as data:
-        keys = [str(k) for k in data["rollout_keys"]]
-        ends = np.cumsum(data["rollout_rows"])
-        starts = ends - data["rollout_rows"]
-        fields = {name: data[name] for name in data.files
-                  if name not in ("rollout_keys", "rollout_rows")}
-    return {key: {name.split("@", 1)[0]: values[a:b] for name, values in fields.items()
-                  if not (values.dtype.kind == "f" and np.isnan(values[a:b]).all())}
-            for key, a, b in zip(keys, starts, ends, strict=True)}
+    """The stored rollouts, ``{rollout: {field: array}}`` (:func:`stored_form`)."""
+    return golden_storage.read(path)
+
+
+def write_golden(rollouts: dict[str, dict[str, np.ndarray]], path: Path = GOLDEN_PATH) -> int:
+    """Store ``rollouts`` (recorded or stored) in their :func:`stored_form`; the file's size
+    in bytes."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return golden_storage.write(path, {key: stored_form(fields)
+                                       for key, fields in rollouts.items()})
 
 
 def _rerecord_stops() -> dict[str, dict[str, np.ndarray]]:
@@ -389,9 +415,8 @@ def main(argv=None) -> int:
     print(f"{len(rollouts)} rollouts, {sum(len(f['kind']) for f in rollouts.values())} rows; "
           f"{ends}")
     if args.write:
-        GOLDEN_PATH.parent.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(GOLDEN_PATH, **flatten(rollouts))
-        print(f"wrote {GOLDEN_PATH} ({GOLDEN_PATH.stat().st_size / 1e6:.2f} MB)")
+        size_bytes = write_golden(rollouts)
+        print(f"wrote {GOLDEN_PATH} ({size_bytes / 1e6:.2f} MB)")
     return 0
 
 

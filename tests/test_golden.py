@@ -5,9 +5,11 @@ rewards, terminations and ``info`` entries.
 The comparison must pass on any CPU and still catch a change of behaviour; both are proved
 here: rollouts perturbed by 1e-12 pass (the last-bit differences of another machine are
 10,000 times smaller), and small real changes (a reward weight by 1e-4, one link's mass by
-0.1 %, one safety threshold) fail.
+0.1 %, one safety threshold) fail. The file gives back every bit it was given, and a stored
+rollout is compared in the rows it keeps (``tests/golden_storage.py``, ``stored_form``).
 """
 
+import golden_storage
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -15,6 +17,8 @@ from golden_episodes import (
     GOLDEN_PATH,
     IDS,
     MODES,
+    SAMPLE_EVERY,
+    SAMPLED_ROWS,
     WEIGHT_LEVELS,
     Perturbation,
     compare_rollout,
@@ -23,6 +27,8 @@ from golden_episodes import (
     load_golden,
     record_rollout,
     rollout_key,
+    sampled_rows,
+    write_golden,
 )
 
 import rehabbot  # noqa: F401  (registers the ids)
@@ -176,3 +182,97 @@ def test_one_safety_threshold_changed_by_1_percent_fails(golden, env_id, mode, t
     failures = _mutated_rollouts_fail(golden, env_id, mode, _cells(env_id),
                                       {threshold: value * 0.99})
     assert failures, f"{threshold}={value * 0.99} changed no rollout of {env_id} ({mode})"
+
+
+# -- the file holds what was recorded --------------------------------------------------------
+def _bits(values):
+    return values.view(f"u{values.dtype.itemsize}")
+
+
+def _assert_same_tables(got, want):
+    assert list(got) == list(want)
+    for key, fields in want.items():
+        assert set(got[key]) == set(fields), key
+        for name, values in fields.items():
+            stored = got[key][name]
+            assert stored.dtype == values.dtype and stored.shape == values.shape, (key, name)
+            assert np.array_equal(_bits(stored), _bits(values)), (key, name)
+
+
+def test_the_storage_gives_back_every_bit(tmp_path):
+    """Any dtype and row shape, a name with other shapes or dtypes in other keys or missing
+    from some, no rows, NaN payloads, -0.0, infinities, the extremes of every integer type and
+    jumps between them (the differences wrap)."""
+    rng = np.random.default_rng(7)
+    special = np.array([np.nan, -np.nan, np.inf, -np.inf, -0.0, 0.0, 5e-324, -1.7e308])
+    payload_nan = np.array([0x7FF0_0000_0000_0ABC], dtype=np.uint64).view(np.float64)
+    walk = np.cumsum(rng.normal(size=(50, 3)), axis=0)
+    tables = {
+        "a": {"walk": walk, "f32": walk.astype(np.float32), "special": special,
+              "nan": payload_nan, "i8": np.array([-128, 127, -128, 0], dtype=np.int8),
+              "i64": np.array([np.iinfo(np.int64).min, np.iinfo(np.int64).max, -1]),
+              "u32": np.array([0, 2**32 - 1, 1], dtype=np.uint32),
+              "grid": rng.normal(size=(4, 2, 3)).astype(np.float32)},
+        "b": {"walk": rng.normal(size=(7, 5)), "f32": np.zeros((0, 3), dtype=np.float32),
+              "i8": np.array([3], dtype=np.int32)},  # another width, no rows, another dtype
+        "c": {},
+    }
+    golden_storage.write(tmp_path / "t.npz.xz", tables)
+    _assert_same_tables(golden_storage.read(tmp_path / "t.npz.xz"), tables)
+
+
+def test_the_storage_refuses_what_it_cannot_store(tmp_path):
+    with pytest.raises(TypeError, match="dtype <U1"):
+        golden_storage.write(tmp_path / "t.npz.xz", {"a": {"text": np.array(["x"])}})
+    with pytest.raises(ValueError, match="'scalar' has no rows"):
+        golden_storage.write(tmp_path / "t.npz.xz", {"a": {"scalar": np.float64(1.0)}})
+    assert not list(tmp_path.iterdir())
+
+
+def test_stored_rollouts_are_written_again_bit_for_bit(golden, tmp_path):
+    """What ``--only`` and ``--stops`` do with the rollouts they keep."""
+    kept = {key: golden[key] for key in list(golden)[::37]}
+    write_golden(kept, tmp_path / "again.npz.xz")
+    _assert_same_tables(load_golden(tmp_path / "again.npz.xz"), kept)
+
+
+def test_the_file_holds_discrete_fields_in_every_row_and_floats_in_the_sampled_rows(golden):
+    for key, fields in golden.items():
+        rows = len(fields["kind"])
+        sampled = fields[SAMPLED_ROWS]
+        assert np.array_equal(sampled, sampled_rows(fields)), key
+        assert sampled[0] == 0 and sampled[-1] == rows - 1
+        assert set(range(0, rows, SAMPLE_EVERY)) <= set(sampled.tolist())
+        for name, values in fields.items():
+            if name != SAMPLED_ROWS:
+                assert len(values) == (len(sampled) if values.dtype.kind == "f" else rows), \
+                    (key, name)
+
+
+def test_a_stored_rollout_is_compared_in_its_sampled_rows(golden):
+    """Its floats in the sampled rows (every SAMPLE_EVERY-th, the last, and around every
+    event), its discrete fields in every row."""
+    env_id, mode, exercise, level = "rehabbot/rehab-hip-v1", "joint_delta", 0, 4
+    expected = golden[rollout_key(env_id, mode, exercise, level)]
+    assert (expected["safety_violation"] > 0).any()  # a rollout with events
+    env = gym.make(env_id, control_mode=mode)
+    try:
+        actual = record_rollout(env, env_id, mode, exercise, level)
+    finally:
+        env.close()
+    assert first_difference(actual, expected) is None
+    sampled = expected[SAMPLED_ROWS]
+    stop = int(np.flatnonzero(expected["safety_violation"])[0])
+    skipped = sorted(set(range(len(expected["kind"]))) - set(sampled.tolist()))
+    assert stop in sampled and stop + 1 in sampled and skipped
+
+    def changed(name, row, delta):
+        values = actual[name].copy()
+        values[row] += delta
+        return first_difference({**actual, name: values}, expected)
+
+    assert changed("obs", stop, 1e-3).startswith(f"obs differs at row {stop}:")
+    assert changed("reward", stop + 1, 1e-3).startswith(f"reward differs at row {stop + 1}:")
+    assert changed("action_clipped", skipped[0], 1).startswith(
+        f"action_clipped differs at row {skipped[0]}:")
+    assert changed("reward", skipped[0], 1e-3) is None  # a row that is not stored

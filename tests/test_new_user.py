@@ -217,7 +217,7 @@ def test_env_dt_and_version_and_citation(capsys) -> None:
 
 def test_python_dash_m_rehabbot_is_the_command() -> None:
     result = subprocess.run([sys.executable, "-m", "rehabbot", "--version"],
-                            capture_output=True, text=True, timeout=60, check=True)
+                            capture_output=True, text=True, timeout=600, check=True)
     assert result.stdout.strip() == f"rehabbot {rehabbot.__version__}"
 
 
