@@ -61,6 +61,6 @@ def test_demo_run_again_resumes_instead_of_retraining(demo_out) -> None:
 def test_demo_reports_an_unwritable_output_folder(tmp_path: Path, capsys) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    assert main(["demo", "--out", str(blocker / "demo"), "--timesteps", "300"]) == 1
+    assert main(["demo", "--out", str(blocker / "demo"), "--timesteps", "300"]) == 2
     err = capsys.readouterr().err
-    assert "rehabbot: error: cannot write to output folder" in err and str(blocker) in err
+    assert "rehabbot: error: --out" in err and f"{str(blocker)!r} is not a folder" in err

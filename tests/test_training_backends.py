@@ -458,7 +458,7 @@ def test_bad_demos_bc_algo_and_backend_are_clear_errors(tmp_path: Path, capsys) 
     with pytest.raises(SystemExit) as stop:
         _parse(ENV, "--algo", "sac", "--demos", "-1")
     assert stop.value.code == 2
-    assert "--demos: must be >= 0, got -1" in capsys.readouterr().err
+    assert "--demos: must be an integer in [0, 100,000], got '-1'" in capsys.readouterr().err
     from rehabbot.common.errors import UsageError
     from rehabbot.rl.training import train_run
 

@@ -6,6 +6,7 @@ under its final name. New files get the usual permissions (``0666`` minus the um
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import os
@@ -323,3 +324,29 @@ class FolderLock:
 
     def __exit__(self, *_exc: object) -> None:
         self.release()
+
+
+# --------------------------------------------------------------------------- write errors
+
+
+def unnamed_write_error(err: BaseException) -> bool:
+    """An OSError of a writer that names no file (a full disk: ``file.write`` raises
+    ``[Errno 28]`` without a name), not one of ours (:class:`OutputError` names its file)."""
+    return isinstance(err, OSError) and not isinstance(err, OutputError) \
+        and err.filename is None
+
+
+def naming_write_errors(func: Callable[..., Any], path: Path) -> Callable[..., Any]:
+    """``func``, with an OSError that names no file raised as :class:`OutputError` naming
+    ``path``, the file ``func`` writes (Stable-Baselines3's monitor and evaluation logs)."""
+
+    @functools.wraps(func)
+    def call(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except OSError as err:
+            if not unnamed_write_error(err):
+                raise
+            raise OutputError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
+
+    return call

@@ -26,7 +26,7 @@ import signal
 import sys
 import time
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +35,8 @@ from rehabbot.common.files import (
     atomic_write,
     atomic_write_json,
     check_writable_dir,
+    naming_write_errors,
+    unnamed_write_error,
 )
 from rehabbot.common.provenance import git_commit, now_iso, package_versions
 from rehabbot.common.signals import SignalLatch, deferring_signals
@@ -60,29 +62,6 @@ from rehabbot.rl.vecnormalize_io import load_vecnormalize, save_vecnormalize
 EVAL_SEED_OFFSET = 10_000
 MONITOR_INFO_KEYWORDS = ("is_success", "safety_violation")
 SUBPROC_START_METHOD = "spawn"
-
-
-def _unnamed_write_error(err: BaseException) -> bool:
-    """An OSError of a writer that names no file (a full disk: ``file.write`` raises
-    ``[Errno 28]`` without a name), not one of ours (:class:`OutputError` names its file)."""
-    return isinstance(err, OSError) and not isinstance(err, OutputError) \
-        and err.filename is None
-
-
-def naming_write_errors(func: Callable[..., Any], path: Path) -> Callable[..., Any]:
-    """``func``, with an OSError that names no file raised as :class:`OutputError` naming
-    ``path``, the file ``func`` writes (Stable-Baselines3's monitor and evaluation logs)."""
-
-    @functools.wraps(func)
-    def call(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except OSError as err:
-            if not _unnamed_write_error(err):
-                raise
-            raise OutputError(f"cannot write {str(path)!r}: {err.strerror or err}") from err
-
-    return call
 
 
 class TrainingInterrupted(Exception):  # noqa: N818  (not an error)
@@ -494,7 +473,7 @@ def _execute_latched(plan: RunPlan, created_root: Path | None, latch: SignalLatc
                 run.write(status="interrupted")
             else:
                 run.write(status="failed", error=f"{type(err).__name__}: {err}")
-        if _unnamed_write_error(err):  # a writer of a library's own (TensorBoard's events)
+        if unnamed_write_error(err):  # a writer of a library's own (TensorBoard's events)
             raise OutputError(f"cannot write a file in {str(run_dir)!r} (the TensorBoard "
                               f"log in {runs.TB_DIR}/, or another writer's): "
                               f"{err.strerror or err}") from err
