@@ -195,6 +195,7 @@ def test_a_population_restricted_to_conditions_stacks_only_their_patients():
         batch.make("rehabbot/rehab-knee-population-v2", conditions=[3, 3], naconmax=16)
 
 
+@pytest.mark.slow
 def test_the_batched_env_prints_nothing():
     """Building, compiling and stepping a batched env prints nothing (Warp announces every
     kernel module it loads unless told to be quiet), in a fresh process."""

@@ -99,6 +99,7 @@ def test_cli_refuses_by_name_and_writes_nothing(tmp_path, capsys, argv, named):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_rsl_vec_env_counts_a_stopped_episode():
     from rehabbot.rl.rsl_vec_env import RslVecEnv
 

@@ -50,6 +50,7 @@ def test_step_throughput_makes_the_ids_with_the_robot_asked_for(capsys) -> None:
     assert "| rehabbot/rehab-knee-v1 (robot=fr3) |" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_bilateral_sync_reads_the_gap_of_symmetric_episodes(capsys) -> None:
     # The expert moves both arms in step: no gap beyond the tolerance, nothing paid.
     expert = bilateral_sync.sync_of("expert", episodes=2, seed=0)
@@ -202,6 +203,7 @@ def test_stratified_results_leave_out_the_cells_an_env_refuses() -> None:
                                           {"robot": "kuka"}, 1, 900)
 
 
+@pytest.mark.slow
 def test_stratified_results_evaluate_a_population_id_on_its_held_out_patients() -> None:
     """A population id's cells are the held-out "test" population's patients, each picked with
     the reset option ``patient`` (its episodes are that patient's: the 1.80 m man's contracture

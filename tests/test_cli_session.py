@@ -73,17 +73,8 @@ def _files(folder: Path) -> set[Path]:
     return {path for path in folder.rglob("*")}
 
 
-# evaluate and plot (rehabbot/cli/evaluate.py, plot.py) build the env, or evaluate, before they
-# check the libraries they need.
-BUILDS_FIRST = {"evaluate", "plot"}
-
-
 @pytest.mark.parametrize("argv, extras", [
-    pytest.param(argv, extras, id=argv[0],
-                 marks=[pytest.mark.xfail(strict=True, reason="checks its extra only after "
-                                          "building the env")] if argv[0] in BUILDS_FIRST
-                 else [])
-    for argv, extras in session()])
+    pytest.param(argv, extras, id=argv[0]) for argv, extras in session()])
 def test_each_session_command_works_or_names_its_extra_on_a_core_install(
         session_folder: Path, argv: list[str], extras: set[str]) -> None:
     before = _files(session_folder)

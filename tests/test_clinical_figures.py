@@ -276,6 +276,7 @@ def test_the_overlay_draws_one_line_per_controller_in_every_panel(tmp_path) -> N
         build_overlay([paths[0], other])
 
 
+@pytest.mark.slow
 def test_plot_draws_one_overlay_per_evaluation_folder(tmp_path) -> None:
     from rehabbot.analysis.overlay_figure import overlay_groups
 

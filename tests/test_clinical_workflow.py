@@ -201,6 +201,7 @@ def test_cuff_force_and_work_figures(expert_trace) -> None:
     np.testing.assert_array_equal(lines["patient-work"].get_ydata(), raw["patient_work_j"])
 
 
+@pytest.mark.slow
 def test_plot_cli_writes_the_patient_figures(expert_trace, tmp_path, capsys) -> None:
     pytest.importorskip("matplotlib")
     trace, _ = expert_trace
@@ -308,6 +309,7 @@ def _cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
                           env=env, capture_output=True, text=True, timeout=300, check=False)
 
 
+@pytest.mark.slow
 def test_evaluate_and_plot_write_no_warning_to_stderr(tmp_path) -> None:
     pytest.importorskip("matplotlib")
     done = _cli(["evaluate", "expert", "--env", "rehab-reach-v1", "--episodes", "1", "--out",

@@ -68,6 +68,7 @@ def test_the_four_paper_ids_are_registered_as_kwargs_of_one_class():
     assert set(V1_IDS) == {i.replace("-v0", "-v1") for i in PAPER_IDS}
 
 
+@pytest.mark.slow
 def test_every_registered_rehabbot_id_constructs_resets_and_steps():
     ids = [i for i in gym.registry if i.startswith("rehabbot/")]
     assert len(ids) >= 4

@@ -74,6 +74,7 @@ def _check_envs(env_ids: list[str], expect_render_checks: int = 1) -> None:
     assert sum(words[2:] == ["render"] for words in checked) == expect_render_checks
 
 
+@pytest.mark.slow
 def test_gymnasium_env_checker_passes_without_warnings():
     _check_envs(["rehabbot/rehab-reach-v1"])
 
@@ -99,6 +100,7 @@ def headless(monkeypatch):
         monkeypatch.delenv(name, raising=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("env_id", "kwargs"), FAMILIES,
                          ids=[f"{i.split('/')[1]}{'-' + k['robot'] if k else ''}"
                               for i, k in FAMILIES])

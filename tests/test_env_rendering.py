@@ -171,6 +171,7 @@ print("CLOSED", base._rendering._viewer is None, any(t.is_alive() for t in threa
 """
 
 
+@pytest.mark.slow
 def test_human_mode_shows_overlay_in_viewer_at_real_time() -> None:
     """50 expert steps in the passive viewer (Xvfb): the fixed camera is used, the user scene
     holds the trace and one active target, the loop keeps real time, and close() twice ends

@@ -179,6 +179,7 @@ class Broken:
 '''
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attr, label, needle", [
     ("Quit", "Quit", "its predict() called exit(0)"),
     ("NotANumber", "nan-policy", "returned a non-finite action"),

@@ -74,6 +74,7 @@ def check_result(common, out: Path, script: str, seed: int, timesteps: int) -> d
     return result
 
 
+@pytest.mark.slow
 def test_train_evaluate_save(example, common, tmp_path, monkeypatch, capsys):
     trained, real_train = {}, example.train
 
@@ -113,6 +114,7 @@ def test_train_evaluate_save(example, common, tmp_path, monkeypatch, capsys):
     env.close()
 
 
+@pytest.mark.slow
 def test_ppo_example_end_to_end(ppo, common, tmp_path):
     """The script, run as a user runs it, for two PPO updates (8 envs x 256 steps each): quiet
     (only its own lines), the evaluation, the outputs and the learning curve."""
@@ -151,6 +153,7 @@ def test_ppo_example_end_to_end(ppo, common, tmp_path):
     env.close()
 
 
+@pytest.mark.slow
 def test_ppo_env_is_seeded_float32_and_clips(ppo):
     """skrl gets float32 observations, the first reset honours the seed (set_seed), and the
     env resets an ended episode within the step, clipping actions to the box."""
@@ -228,6 +231,7 @@ def test_ppo_bootstraps_truncated_episodes_from_their_last_observation(ppo):
     env.close()
 
 
+@pytest.mark.slow
 def test_stratified_results_renders_both_examples(tmp_path, monkeypatch, capsys):
     """``--skrl`` takes result.json files of both examples: each is a row named by the
     result's algorithm (an older SAC result without one is SAC's), with its training

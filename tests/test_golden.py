@@ -142,6 +142,7 @@ def _mutated_rollouts_fail(golden, env_id, mode, cells, make_kwargs=None, mutate
 MUTATION_MODES = ("joint_delta", "torque")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", MUTATION_MODES)
 def test_a_reward_weight_changed_by_1e_4_fails(golden, mode):
     env_id = "rehabbot/rehab-reach-v1"
@@ -151,6 +152,7 @@ def test_a_reward_weight_changed_by_1e_4_fails(golden, mode):
     assert len(failures) == len(cells), failures
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", MUTATION_MODES)
 def test_a_link_mass_changed_by_a_tenth_of_a_percent_fails(golden, mode):
     env_id = "rehabbot/rehab-reach-v1"
@@ -171,6 +173,7 @@ def _default_cuff_limit_n(env_id):
         env.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("env_id", "mode", "threshold"), [
     # Golden rollouts that stop on the cuff-force rule (the rule that fires in most of them;
     # none stops on the range of motion), the limit lowered by 1 %.

@@ -21,6 +21,7 @@ from rehabbot.sim.fatigue import ThreeCompartmentFatigue
 from rehabbot.sim.muscles import FORCE_INDEX, PassiveForce, limb_muscles
 
 pytest.importorskip("myo_sim", reason='patient_model="myo" needs pip install "rehabbot[myo]"')
+pytestmark = pytest.mark.slow  # muscle models: seconds a test
 
 KNEE = "rehabbot/rehab-knee-myo-v2"
 # The sweep of the seated knee: up to 99 % of its range, so that grade 1's catch near the end

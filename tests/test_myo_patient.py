@@ -161,6 +161,7 @@ def test_info_reports_the_muscles_and_their_work_is_the_passive_torques_integral
         .observation_space.shape
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("myo_id", MYO_IDS)
 def test_a_myo_id_has_its_base_ids_spaces_at_every_weight_level_and_mode(myo_id):
     from rehabbot.envs.registration import MYO_VARIANTS
@@ -278,6 +279,7 @@ def test_without_myo_sim_the_error_names_the_extra(monkeypatch, preset, template
 # --------------------------------------------------------------------------- the command line
 
 
+@pytest.mark.slow
 def test_snapshot_draws_the_myo_legs_and_refuses_the_left_arm(tmp_path, capsys):
     imageio = pytest.importorskip("imageio.v2")
     from rehabbot.cli import main

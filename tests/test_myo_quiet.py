@@ -27,7 +27,9 @@ def test_there_are_myo_ids():
     assert len(MYO_IDS) >= 3
 
 
-@pytest.mark.parametrize("env_id", MYO_IDS)
+@pytest.mark.parametrize("env_id", [
+    pytest.param(env_id, marks=[] if "knee" in env_id else [pytest.mark.slow])
+    for env_id in MYO_IDS])
 def test_making_a_myo_id_leaves_no_file_and_prints_nothing(env_id, tmp_path):
     """In a fresh process (myo-sim's model is composed once per process), in an empty folder,
     with every warning shown: make, reset and step the id."""

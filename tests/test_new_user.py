@@ -68,6 +68,7 @@ def test_a_bad_policy_fails_before_anything_is_written(trained_run, tmp_path, ca
     assert "need(s) --env ENV" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_the_readme_session_plots_the_comparison_it_evaluated(trained_run, tmp_path,
                                                              monkeypatch, capsys) -> None:
     """README: `rehabbot evaluate <run>/model.zip expert random`, then `rehabbot plot

@@ -23,6 +23,7 @@ WITHIN_ONE = ("joint_error_fine", "joint_error", "tool_error_fine", "tool_error"
 PAST_ONE = ("theta_in_bounds", "phi_in_range", "cuff_force")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("env_id", V2_IDS)
 def test_every_v2_space_is_box_minus_two_two(env_id):
     if "-myo-" in env_id and not myo_available():

@@ -134,6 +134,7 @@ def test_render_checks_its_output_before_the_episode(tmp_path, monkeypatch, caps
     assert message in _one_line(capsys.readouterr().err)
 
 
+@pytest.mark.slow
 def test_render_that_runs_out_of_space_keeps_the_old_video(good_video, tmp_path, monkeypatch,
                                                            capsys) -> None:
     import rehabbot.analysis.video as video
@@ -217,6 +218,7 @@ def _run_limited(args: list[str], limit_bytes: int, cwd: Path) -> subprocess.Com
                           timeout=180, cwd=cwd, env=env)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform != "linux", reason="RLIMIT_FSIZE as a full disk: Linux")
 @pytest.mark.parametrize("suffix", [".mp4", ".gif"])
 def test_render_on_a_really_full_disk_exits_1_and_keeps_the_old_video(good_video, tmp_path,
@@ -240,6 +242,7 @@ def test_render_on_a_really_full_disk_exits_1_and_keeps_the_old_video(good_video
 # ----------------------------------------------------------------------- plot (finding 5)
 
 
+@pytest.mark.slow
 def test_plot_that_runs_out_of_space_keeps_the_old_png(evaluated, tmp_path, monkeypatch,
                                                        capsys) -> None:
     pytest.importorskip("matplotlib")

@@ -82,6 +82,7 @@ def test_v1_arguments_are_validated():
         gym.make("rehabbot/rehab-reach-v0", reward="shaped")
 
 
+@pytest.mark.slow
 def test_the_paper_reward_traps_a_gamma_099_agent_and_v1_does_not():
     """Elbow exercise (1) of the reach id: under eq. (5), holding still 0.06 rad short of a
     target is worth more than reaching it for gamma = 0.99 (README: no agent reached the first

@@ -309,6 +309,7 @@ def test_a_normalised_run_writes_json_statistics_only(tmp_path: Path) -> None:
     assert (run_dir / runs.CHECKPOINT_DIR / "rl_model_vecnormalize_64_steps.json").is_file()
 
 
+@pytest.mark.slow
 def test_sbx_models_are_saved_without_pickled_networks(tmp_path: Path) -> None:
     sbx = pytest.importorskip("sbx")
     from rehabbot.rl.algorithms import read_model_data

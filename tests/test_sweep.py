@@ -102,6 +102,7 @@ def test_variant_names_are_folder_names() -> None:
     assert first == "gamma=0.9" and second.startswith("gamma=0.9-") and len(second) == 18
 
 
+@pytest.mark.slow
 def test_the_shipped_sweep_files_load() -> None:
     base = {"rehabbot/rehab-reach-v2", "rehabbot/rehab-reach-l-v2", "rehabbot/rehab-hip-v2",
             "rehabbot/rehab-knee-v2"}

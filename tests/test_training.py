@@ -638,6 +638,7 @@ def test_one_update_is_enough_to_run() -> None:
     check_run_updates("sac", 101, 1, as_hyperparameters({}, FULL_ID, "sac"))
 
 
+@pytest.mark.slow
 def test_train_without_hyperparams_uses_the_shipped_file_and_says_so(tmp_path: Path,
                                                                       capsys) -> None:
     """``rehabbot train ID --algo A`` trains with the shipped settings of that id and algorithm

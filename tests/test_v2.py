@@ -102,6 +102,7 @@ def test_the_agent_observation_is_what_its_docstring_says() -> None:
     assert info["is_success"] and seen_last
 
 
+@pytest.mark.slow
 def test_the_expert_finishes_every_v2_id_from_the_agent_observation() -> None:
     """The scripted expert reads the joint errors back from the agent observation (the tanh
     fields) and acts in Box(-1, 1): one episode of every -v2 id, as on -v1."""

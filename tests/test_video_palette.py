@@ -27,6 +27,7 @@ def _colours(path) -> set:
     return colours
 
 
+@pytest.mark.slow
 def test_a_gif_with_one_palette_of_n_colours(tmp_path, capsys) -> None:
     pytest.importorskip("imageio")
     shared, own = tmp_path / "shared.gif", tmp_path / "own.gif"

@@ -128,6 +128,9 @@ def plot_command(out_dir: Path) -> str:
 @cli_command
 def cmd_evaluate(args: argparse.Namespace) -> int:
     """Run ``rehabbot evaluate``."""
+    from rehabbot.cli.needs import policy_modules, require
+
+    require("rehabbot evaluate", *map(policy_modules, args.policies))
     from rehabbot.analysis import evaluation, evaluation_folders
     from rehabbot.cli.threads import one_torch_thread
     from rehabbot.common.files import check_parent_exists, check_writable_dir
