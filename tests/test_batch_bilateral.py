@@ -41,9 +41,11 @@ TORQUE_TRANSIENT_TOL = 0.05
 
 
 def test_expert_episode_replays_on_warp():
-    """The symmetric exercise (entry 0); the alternating one (entry 2, 644 steps) is on the
-    parity page (benchmarks/results/batch_parity.py), outside the suite's time budget."""
-    replay = replay_expert(ENV, start={"exercise": 0, "weight_level": 0})
+    """The symmetric exercise (entry 0), its first 200 steps (four target switches); its whole
+    episode and the alternating one (entry 2, 644 steps) are on the parity page
+    (benchmarks/results/batch_parity.py), outside the suite's time budget."""
+    replay = replay_expert(ENV, start={"exercise": 0, "weight_level": 0}, max_steps=200)
+    assert len(replay["switches_cpu"]) >= 4
     assert replay["stop_cpu"] is None
     assert replay["reset_obs_error"] < OBS_TOL  # the cuff forces at home (dense Jacobian)
     assert replay["obs_error"] < OBS_TOL, replay["obs_error"]

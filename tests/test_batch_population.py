@@ -72,11 +72,12 @@ def test_population_ids_are_batched():
 
 @pytest.mark.slow
 def test_reach_population_patients_replay_side_by_side():
-    rows = replay_population(REACH, REACH_PATIENTS)
+    rows = replay_population(REACH, REACH_PATIENTS, max_steps=200)  # four switches each
     _assert_replays(rows)
     by_patient = {row["patient"]: row for row in rows}
     assert by_patient[16]["patient_work_cpu_j"] > 0.1  # the active patient pulls
-    assert len({row["end_cpu"] for row in rows}) > 1  # the profiles take different paths
+    # the profiles take different paths: their targets switch on other steps
+    assert len({tuple(row["switches_cpu"]) for row in rows}) > 1
     _assert_patients_differ(REACH, REACH_PATIENTS)
 
 

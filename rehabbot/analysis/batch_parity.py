@@ -32,12 +32,14 @@ def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int |
     (``actions`` None) or a constant action's, to its end or ``max_steps``. Arrays per step:
     ``actions``, ``obs`` (the reset's first), ``rewards``, ``index`` (the target index, the
     reset's first); ``violation`` (the stop's rule or None), ``robot_work_j`` and
-    ``patient_work_j`` at the end."""
+    ``patient_work_j`` at the end; ``ended``: whether the episode ended (a stop, success or the
+    step limit) rather than being cut at ``max_steps``."""
     env = gym.make(env_id, **kwargs).unwrapped
     obs, info = env.reset(seed=0, options=start or START)
     expert = ScriptedExpert(env) if actions is None else None
     out: dict[str, Any] = {"actions": [], "obs": [obs], "rewards": [], "index": [0],
-                           "violation": None, "robot_work_j": 0.0, "patient_work_j": 0.0}
+                           "violation": None, "robot_work_j": 0.0, "patient_work_j": 0.0,
+                           "ended": False}
     for _ in range(max_steps or env.max_episode_steps):
         action = np.asarray(expert.predict(obs)[0] if expert else actions, np.float32)
         obs, reward, terminated, _truncated, info = env.step(action)
@@ -50,6 +52,7 @@ def cpu_episode(env_id: str, actions: np.ndarray | None = None, max_steps: int |
         if terminated:
             out["violation"] = info["safety_violation"]
             break
+    out["ended"] = bool(terminated) or len(out["actions"]) >= env.max_episode_steps
     env.close()
     return {k: np.asarray(v) if isinstance(v, list) else v for k, v in out.items()}
 
@@ -92,14 +95,15 @@ def switches(index: np.ndarray) -> list[int]:
 
 
 def replay_expert(env_id: str, other_world_offset: float = 0.3, start: dict | None = None,
-                  **kwargs: Any) -> dict:
+                  max_steps: int | None = None, **kwargs: Any) -> dict:
     """The CPU scripted expert's episode replayed in world 0 of two (world 1 acts the same
     actions plus ``other_world_offset``, so that its contacts and constraints would show if
     they reached world 0); what each env gave. ``start``: the exercise and weight level
-    (:data:`START` by default); ``kwargs``: both envs' keyword arguments (a ``condition``, for
-    example)."""
+    (:data:`START` by default); ``max_steps``: only the episode's first steps (its end, then,
+    is None on both sides unless it came before them); ``kwargs``: both envs' keyword
+    arguments (a ``condition``, for example)."""
     start = start or START
-    cpu = cpu_episode(env_id, start=start, **kwargs)
+    cpu = cpu_episode(env_id, start=start, max_steps=max_steps, **kwargs)
     steps = len(cpu["actions"])
     actions = np.repeat(cpu["actions"][:, None], 2, axis=1)
     actions[:, 1] = np.clip(actions[:, 1] + other_world_offset, -1, 1)
@@ -109,7 +113,8 @@ def replay_expert(env_id: str, other_world_offset: float = 0.3, start: dict | No
         "id": env_id, "start": start, "steps": steps,
         "switches_cpu": switches(cpu["index"]),
         "switches_batched": switches(np.r_[0, out["index"][:, 0]]),
-        "end_cpu": steps - 1, "end_batched": int(done[0]) if done.size else None,
+        "end_cpu": steps - 1 if cpu["ended"] else None,
+        "end_batched": int(done[0]) if done.size else None,
         "stop_cpu": cpu["violation"], "stop_batched": int(out["violation"][:, 0].max()),
         "return_cpu": float(cpu["rewards"].sum()),
         "return_batched": float(out["rewards"][:steps, 0].sum()),
@@ -124,14 +129,15 @@ def replay_expert(env_id: str, other_world_offset: float = 0.3, start: dict | No
 
 
 def replay_population(env_id: str, world_patients: Sequence[int], start: dict | None = None,
-                      **kwargs: Any) -> list[dict]:
+                      max_steps: int | None = None, **kwargs: Any) -> list[dict]:
     """The CPU population env's scripted-expert episode of each patient of ``world_patients``
     (from ``reset(seed=0, options={**start, "patient": k})``), all replayed at once: patient
     ``world_patients[i]`` in world ``i`` of one batch, each world with its own patient's
-    model fields and tables. What each env gave, per patient (as :func:`replay_expert`);
-    ``kwargs``: both envs' keyword arguments (``patients="test"``, for example)."""
+    model fields and tables. What each env gave, per patient (as :func:`replay_expert`, with
+    its ``max_steps``); ``kwargs``: both envs' keyword arguments (``patients="test"``, for
+    example)."""
     start = start or START
-    cpus = [cpu_episode(env_id, start={**start, "patient": k}, **kwargs)
+    cpus = [cpu_episode(env_id, start={**start, "patient": k}, max_steps=max_steps, **kwargs)
             for k in world_patients]
     steps = max(len(c["actions"]) for c in cpus)
     actions = np.zeros((steps, len(cpus), cpus[0]["actions"].shape[1]), np.float32)
@@ -146,7 +152,8 @@ def replay_population(env_id: str, world_patients: Sequence[int], start: dict | 
             "id": env_id, "patient": int(patient), "start": start, "steps": n,
             "switches_cpu": switches(cpu["index"]),
             "switches_batched": switches(np.r_[0, out["index"][:n, world]]),
-            "end_cpu": n - 1, "end_batched": int(done[0]) if done.size else None,
+            "end_cpu": n - 1 if cpu["ended"] else None,
+            "end_batched": int(done[0]) if done.size else None,
             "stop_cpu": cpu["violation"], "stop_batched": int(out["violation"][:n, world].max()),
             "return_cpu": float(cpu["rewards"].sum()),
             "return_batched": float(out["rewards"][:n, world].sum()),
