@@ -38,9 +38,10 @@ EFFORT_WORDS = {"active_assisted": "active-assisted", "resistive": "resistive"}
 
 
 def condition_text(condition: dict[str, Any] | None) -> str:
-    """A condition (:meth:`PatientCondition.to_dict`'s fields, None for a healthy limb) as a
-    therapist reads it: ``"MAS 3 spasticity"``, ``"MAS 2 spasticity, stiffness x1.5, ROM
-    x0.8"``, ``"active-assisted (effort 30 %), strength 50 %"``, or ``"healthy, passive"``.
+    """A condition (:meth:`~rehabbot.sim.conditions.PatientCondition.to_dict`'s fields, None
+    for a healthy limb) as a therapist reads it: ``"MAS 3 spasticity"``,
+    ``"MAS 2 spasticity, stiffness x1.5, ROM x0.8"``,
+    ``"active-assisted (effort 30 %), strength 50 %"``, or ``"healthy, passive"``.
     Only the fields that differ from a healthy, passive limb are named; a field this function
     does not know is shown as ``name=value``, so nothing is left out."""
     if not condition:

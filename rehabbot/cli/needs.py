@@ -2,19 +2,19 @@
 (:func:`rehabbot.common.extras.require_modules`: one line naming ``pip install
 "rehabbot[EXTRA]"``, exit 1), so that a missing extra never shows up after minutes of work.
 
-======================  ==========================================================
-``list``, ``scenes``    nothing (the core install)
-``train``               ``[train]`` (SB3, PyTorch, PyYAML, TensorBoard); the default
-                        backend, ``auto``, trains on SBX (JAX) when ``[jax]`` is
-                        installed too, else on SB3; ``--backend rsl_rl``: ``[gpu]``
-``evaluate``/``render`` for a model zip, its backend's library: ``[train]`` (SB3) or
-                        ``[jax]`` (SBX); ``render`` also ``[video]`` (an .mp4 needs
-                        imageio-ffmpeg, a .gif imageio only)
-``plot``                ``[plot]`` (and what evaluating a model needs, if it does)
-``snapshot``            ``[video]`` (imageio writes the PNG)
-``sweep``               ``[train]`` and ``[sweep]`` (Ray Tune; not for ``--dry-run``)
-``demo``                ``[train]``, ``[plot]`` and ``[video]`` (not with ``--no-video``)
-======================  ==========================================================
+========================  ==========================================================
+``list``, ``scenes``      nothing (the core install)
+``train``                 ``[train]`` (SB3, PyTorch, PyYAML, TensorBoard); the default
+                          backend, ``auto``, trains on SBX (JAX) when ``[jax]`` is
+                          installed too, else on SB3; ``--backend rsl_rl``: ``[gpu]``
+``evaluate``/``render``   for a model zip, its backend's library: ``[train]`` (SB3) or
+                          ``[jax]`` (SBX); ``render`` also ``[video]`` (an .mp4 needs
+                          imageio-ffmpeg, a .gif imageio only)
+``plot``                  ``[plot]`` (and what evaluating a model needs, if it does)
+``snapshot``              ``[video]`` (imageio writes the PNG)
+``sweep``                 ``[train]`` and ``[sweep]`` (Ray Tune; not for ``--dry-run``)
+``demo``                  ``[train]``, ``[plot]`` and ``[video]`` (not with ``--no-video``)
+========================  ==========================================================
 """
 
 from __future__ import annotations
