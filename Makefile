@@ -28,8 +28,10 @@ XVFB := $(if $(DISPLAY),,$(shell command -v xvfb-run >/dev/null 2>&1 && echo xvf
 # The full suite (CI runs this), on every core (pytest-xdist, at most 4 workers). `make
 # test-fast` (or plain `pytest`, in one process) runs the fast selection: every test not marked
 # slow, in under two minutes. The full suite reports each failure's reason and its 30 slowest
-# tests (-rf --durations=30), so that a slow or failing test is named in CI's log.
-PARALLEL := -n auto --maxprocesses 4
+# tests (-rf --durations=30), so that a slow or failing test is named in CI's log. Work
+# stealing (--dist worksteal) keeps a worker that drew a long batched replay from holding up
+# the end of the run.
+PARALLEL := -n auto --maxprocesses 4 --dist worksteal
 
 test: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q --full $(PARALLEL) -rf --durations=30

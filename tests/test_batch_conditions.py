@@ -41,25 +41,28 @@ OBS_TOL = 1e-3
 RETURN_RTOL = 1e-4
 WORK_RTOL = 1e-3
 
-PREFIX_STEPS = 200  # a batched step costs about 0.15 s on a CPU
+# A batched step costs about 0.15 s on a CPU: each replay covers the first steps of its
+# episode, enough for two or more target switches and over 1 J of the patient's work.
+PREFIX_STEPS = {"reach-mas4": 200, "knee-weak-v2": 120, "hip-stiff-resistive": 120}
 MAS4 = {"spasticity_mas": "4"}
 STIFF_RESISTIVE = {"stiffness_scale": 3.0, "rom_scale": 0.7, "effort": "resistive",
                    "effort_fraction": 0.1}
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("env_id", "kwargs"), [
+@pytest.mark.parametrize(("case", "env_id", "kwargs"), [
     # the strongest stretch reflex, on the arm (condition=)
-    ("rehabbot/rehab-reach-v2", {"condition": MAS4}),
+    ("reach-mas4", "rehabbot/rehab-reach-v2", {"condition": MAS4}),
     # a weak knee (10 % strength) that tries to follow the exercise (a condition id)
-    ("rehabbot/rehab-knee-weak-v2", {}),
+    ("knee-weak-v2", "rehabbot/rehab-knee-weak-v2", {}),
     # a contracted hip (stiffness x3, 70 % of the range) that pushes against the motion
-    ("rehabbot/rehab-hip-v2", {"condition": STIFF_RESISTIVE}),
+    ("hip-stiff-resistive", "rehabbot/rehab-hip-v2", {"condition": STIFF_RESISTIVE}),
 ], ids=["reach-mas4", "knee-weak-v2", "hip-stiff-resistive"])
-def test_condition_expert_episode_replays_on_warp(env_id, kwargs):
-    # The first PREFIX_STEPS steps (three or more target switches; the contracted hip's
-    # whole episode is shorter): the drive's laws act from the first step.
-    replay = replay_expert(env_id, max_steps=PREFIX_STEPS, **kwargs)
+def test_condition_expert_episode_replays_on_warp(case, env_id, kwargs):
+    # The first PREFIX_STEPS[case] steps: the drive's laws act from the first step.
+    steps = PREFIX_STEPS[case]
+    replay = replay_expert(env_id, max_steps=steps, **kwargs)
+    assert len(replay["switches_cpu"]) >= 2, replay["switches_cpu"]
     assert replay["reset_obs_error"] < OBS_TOL
     assert replay["obs_error"] < OBS_TOL, replay["obs_error"]
     assert replay["switches_batched"] == replay["switches_cpu"]
@@ -76,8 +79,8 @@ def test_condition_expert_episode_replays_on_warp(env_id, kwargs):
     assert abs(replay["patient_work_cpu_j"]) > 1.0, replay["patient_work_cpu_j"]
     if kwargs.get("condition") == MAS4:
         # The reflex changes the episode by far more than the tolerances.
-        healthy = cpu_episode(env_id, max_steps=PREFIX_STEPS)
-        mas4 = cpu_episode(env_id, max_steps=PREFIX_STEPS, **kwargs)
+        healthy = cpu_episode(env_id, max_steps=steps)
+        mas4 = cpu_episode(env_id, max_steps=steps, **kwargs)
         steps = min(len(healthy["obs"]), len(mas4["obs"]))
         assert np.abs(healthy["obs"][:steps] - mas4["obs"][:steps]).max() > 100 * OBS_TOL
         assert abs(healthy["robot_work_j"] - replay["robot_work_cpu_j"]) > \
