@@ -182,12 +182,18 @@ def test_cli_writes_json_trace_and_comparison(tmp_path: Path, capsys) -> None:
     assert not list(out.rglob("*.tmp"))
 
 
-def test_ensure_trace_evaluates_a_run_once(tmp_path: Path, sac_model: Path) -> None:
+def _finished_run(tmp_path: Path, sac_model: Path) -> Path:
+    """A run folder holding ``sac_model`` as its final model (SAC, seed 7), without a trace."""
     run = tmp_path / "run"
     run.mkdir()
     (run / "model.zip").write_bytes(sac_model.read_bytes())
     (run / "manifest.json").write_text(json.dumps(
         {"env_id": FULL_ID, "algo": "sac", "seed": 7, "env_kwargs": {}}))
+    return run
+
+
+def test_ensure_trace_evaluates_a_run_once(tmp_path: Path, sac_model: Path) -> None:
+    run = _finished_run(tmp_path, sac_model)
     path = ensure_trace(run)
     assert path == run / "evaluation" / "sac-seed7" / "trace.npz"
     with np.load(path) as trace:
@@ -199,11 +205,7 @@ def test_ensure_trace_evaluates_a_run_once(tmp_path: Path, sac_model: Path) -> N
 def test_ensure_trace_never_writes_into_a_live_run(tmp_path: Path, sac_model: Path) -> None:
     from rehabbot.common.files import FolderLock, FolderLockedError
 
-    run = tmp_path / "run"
-    run.mkdir()
-    (run / "model.zip").write_bytes(sac_model.read_bytes())
-    (run / "manifest.json").write_text(json.dumps(
-        {"env_id": FULL_ID, "algo": "sac", "seed": 7, "env_kwargs": {}}))
+    run = _finished_run(tmp_path, sac_model)
     lock = FolderLock(run, ".lock").acquire("run folder")  # a live `rehabbot train`
     try:
         with pytest.raises(FolderLockedError, match=f"run folder {run} is being written"):
