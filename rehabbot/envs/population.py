@@ -12,7 +12,11 @@ the same for every patient of an id (checked as each is built), so one policy se
 ``patients``         default ``"train"``: a
                      :class:`~rehabbot.sim.populations.PatientPopulation`, a dict of its
                      fields, or the name of a shipped one (``"train"``, ``"test"``;
-                     :data:`rehabbot.sim.populations.POPULATIONS`)
+                     :data:`rehabbot.sim.populations.POPULATIONS`), or of an envelope
+                     cohort drawn for this env's limb and robot (``"envelope-train"``,
+                     ``"envelope-validation"``, ``"envelope-test"``,
+                     ``"envelope-test-conditions"``;
+                     :mod:`rehabbot.sim.envelope`)
 ``conditions``       default ``None`` (all): the population's conditions to draw from, as
                      indices into ``population.conditions`` or the conditions themselves
                      (a ``PatientCondition`` or a dict of its fields), one or a sequence;
@@ -41,7 +45,16 @@ patient ``k`` (an index into :attr:`PatientPopulation.patients`); ``"exercise"``
 
 A patient who cannot do the exercises (``ValueError`` when its env is built) is reported with
 its profile and condition the first time it is drawn; :meth:`PopulationEnv.build_all` builds
-every patient at once to check a population up front.
+every patient at once to check a population up front. A population with ``skip_infeasible``
+(the envelope cohorts: a heavy patient resisting at 15 % of its strength pushes harder than
+the cuff may hold) leaves such a patient out instead: it is drawn again, and
+``env.refused_patients`` maps its index to the reason. Drawing again keeps the draw uniform
+over the patients the scene takes, and the same for a seed.
+
+Each patient's env is built once, the first time it is drawn (about 0.1 s and 3 MB for a
+one-limb scene), and kept: changing the patient per episode costs no scene rebuild
+(``benchmarks/performance/patient_switch_throughput.py`` measures the cost against a fixed
+patient).
 """
 
 from __future__ import annotations
@@ -72,14 +85,21 @@ class PopulationEnv(MakeTimeLimit, gym.Env):
                 raise ValueError(f"PopulationEnv sets {name!r} from its population; pass "
                                  f"patients= (or conditions=, a subset of the population's) "
                                  f"instead of {name}=")
-        population = as_population(patients)
+        self.config = RehabEnvConfig(**kwargs)  # ValueError naming a bad kwarg, now
+        population = as_population(patients, self.config.limb, self.config.robot)
         self.population = population if conditions is None \
             else population.with_conditions(conditions)
-        self.config = RehabEnvConfig(**kwargs)  # ValueError naming a bad kwarg, now
         self._kwargs = dict(kwargs)
         self._envs: dict[int, RehabEnv] = {}
+        self.refused_patients: dict[int, str] = {}
         self._patient = 0
-        first = self._env_of(0)
+        feasible = next((k for k in range(len(self.population.patients))
+                         if not self._refuses(k)), None)
+        if feasible is None:
+            raise ValueError(f"no patient of population {self.population.name!r} can do these "
+                             f"exercises: {self.refused_patients}")
+        self._patient = feasible
+        first = self._env_of(feasible)
         self.observation_space = first.observation_space
         self.action_space = first.action_space
         self.render_mode = first.render_mode
@@ -94,6 +114,8 @@ class PopulationEnv(MakeTimeLimit, gym.Env):
         patient = options.pop("patient", None)
         if patient is None:
             patient = drawn
+            while self._refuses(patient):  # a patient the scene refuses is drawn again
+                patient = int(self.np_random.integers(len(patients)))
         elif isinstance(patient, bool) or patient not in range(len(patients)):
             raise ValueError(f"patient={patient!r} is not one of {list(range(len(patients)))} "
                              f"(population {self.population.name!r})")
@@ -149,14 +171,37 @@ class PopulationEnv(MakeTimeLimit, gym.Env):
 
     def build_all(self) -> None:
         """Build every patient's env now (``ValueError`` for one who cannot do the
-        exercises)."""
+        exercises; with the population's ``skip_infeasible``, they are listed in
+        :attr:`refused_patients` instead)."""
         for k in range(len(self.population.patients)):
-            self._env_of(k)
+            if not self._refuses(k):
+                self._env_of(k)
+
+    @property
+    def feasible_patients(self) -> tuple[int, ...]:
+        """The patients the scene takes, building every patient's env to find out."""
+        self.build_all()
+        return tuple(k for k in range(len(self.population.patients))
+                     if k not in self.refused_patients)
+
+    def _refuses(self, k: int) -> bool:
+        """Whether the scene refuses patient ``k`` of a ``skip_infeasible`` population (its
+        env is built to find out; the reason goes to :attr:`refused_patients`)."""
+        if not self.population.skip_infeasible or k in self._envs:
+            return False
+        if k not in self.refused_patients:
+            try:
+                self._env_of(k)
+            except ValueError as err:
+                self.refused_patients[k] = str(err)
+        return k in self.refused_patients
 
     def _env_of(self, k: int) -> RehabEnv:
         env = self._envs.get(k)
         if env is not None:
             return env
+        if k in self.refused_patients:
+            raise ValueError(self.refused_patients[k])
         profile, condition = self.population.patients[k]
         try:
             env = RehabEnv(profile=profile, condition=condition, **self._kwargs)

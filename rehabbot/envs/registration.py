@@ -139,6 +139,15 @@ for _v1_id in V1_IDS:
     if _v1_id in POPULATION_VARIANTS:
         POPULATION_VARIANTS[_v2_id] = POPULATION_VARIANTS[_v1_id].replace("-v1", "-v2")
 
+# Every one-arm and leg -v2 task with a patient of a population each episode: the reach and
+# knee ids above, and the left arm's trajectory and the hip. Their default population is
+# "train"; patients="envelope-train" draws across the adult envelope (rehabbot.sim.envelope).
+for _base_id in ("rehabbot/rehab-reach-l-v2", "rehabbot/rehab-hip-v2"):
+    _id = _base_id.replace("-v2", "-population-v2")
+    POPULATION_VARIANTS[_id] = _base_id
+    ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], "patients": "train"},
+                      f"{ENV_SPECS[_base_id][1]}; a patient of a population each episode")
+
 # MyoSuite's musculoskeletal legs (rehabbot.sim.myo_patient) and right arm
 # (rehabbot.sim.myo_arm; pip install "rehabbot[myo]"): the -v2 task of the base id on
 # patient_model="myo", the same observation and actions.

@@ -22,6 +22,12 @@ import numpy as np
 
 from rehabbot.common.checks import as_dataclass
 from rehabbot.sim.conditions import PatientCondition, as_condition
+from rehabbot.sim.envelope import (
+    ENVELOPE_SPLITS,
+    POPULATION_PREFIX,
+    envelope_bodies,
+    envelope_conditions,
+)
 from rehabbot.sim.patient import PatientProfile
 
 
@@ -33,12 +39,19 @@ class PatientPopulation:
     ``name``                a short identifier, reported with every result
     ``profiles``            :class:`PatientProfile` objects (or dicts of their fields)
     ``conditions``          :class:`PatientCondition` objects (or dicts of their fields)
+    ``skip_infeasible``     default False: a patient the scene refuses (``ValueError``
+                            when its env is built, e.g. a heavy patient resisting harder than
+                            the cuff may hold) ends the episode's draw with that error; True:
+                            it is left out of the cohort for that scene (the env lists it,
+                            with the reason, in ``PopulationEnv.refused_patients``) and the
+                            draw is made again
     ======================= ============================================================
     """
 
     name: str
     profiles: tuple[PatientProfile, ...]
     conditions: tuple[PatientCondition, ...]
+    skip_infeasible: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -50,6 +63,9 @@ class PatientPopulation:
                 raise ValueError(f"PatientPopulation.{field} must be a non-empty sequence, got "
                                  f"{values!r}")
             object.__setattr__(self, field, tuple(convert(v) for v in values))
+        if not isinstance(self.skip_infeasible, bool):
+            raise ValueError(f"PatientPopulation.skip_infeasible={self.skip_infeasible!r} must "
+                             "be True or False")
 
     @property
     def patients(self) -> tuple[tuple[PatientProfile, PatientCondition], ...]:
@@ -78,7 +94,7 @@ class PatientPopulation:
         chosen.sort()
         return PatientPopulation(
             f"{self.name}[conditions {', '.join(map(str, chosen))}]", self.profiles,
-            tuple(self.conditions[k] for k in chosen))
+            tuple(self.conditions[k] for k in chosen), self.skip_infeasible)
 
     def _condition_index(self, entry: Any) -> int:
         count = len(self.conditions)
@@ -111,7 +127,8 @@ class PatientPopulation:
         return {"name": self.name,
                 "profiles": [{"height_m": p.height_m, "mass_kg": p.mass_kg, "sex": p.sex}
                              for p in self.profiles],
-                "conditions": [c.to_dict() for c in self.conditions]}
+                "conditions": [c.to_dict() for c in self.conditions],
+                "skip_infeasible": self.skip_infeasible}
 
 
 def _as_profile(value: Any) -> PatientProfile:
@@ -148,22 +165,51 @@ POPULATIONS: dict[str, PatientPopulation] = {
 }
 
 
-def as_population(value: Any) -> PatientPopulation:
-    """A population from itself, the name of a shipped one, or a dict of its fields."""
+ENVELOPE_POPULATIONS: tuple[str, ...] = tuple(f"{POPULATION_PREFIX}{split}"
+                                              for split in ENVELOPE_SPLITS)
+
+
+def envelope_population(name: str, limb: str, robot: str = "ur5e") -> PatientPopulation:
+    """The envelope cohort ``name`` (one of :data:`ENVELOPE_POPULATIONS`) of a scene: its
+    bodies x its conditions (:mod:`rehabbot.sim.envelope`), named ``"<name>:<limb>-<robot>"``."""
+    if name not in ENVELOPE_POPULATIONS:
+        raise ValueError(f"patients={name!r} is not an envelope cohort; valid: "
+                         f"{list(ENVELOPE_POPULATIONS)}")
+    split = name.removeprefix(POPULATION_PREFIX)
+    return PatientPopulation(f"{name}:{limb}-{robot}", envelope_bodies(split, limb, robot),
+                             envelope_conditions(split), skip_infeasible=True)
+
+
+def population_names() -> list[str]:
+    """Every population a name gives: the fixed ones and the envelope cohorts."""
+    return [*POPULATIONS, *ENVELOPE_POPULATIONS]
+
+
+def as_population(value: Any, limb: str | None = None, robot: str = "ur5e"
+                  ) -> PatientPopulation:
+    """A population from itself, the name of a shipped one, or a dict of its fields. An
+    envelope cohort's name (``"envelope-train"``, ...) needs the scene: ``limb`` and
+    ``robot``."""
     if isinstance(value, PatientPopulation):
         return value
     if isinstance(value, str):
+        if value in ENVELOPE_POPULATIONS:
+            if limb is None:
+                raise ValueError(f"patients={value!r} is an envelope cohort, drawn per scene: "
+                                 "give the limb (and robot) it is for")
+            return envelope_population(value, limb, robot)
         if value not in POPULATIONS:
             raise ValueError(f"patients={value!r} is not a shipped population; valid: "
-                             f"{list(POPULATIONS)} (or a PatientPopulation)")
+                             f"{population_names()} (or a PatientPopulation)")
         return POPULATIONS[value]
     if isinstance(value, Mapping):
-        unknown = sorted(set(value) - {"name", "profiles", "conditions"})
+        unknown = sorted(set(value) - {"name", "profiles", "conditions", "skip_infeasible"})
         if unknown:
             raise ValueError(f"patients has unknown field(s) {unknown}; valid: name, profiles, "
-                             "conditions")
+                             "conditions, skip_infeasible")
         return PatientPopulation(name=value.get("name", "custom"),
                                  profiles=value.get("profiles", ()),
-                                 conditions=value.get("conditions", ()))
+                                 conditions=value.get("conditions", ()),
+                                 skip_infeasible=value.get("skip_infeasible", False))
     raise ValueError(f"patients={value!r} must be a PatientPopulation, a dict of its fields or "
-                     f"the name of a shipped population {list(POPULATIONS)}")
+                     f"the name of a shipped population {population_names()}")
