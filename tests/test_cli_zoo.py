@@ -16,11 +16,40 @@ def test_zoo_list_has_one_line_per_shipped_agent(capsys) -> None:
     assert main(["zoo", "list"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     agents = zoo.available()
-    assert agents and len(lines) == 1 + len(agents)
-    for (env_id, algo), line in zip(agents, lines[1:], strict=True):
-        assert line.startswith(f"{env_short_name(env_id)}/{algo} ")
+    assert agents and len(lines) == 2 + len(agents)  # a header, the agents, a legend
+    held_out = zoo.held_out_figures()
+    for (env_id, algo), line in zip(agents, lines[1:-1], strict=True):
+        name = f"{env_short_name(env_id)}/{algo}"
+        assert line.startswith(f"{name} ")
         meta = zoo.load(env_id, algo).metadata
-        assert f"{100 * meta['success_rate']:.0f} %" in line
+        figures = held_out.get(name)
+        if figures and figures.get("weights_sha256") == meta["weights_sha256"]:
+            finished, of = figures["bodies"]
+            assert f"{finished}/{of} ({100 * finished / of:.0f} %)" in line
+    assert lines[-1].startswith("patients: ")
+
+
+def test_zoo_list_shows_held_out_figures_only_for_the_weights_measured(
+        capsys, tmp_path, monkeypatch) -> None:
+    shipped = zoo.zoo_path("rehab-knee-v2", "sac")
+    root = tmp_path / "zoo"
+    (root / "rehab-knee-v2").mkdir(parents=True)
+    (root / "rehab-knee-v2" / "sac.npz").write_bytes(shipped.read_bytes())
+    (root / "rehab-knee-v2" / "td3.npz").write_bytes(
+        zoo.zoo_path("rehab-knee-v2", "td3").read_bytes())
+    sha = zoo.load("rehab-knee-v2", "sac").metadata["weights_sha256"]
+    monkeypatch.setenv("REHABBOT_ZOO_DIR", str(root))
+    (root / zoo.HELD_OUT_FILE).write_text(json.dumps({"agents": {
+        "rehab-knee-v2/sac": {"bodies": [37, 40], "conditions": [90, 120],
+                              "weights_sha256": sha},
+        "rehab-knee-v2/td3": {"bodies": [40, 40], "conditions": [120, 120],
+                              "weights_sha256": "0" * 64}}}))
+    assert main(["zoo", "list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    sac = next(line for line in lines if line.startswith("rehab-knee-v2/sac "))
+    td3 = next(line for line in lines if line.startswith("rehab-knee-v2/td3 "))
+    assert "37/40 (92 %)" in sac and "90/120 (75 %)" in sac
+    assert "40/40" not in td3 and td3.split()[-2:] == ["-", "-"]  # other weights: no figure
 
 
 def test_zoo_show_prints_the_agents_metadata(capsys) -> None:

@@ -4,6 +4,15 @@
         --seed 40000 --json val.json
     python benchmarks/results/zoo_select.py val.json [more.json ...] [--export] [--zoo DIR]
         [--min-success 0.5] [--skip ENV/AGENT ...]
+    python benchmarks/results/heldout_results.py --runs RUNS --split validation --json val.json
+    python benchmarks/results/zoo_select.py val.json --export --no-full   # envelope-trained
+
+Runs trained on patients across the adult envelope are chosen on the envelope's validation
+cohort (``heldout_results.py --split validation``: bodies and conditions of their own, seeds
+from 40 000): the seed that finished the most of the validation episodes the scripted expert
+finishes. Such an agent is filed under its base id (``rehab-knee-v2/sac``), with the
+population it trained on in its metadata. ``--no-full`` exports the actor alone (no full
+model: the package's git history does not hold one).
 
 For every env x algorithm row of ``benchmarks/results/stratified_results.py`` (the runs of one id,
 robot and algorithm), the run whose final model finished the most validation episodes is
@@ -32,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from rehabbot.common.tables import markdown_table
-from rehabbot.envs.registration import env_short_name
+from rehabbot.envs.registration import POPULATION_VARIANTS, env_short_name
 from rehabbot.rl import runs, zoo
 from rehabbot.rl.zoo_export import export_policy
 
@@ -67,6 +76,30 @@ def choices(validation: dict[str, Any]) -> list[dict[str, Any]]:
     return picked
 
 
+def heldout_choices(validation: dict[str, Any]) -> list[dict[str, Any]]:
+    """One choice per row of a ``heldout_results.py --split validation --json`` file: the run
+    that finished the most validation episodes the expert finishes (ties: the lower seed)."""
+    if validation.get("split") != "validation":
+        raise ValueError(f"the file holds the {validation.get('split')!r} split: choose on "
+                         "validation episodes (heldout_results.py --split validation)")
+    rows: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for entry in validation["per_controller"]:
+        if entry["kind"] != "run":
+            continue
+        manifest = runs.read_manifest(Path(entry["run_dir"])) or {}
+        env_id = POPULATION_VARIANTS.get(manifest["env_id"], manifest["env_id"])
+        rows[(env_id, zoo.agent_name(manifest["algo"], manifest.get("env_kwargs")))].append(
+            entry)
+    picked = []
+    for (env_id, name), row in sorted(rows.items()):
+        rates = {int(e["train_seed"]): e["finished"] / max(e["of"], 1) for e in row}
+        best = max(row, key=lambda e: (rates[int(e["train_seed"])], -int(e["train_seed"])))
+        picked.append({"env_id": env_id, "agent": name, "run_dir": best["run_dir"],
+                       "seed": int(best["train_seed"]), "success_by_seed": rates,
+                       "episodes_per_run": best["of"]})
+    return picked
+
+
 def merge(files: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """One validation record of several ``stratified_results --json`` files of the same
     episodes (first seed and episodes per cell); their commands are kept, joined by ``; ``."""
@@ -88,6 +121,19 @@ def merge(files: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 def selection_note(choice: dict[str, Any], validation: dict[str, Any]) -> dict[str, Any]:
     """The ``selection`` metadata of an exported agent."""
+    if "per_controller" in validation:  # the envelope's validation cohort
+        return {"selection": {
+            "rule": "the final model of the training seed that finished the most of the "
+                    "validation episodes the scripted expert finishes (ties: the lower seed)",
+            "validation_command": validation.get("command"),
+            "validation_episodes": {"first_seed": validation["seed"],
+                                    "patients": "envelope-validation",
+                                    "expert_finished_per_run": choice["episodes_per_run"]},
+            "success_by_seed": {str(k): v
+                                for k, v in sorted(choice["success_by_seed"].items())},
+            "chosen_seed": choice["seed"],
+            "test_results": "docs/results/heldout-envelope.md (held-out episodes from seed "
+                            "60000)"}}
     return {"selection": {
         "rule": "the final model of the training seed that finished the most validation "
                 "episodes (ties: the lower seed)",
@@ -114,11 +160,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--export", action="store_true",
                         help="export every choice to the zoo with its whole model")
     parser.add_argument("--zoo", type=Path, help="the zoo folder (default: the package's)")
+    parser.add_argument("--no-full", action="store_true",
+                        help="export the actors alone, without their full models")
     args = parser.parse_args(argv)
     if not 0.0 <= args.min_success <= 1.0:
         parser.error(f"--min-success {args.min_success} must be in [0, 1]")
-    validation = merge([json.loads(path.read_text()) for path in args.validation])
-    picked = choices(validation)
+    files = [json.loads(path.read_text()) for path in args.validation]
+    if all("per_controller" in f for f in files) and len(files) == 1:
+        validation, picked = files[0], heldout_choices(files[0])
+    else:
+        validation = merge(files)
+        picked = choices(validation)
     shipped, cells = [], []
     for choice in picked:
         rates = ", ".join(f"{seed}: {100 * rate:.0f} %"
@@ -136,7 +188,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.export:
         for choice in shipped:
             out = zoo.zoo_path(choice["env_id"], choice["agent"], args.zoo)
-            meta = export_policy(choice["run_dir"], out_path=out, full=True,
+            meta = export_policy(choice["run_dir"], out_path=out, full=not args.no_full,
                                  metadata=selection_note(choice, validation))
             print(f"wrote {out}: success {meta.get('success_rate')} on "
                   f"{(meta.get('evaluation') or {}).get('episodes')} episodes", flush=True)

@@ -30,18 +30,28 @@ model (critics included, for fine-tuning with rehabbot.zoo.load_full_model) is n
 package: `rehabbot zoo fetch` puts a copy verified by its SHA-256 in the user's cache."""
 
 
-def _row(env_id: str, algo: str) -> str:
+def _share(figures: dict | None, key: str) -> str:
+    """``"47 of 50 (94 %)"`` from ``figures[key] = [finished, of]``, ``"-"`` without it."""
+    pair = (figures or {}).get(key)
+    if not pair or not pair[1]:
+        return "-"
+    return f"{pair[0]}/{pair[1]} ({100 * pair[0] / pair[1]:.0f} %)"
+
+
+def _row(env_id: str, algo: str, held_out: dict[str, dict]) -> str:
     from rehabbot.envs.registration import env_short_name
     from rehabbot.rl import zoo
 
     meta = zoo.load(env_id, algo).metadata
-    evaluation = meta.get("evaluation") or {}
-    success = meta.get("success_rate")
-    share = "-" if success is None else f"{100 * float(success):.0f} %"
-    policy = str(meta.get("policy_class", "-")).rsplit(".", 1)[-1]
-    return (f"{env_short_name(env_id) + '/' + algo:<32} {meta.get('backend', '-'):<4} "
-            f"{policy:<36} {meta.get('training_steps', '-')!s:>7} "
-            f"{meta.get('seed', '-')!s:>4} {share:>6} of {evaluation.get('episodes', '-')}")
+    name = f"{env_short_name(env_id)}/{algo}"
+    figures = held_out.get(name)
+    if figures is not None and figures.get("weights_sha256") != meta.get("weights_sha256"):
+        figures = None  # measured on other weights: not this agent's figure
+    training = "envelope" if str(meta.get("training_patients", "")).startswith("envelope") \
+        else "one"
+    return (f"{name:<28} {meta.get('backend', '-'):<4} "
+            f"{meta.get('training_steps', '-')!s:>7} {meta.get('seed', '-')!s:>4} "
+            f"{training:<8} {_share(figures, 'bodies'):>15} {_share(figures, 'conditions'):>15}")
 
 
 def _agent(text: str) -> tuple[str, str]:
@@ -65,9 +75,15 @@ def cmd_zoo_list(args: argparse.Namespace) -> int:
     if not agents:
         print(f"the zoo ({zoo.zoo_dir()}) holds no agents")
         return EXIT_OK
-    print(f"{'agent':<32} {'lib':<4} {'policy':<36} {'steps':>7} {'seed':>4} success")
+    held_out = zoo.held_out_figures()
+    print(f"{'agent':<28} {'lib':<4} {'steps':>7} {'seed':>4} {'patients':<8} "
+          f"{'held-out bodies':>15} {'held-out conds':>15}")
     for env_id, algo in agents:
-        print(_row(env_id, algo))
+        print(_row(env_id, algo, held_out))
+    print("patients: what training drew (one: the id's 1.75 m, 75 kg man; envelope: the adult "
+          "envelope's training cohort). held-out: test episodes finished of those the scripted "
+          "expert finished, on the envelope's test bodies and test conditions "
+          "(docs/results/heldout-envelope.md); -: not measured for these weights.")
     return EXIT_OK
 
 

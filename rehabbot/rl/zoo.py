@@ -96,7 +96,7 @@ RESERVED_METADATA = frozenset({
     "env_id", "env_kwargs", "algo", "backend", "policy_class", "training_steps", "seed",
     "train_command", "git_commit", "hyperparameters", "training_versions",
     "rehabbot_version", "format", "weights_sha256", "full_model_sha256", "success_rate",
-    "evaluation",
+    "evaluation", "training_env_id", "training_patients",
 })
 # op name -> the parameters it needs
 OP_PARAMS: dict[str, tuple[str, ...]] = {
@@ -419,6 +419,25 @@ def agent_name(algo: str, env_kwargs: Mapping[str, Any] | None = None,
     name = str(algo).strip().lower()
     name = name if robot in (None, "ur5e") else f"{name}-{robot}"
     return f"{name}-{backend}" if backend in BATCHED_BACKENDS else name
+
+
+HELD_OUT_FILE = "heldout.json"
+
+
+def held_out_figures() -> dict[str, dict[str, Any]]:
+    """Each zoo agent's held-out figures (``"rehab-knee-v2/sac"`` -> ``{"bodies": [finished,
+    of], "conditions": [finished, of], "weights_sha256": ...}``: the test episodes it finished
+    out of those the scripted expert finished, on the envelope's test bodies and on its test
+    conditions), from the zoo's ``heldout.json``, which
+    ``benchmarks/results/heldout_results.py --zoo-figures`` writes with
+    ``docs/results/heldout-envelope.md``. An entry counts only while its weights' SHA-256 is
+    the shipped agent's (a retrained agent has no figure until it is evaluated again); ``{}``
+    without the file."""
+    path = zoo_dir() / HELD_OUT_FILE
+    if not path.is_file():
+        return {}
+    agents = json.loads(path.read_text(encoding="utf-8")).get("agents", {})
+    return {name: figures for name, figures in agents.items() if isinstance(figures, dict)}
 
 
 def available() -> list[tuple[str, str]]:

@@ -34,7 +34,7 @@ import numpy as np
 
 from rehabbot.common.errors import UsageError
 from rehabbot.common.version import VERSION
-from rehabbot.envs.registration import NAMESPACE, env_short_name
+from rehabbot.envs.registration import NAMESPACE, POPULATION_VARIANTS, env_short_name
 from rehabbot.rl import runs
 from rehabbot.rl.algorithms import check_algo
 from rehabbot.rl.policies import env_for, load_model, model_file
@@ -293,6 +293,20 @@ def measure_success(policy: ZooPolicy, env_id: str, env_kwargs: Mapping[str, Any
                            "successes": int(sum(successes))}}
 
 
+def serve_base_id(meta: dict[str, Any]) -> None:
+    """File an agent trained on a population id under its base id, in place: the population
+    is how training drew its patients, the task and spaces are the base id's. The training id
+    and patients are kept (``training_env_id``, ``training_patients``) and the agent runs
+    with the base id's own patient (``env_kwargs`` without ``patients``)."""
+    base_id = POPULATION_VARIANTS.get(meta["env_id"])
+    if base_id is None:
+        return
+    env_kwargs = dict(meta.get("env_kwargs") or {})
+    patients = env_kwargs.pop("patients", gym.spec(meta["env_id"]).kwargs.get("patients"))
+    meta.update(training_env_id=meta["env_id"], training_patients=patients, env_id=base_id,
+                env_kwargs=env_kwargs)
+
+
 def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | None = None,
                   out_path: str | Path | None = None, metadata: Mapping[str, Any] | None = None,
                   episodes: int = DEFAULT_EPISODES, seed: int = DEFAULT_SEED,
@@ -303,7 +317,9 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
 
     ``model_or_run_dir`` is an SB3 or SBX model object, a model zip, or a ``rehabbot
     train`` run folder (its manifest gives the env id, kwargs, algorithm, seed, steps and
-    command, and its ``vecnormalize.json`` the observation normalisation). ``metadata`` adds
+    command, and its ``vecnormalize.json`` the observation normalisation). A run on a
+    population id (``rehab-knee-population-v2``) is filed under its base id
+    (:func:`serve_base_id`). ``metadata`` adds
     fields of its own (a note: how the seed was chosen); the keys the exporter writes
     (:data:`~rehabbot.rl.zoo.RESERVED_METADATA`: the env id, the algorithm, the hashes ...)
     are refused. ``full`` also keeps the model zip beside the zoo file
@@ -330,6 +346,7 @@ def export_policy(model_or_run_dir: Any, env_id: str | None = None, algo: str | 
     if not env_id:
         raise UsageError("the env id is unknown (no run manifest): give env_id / --env")
     meta.update(env_id=f"{NAMESPACE}/{env_short_name(env_id)}", rehabbot_version=VERSION)
+    serve_base_id(meta)
     meta.update(dict(metadata or {}))
     out_path = Path(out_path) if out_path is not None else zoo_path(
         meta["env_id"], agent_name(meta["algo"], meta.get("env_kwargs"), meta.get("backend")))
