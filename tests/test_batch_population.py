@@ -70,6 +70,12 @@ def test_population_ids_are_batched():
     assert set(POPULATION_IDS) == {REACH, KNEE}
 
 
+@pytest.mark.slow  # builds the cohort's 100 patients to find the refused ones
+def test_a_cohort_that_leaves_out_patients_is_refused_by_name():
+    with pytest.raises(ValueError, match=r"envelope-train:knee-ur5e.*leaves out patients"):
+        batch.make(KNEE, patients="envelope-train")
+
+
 @pytest.mark.slow
 def test_reach_population_patients_replay_side_by_side():
     rows = replay_population(REACH, REACH_PATIENTS, max_steps=200)  # four switches each

@@ -89,6 +89,13 @@ class BatchedRehabEnv:
         check_id(env_id)
         cpu = gym.make(env_id, **kwargs).unwrapped
         if env_id in POPULATION_IDS:
+            if cpu.population.skip_infeasible and cpu.feasible_patients != tuple(
+                    range(len(cpu.population.patients))):
+                raise ValueError(
+                    f"population {cpu.population.name!r} leaves out patients its scene "
+                    f"refuses ({sorted(cpu.refused_patients)}); the batched env draws from "
+                    "every patient of a population: pass one whose patients all do the "
+                    "exercises, or train on the CPU env")
             envs = [cpu.patient_env(k) for k in range(len(cpu.population.patients))]
         else:
             envs = [cpu]

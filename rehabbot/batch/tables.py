@@ -40,11 +40,13 @@ SUPPORTED_IDS: tuple[str, ...] = (
 CONDITION_IDS: tuple[str, ...] = tuple(
     env_id for env_id, (base_id, _condition, _text) in CONDITION_VARIANTS.items()
     if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
-# The population ids of those ids (a patient of a population per world and episode:
-# rehabbot.batch.patients).
+# The population ids batched and parity-tested (a patient of a population per world and
+# episode: rehabbot.batch.patients): the reach's and the knee's; the left arm's and the hip's
+# population ids run on the CPU env only.
 POPULATION_IDS: tuple[str, ...] = tuple(
     env_id for env_id, base_id in POPULATION_VARIANTS.items()
-    if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
+    if env_id.endswith("-v2") and base_id in ("rehabbot/rehab-reach-v2",
+                                              "rehabbot/rehab-knee-v2"))
 # The two-arm id: two robots, one on each hand (the bilateral exercise table).
 BILATERAL_ID = "rehabbot/rehab-bilateral-v2"
 # Every id the batched env builds.
