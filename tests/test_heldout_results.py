@@ -298,3 +298,22 @@ def test_evaluations_of_the_same_plan_merge_and_others_are_refused():
     shifted = {**target, "episodes": [{**e, "seed": e["seed"] + 1} for e in target["episodes"]]}
     with pytest.raises(ValueError, match="other episodes"):
         heldout.merge_data([first, {**data, "targets": [shifted]}])
+    flipped = {**expert, "success": [not expert["success"][0], *expert["success"][1:]]}
+    with pytest.raises(ValueError, match="expert played the same episodes differently"):
+        heldout.merge_data([first, {**data, "targets": [{**target, "controllers": [
+            flipped, *others[1:]]}]}])
+
+
+def test_stored_data_unpacks_to_the_episodes_and_the_pages_tables_come_from_them():
+    data = synthetic_data()
+    packed = json.loads(json.dumps(heldout.pack(data)))
+    assert isinstance(packed["targets"][0]["episodes"], dict)
+    assert heldout.unpack(packed) == data
+    results = Path(__file__).resolve().parents[1] / "docs" / "results"
+    pages = sorted(results.glob("heldout-*.json"))
+    for path in pages:  # every published held-out page: its tables, from its own episodes
+        document = json.loads(path.read_text(encoding="utf-8"))
+        keys = {sweep: set(heldout.sweep_keys(Path(results.parents[1], sweep)))
+                for sweep in document["sweeps"]}
+        assert document["tables"] == heldout.heldout_tables(
+            heldout.unpack(document["data"]), keys), path.name

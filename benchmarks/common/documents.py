@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shlex
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -257,6 +258,18 @@ def load_document(path: str | Path) -> dict[str, Any]:
     return document
 
 
+# An array that holds no array and no object: its line breaks are layout only (a JSON string
+# never holds a raw line break), so they can go without changing the document.
+_FLAT_ARRAY = re.compile(r"\[[^\[\]{}]*\]")
+
+
+def document_json(document: Mapping[str, Any]) -> str:
+    """The document as JSON text: indented, with each array of plain values on one line (a
+    page's data holds long lists of numbers)."""
+    text = json.dumps(document, indent=1)
+    return _FLAT_ARRAY.sub(lambda m: re.sub(r"\n *", "", m.group(0)), text)
+
+
 def write_page(document: Mapping[str, Any], stem: str | Path) -> tuple[Path, Path]:
     """Write ``<stem>.json`` (the document) and ``<stem>.md`` (its page); return both paths."""
     stem = Path(stem)
@@ -264,7 +277,7 @@ def write_page(document: Mapping[str, Any], stem: str | Path) -> tuple[Path, Pat
         stem = stem.with_suffix("")
     stem.parent.mkdir(parents=True, exist_ok=True)
     json_path, md_path = stem.with_suffix(".json"), stem.with_suffix(".md")
-    json_path.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
+    json_path.write_text(document_json(document) + "\n", encoding="utf-8")
     md_path.write_text(render_markdown(document), encoding="utf-8")
     return json_path, md_path
 

@@ -49,6 +49,7 @@ if not __package__:  # run as a script: make `benchmarks` importable
 import rehabbot  # noqa: F401  (registers the ids)
 from benchmarks.common.documents import (
     command_line,
+    document_json,
     make_document,
     make_table,
     render_markdown,
@@ -650,7 +651,7 @@ def heldout_document(data: dict, command: str, *, title: str | None = None,
         settings={"split": data["split"], "actions": "deterministic",
                   "model": "every run's final model",
                   **({"subset": data["subset"]} if data.get("subset") else {})},
-        provenance=provenance, data=data)
+        provenance=provenance, data=pack(data))
 
 
 # --------------------------------------------------------------------------- CLI
@@ -710,13 +711,44 @@ def evaluate_all(targets: dict[Target, list[dict]], exercises: dict[Target, int]
     return {**data, "per_controller": controller_figures(data)}
 
 
+PACKED_TEXT = ("part", "body", "condition")
+
+
+def pack(data: dict[str, Any]) -> dict[str, Any]:
+    """The data as stored: each scene's episodes as columns, the text columns as indices
+    into their ``labels`` (thousands of episodes repeat a few patients)."""
+    targets = []
+    for target in data["targets"]:
+        episodes = target["episodes"]
+        labels = {k: list(dict.fromkeys(e[k] for e in episodes)) for k in PACKED_TEXT}
+        columns = {k: ([labels[k].index(e[k]) for e in episodes] if k in labels
+                       else [e[k] for e in episodes]) for k in ("seed", *CELL)}
+        targets.append({**target, "episodes": {"columns": columns, "labels": labels}})
+    return {**data, "targets": targets}
+
+
+def unpack(data: dict[str, Any]) -> dict[str, Any]:
+    """The data of :func:`pack` with each scene's episodes as records again."""
+    targets = []
+    for target in data["targets"]:
+        stored = target["episodes"]
+        if isinstance(stored, dict):
+            columns, labels = stored["columns"], stored["labels"]
+            names = list(columns)
+            stored = [{k: (labels[k][v] if k in labels else v) for k, v in zip(names, row,
+                                                                               strict=True)}
+                      for row in zip(*(columns[k] for k in names), strict=True)]
+        targets.append({**target, "episodes": stored})
+    return {**data, "targets": targets}
+
+
 def load_data(path: Path) -> tuple[dict[str, Any], str | None]:
     """The data of a results document or of a ``--json`` file, and its provenance (for a
     ``--json`` file, the command that wrote it)."""
     saved = json.loads(Path(path).read_text(encoding="utf-8"))
     if "schema" in saved:
-        return saved["data"], saved.get("provenance")
-    return ({k: v for k, v in saved.items() if k != "command"},
+        return unpack(saved["data"]), saved.get("provenance")
+    return (unpack({k: v for k, v in saved.items() if k != "command"}),
             f"{repo_path(path)}: {saved.get('command')}")
 
 
@@ -739,6 +771,13 @@ def merge_data(parts: Sequence[dict[str, Any]]) -> dict[str, Any]:
                 continue
             if target["episodes"] != targets[key]["episodes"]:
                 raise ValueError(f"{target['label']}: the evaluations played other episodes")
+            experts = [next(c for c in t["controllers"] if c["kind"] == "expert")
+                       for t in (target, targets[key])]
+            outcomes = [[e.get(k) for k in ("success", "safety_violation", "steps")]
+                        for e in experts]
+            if outcomes[0] != outcomes[1]:
+                raise ValueError(f"{target['label']}: the scripted expert played the same "
+                                 "episodes differently in two evaluations")
             targets[key]["controllers"] += [c for c in target["controllers"]
                                             if c["kind"] != "expert"]
     data = {**{k: first.get(k) for k in same}, "targets": list(targets.values())}
@@ -805,7 +844,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.page:
         write_page(document, args.page)
     if args.json:
-        args.json.write_text(json.dumps({"command": command, **data}, indent=1) + "\n")
+        args.json.write_text(document_json({"command": command, **pack(data)}) + "\n")
     if args.zoo_figures:
         source = args.page.with_suffix(".json") if args.page else args.json
         args.zoo_figures.write_text(json.dumps(zoo_figures(
