@@ -317,3 +317,23 @@ def test_stored_data_unpacks_to_the_episodes_and_the_pages_tables_come_from_them
                 for sweep in document["sweeps"]}
         assert document["tables"] == heldout.heldout_tables(
             heldout.unpack(document["data"]), keys), path.name
+
+
+def test_the_stops_table_counts_why_expert_finished_episodes_were_not_finished():
+    data = synthetic_data()
+    target = data["targets"][0]
+    table = heldout.stops_table(target)
+    expert = heldout.expert_of(target)
+    wanted = {e["seed"] for e in expert if e["success"]}
+    for _, label, controllers in heldout.rows_of(target):
+        for part in target["parts"]:
+            row = next(r for r in table["rows"] if r[:2] == [label, part])
+            missed = [e for c in controllers for e in heldout.episodes_of(target, c)
+                      if e["part"] == part and e["seed"] in wanted and not e["success"]]
+            assert row[2] == len(missed) == sum(row[3:])
+    flipped = copy.deepcopy(target)
+    run = next(c for c in flipped["controllers"] if c["kind"] == "run")
+    first = next(i for i, e in enumerate(heldout.episodes_of(flipped, run))
+                 if e["seed"] in wanted and e["success"])
+    run["success"][first] = False
+    assert heldout.stops_table(flipped)["rows"] != table["rows"]

@@ -566,6 +566,35 @@ def breakdown_table(target: dict, part: str, key: str) -> dict[str, Any]:
                       section=target["label"])
 
 
+def stops_table(target: dict) -> dict[str, Any]:
+    """Why each controller row did not finish the episodes the expert finishes: the safety
+    rule that stopped them, or the time limit, per part (seeds pooled)."""
+    expert = expert_of(target)
+    wanted = {e["seed"] for e in expert if e["success"]}
+    rows, reasons = [], set()
+    counted = []
+    for _, label, controllers in rows_of(target):
+        for part in target["parts"]:
+            stops: dict[str, int] = defaultdict(int)
+            for c in controllers:
+                for e in episodes_of(target, c):
+                    if e["part"] == part and e["seed"] in wanted and not e["success"]:
+                        stops[e["safety_violation"] or "time limit"] += 1
+            reasons |= set(stops)
+            counted.append((label, part, stops))
+    columns = sorted(reasons - {"time limit"}) + (["time limit"] if "time limit" in reasons
+                                                  else [])
+    for label, part, stops in counted:
+        rows.append([label, part, sum(stops.values()), *(stops.get(r, 0) for r in columns)])
+    return make_table(f"stops/{target['label']}",
+                      f"{target['label']}: why the episodes the expert finishes were not "
+                      "finished", ["controller", "part", "not finished", *columns], rows,
+                      section=target["label"],
+                      note="Seeds pooled; a safety rule's name is the rule that stopped the "
+                           "episode (a stop never pays), the time limit an episode that ran "
+                           "out of time.")
+
+
 def unfinished_table(target: dict) -> dict[str, Any]:
     """The cells where the expert does not finish every episode, with why (the safety rule,
     or the time limit), and each controller row's finished / played there."""
@@ -629,7 +658,8 @@ def heldout_tables(data: dict, sweeps: dict[str, set] | None = None) -> list[dic
     for target in data["targets"]:
         for part in target["parts"]:
             tables += [breakdown_table(target, part, key) for key in BREAKDOWNS[part]]
-        tables += [unfinished_table(target), refused_table(target), distances_table(target)]
+        tables += [stops_table(target), unfinished_table(target), refused_table(target),
+                   distances_table(target)]
         for c in (c for c in target["controllers"] if c["kind"] == "run"):
             trained[(stratified.env_label(c["trained_env_id"], c["env_kwargs"]), c["row"])] += [c]
     return tables + ([stratified.runs_table(trained, sweeps)] if trained else [])
