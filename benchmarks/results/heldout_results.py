@@ -870,15 +870,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = command_line(__file__, argv if argv is not None else sys.argv[1:])
     document = heldout_document(data, command, title=args.title, sweeps=args.sweep,
                                 provenance=args.provenance or provenance)
-    print(render_markdown(document))
+    if args.json:  # the episodes are written first: a closed pipe on stdout loses nothing
+        args.json.write_text(document_json({"command": command, **pack(data)}) + "\n")
     if args.page:
         write_page(document, args.page)
-    if args.json:
-        args.json.write_text(document_json({"command": command, **pack(data)}) + "\n")
     if args.zoo_figures:
         source = args.page.with_suffix(".json") if args.page else args.json
         args.zoo_figures.write_text(json.dumps(zoo_figures(
             data, repo_path(source) if source else None), indent=1) + "\n")
+    print(render_markdown(document))
     return 0
 
 
