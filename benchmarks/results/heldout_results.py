@@ -746,14 +746,21 @@ PACKED_TEXT = ("part", "body", "condition")
 
 def pack(data: dict[str, Any]) -> dict[str, Any]:
     """The data as stored: each scene's episodes as columns, the text columns as indices
-    into their ``labels`` (thousands of episodes repeat a few patients)."""
+    into their ``labels`` (thousands of episodes repeat a few patients), and each
+    controller's outcomes as 0/1 and as indices into the scene's ``rules`` (0: none)."""
     targets = []
     for target in data["targets"]:
         episodes = target["episodes"]
         labels = {k: list(dict.fromkeys(e[k] for e in episodes)) for k in PACKED_TEXT}
         columns = {k: ([labels[k].index(e[k]) for e in episodes] if k in labels
                        else [e[k] for e in episodes]) for k in ("seed", *CELL)}
-        targets.append({**target, "episodes": {"columns": columns, "labels": labels}})
+        rules = list(dict.fromkeys([None, *(r for c in target["controllers"]
+                                            for r in c["safety_violation"])]))
+        controllers = [{**c, "success": [int(ok) for ok in c["success"]],
+                        "safety_violation": [rules.index(r) for r in c["safety_violation"]]}
+                       for c in target["controllers"]]
+        targets.append({**target, "episodes": {"columns": columns, "labels": labels},
+                        "rules": rules, "controllers": controllers})
     return {**data, "targets": targets}
 
 
@@ -768,7 +775,14 @@ def unpack(data: dict[str, Any]) -> dict[str, Any]:
             stored = [{k: (labels[k][v] if k in labels else v) for k, v in zip(names, row,
                                                                                strict=True)}
                       for row in zip(*(columns[k] for k in names), strict=True)]
-        targets.append({**target, "episodes": stored})
+        target = {**target, "episodes": stored}
+        rules = target.pop("rules", None)
+        if rules is not None:  # outcomes stored as 0/1 and as indices into the rules
+            target["controllers"] = [
+                {**c, "success": [bool(ok) for ok in c["success"]],
+                 "safety_violation": [rules[k] for k in c["safety_violation"]]}
+                for c in target["controllers"]]
+        targets.append(target)
     return {**data, "targets": targets}
 
 
