@@ -70,3 +70,14 @@ def test_a_bad_agent_name_is_one_line(capsys, name: str, words: str) -> None:
     assert main(["zoo", "show", name]) == 2
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1 and err.startswith("rehabbot: error: ")
+
+
+def test_a_damaged_held_out_file_is_named(capsys, tmp_path, monkeypatch) -> None:
+    root = tmp_path / "zoo"
+    (root / "rehab-knee-v2").mkdir(parents=True)
+    (root / "rehab-knee-v2" / "sac.npz").write_bytes(
+        zoo.zoo_path("rehab-knee-v2", "sac").read_bytes())
+    monkeypatch.setenv("REHABBOT_ZOO_DIR", str(root))
+    (root / zoo.HELD_OUT_FILE).write_text("{not json")
+    assert main(["zoo", "list"]) != 0
+    assert zoo.HELD_OUT_FILE in capsys.readouterr().err

@@ -31,7 +31,7 @@ package: `rehabbot zoo fetch` puts a copy verified by its SHA-256 in the user's 
 
 
 def _share(figures: dict | None, key: str) -> str:
-    """``"47 of 50 (94 %)"`` from ``figures[key] = [finished, of]``, ``"-"`` without it."""
+    """``"47/50 (94 %)"`` from ``figures[key] = [finished, of]``, ``"-"`` without it."""
     pair = (figures or {}).get(key)
     if not pair or not pair[1]:
         return "-"

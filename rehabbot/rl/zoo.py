@@ -436,7 +436,13 @@ def held_out_figures() -> dict[str, dict[str, Any]]:
     path = zoo_dir() / HELD_OUT_FILE
     if not path.is_file():
         return {}
-    agents = json.loads(path.read_text(encoding="utf-8")).get("agents", {})
+    try:
+        agents = json.loads(path.read_text(encoding="utf-8")).get("agents", {})
+    except (ValueError, AttributeError) as err:
+        raise ZooError(f"{path} is not a held-out figures file (a JSON object with "
+                       f"'agents'): {err}") from None
+    if not isinstance(agents, dict):
+        raise ZooError(f"{path}: 'agents' must be an object, got {type(agents).__name__}")
     return {name: figures for name, figures in agents.items() if isinstance(figures, dict)}
 
 
