@@ -275,12 +275,13 @@ def test_the_script_runs_end_to_end_on_a_tiny_subset(tmp_path: Path) -> None:
     one = json.loads((tmp_path / "one.json").read_text())
     document = load_document(tmp_path / "page.json")
     assert one["targets"] == document["data"]["targets"]
-    (target,) = one["targets"]
+    (target,) = heldout.unpack(one)["targets"]
     assert len(target["episodes"]) == 1 + 5 + 3  # a body; 6 conditions, the tremor's 3
     assert [c["row"] for c in target["controllers"]] == ["expert", "zoo:rehab-knee-v2/sac"]
     figures = json.loads((tmp_path / "zoo.json").read_text())
     assert figures["seed"] == 60_000 and figures["source"] == str(tmp_path / "page.json")
-    assert set(figures["agents"]["rehab-knee-v2/sac"]) == {"bodies", "conditions"}
+    assert set(figures["agents"]["rehab-knee-v2/sac"]) == {"bodies", "conditions",
+                                                           "weights_sha256"}
 
 
 def test_evaluations_of_the_same_plan_merge_and_others_are_refused():
