@@ -112,6 +112,17 @@ class Controller:
         """Write the controls for ``action`` (already checked and clipped to the space)."""
         raise NotImplementedError
 
+    def setpoint_for(self, action: np.ndarray) -> np.ndarray:
+        """The servo setpoints :meth:`apply` would set for ``action`` (checked and clipped to
+        the space), the same floats, without setting them. A mode without setpoints raises
+        ``ValueError``."""
+        raise ValueError(f"control mode {self.mode!r} commands no joint setpoints")
+
+    def command_setpoint(self, setpoint_rad: np.ndarray) -> None:
+        """Make ``setpoint_rad`` (clipped to the setpoint bounds) the servo setpoints, as if an
+        action had moved them there (a robot commanded joint positions directly)."""
+        self._set(np.asarray(setpoint_rad, dtype=float), None)
+
     def hold_travel_rad(self, theta_rad: list[float], speed_rad_s: float) -> float:
         """How far [rad] the joints at ``theta_rad`` (moving at ``speed_rad_s``, the norm of
         their velocities) may still travel if the agent holds still: to the setpoints,
@@ -172,12 +183,21 @@ class JointDeltaController(Controller):
             self.setpoint_rad[:] = setpoint
         return True
 
-    def apply(self, action, data):
+    def _next_setpoint(self, action: np.ndarray) -> list[float]:
         # Six numbers: plain Python arithmetic is several times faster than NumPy calls.
-        setpoint = self._setpoint = [
-            low if value < low else high if value > high else value
-            for value, (low, high) in zip(map(float.__add__, self._setpoint, action.tolist()),
-                                          self._bounds, strict=True)]
+        return [low if value < low else high if value > high else value
+                for value, (low, high) in zip(map(float.__add__, self._setpoint, action.tolist()),
+                                              self._bounds, strict=True)]
+
+    def setpoint_for(self, action):
+        return np.array(self._next_setpoint(action))
+
+    def command_setpoint(self, setpoint_rad):
+        super().command_setpoint(setpoint_rad)
+        self._setpoint = self.setpoint_rad.tolist()
+
+    def apply(self, action, data):
+        setpoint = self._setpoint = self._next_setpoint(action)
         self._ctrl[self._servo] = setpoint
         if type(self._servo) is not slice:  # setpoint_rad is a copy, not a view
             self.setpoint_rad[:] = setpoint
@@ -200,6 +220,9 @@ class JointPositionController(Controller):
         return spaces.Box(low.astype(np.float32), high.astype(np.float32), (self.n_joints,),
                           np.float32)
 
+    def setpoint_for(self, action):
+        return np.clip(np.asarray(action, dtype=float), self.low_rad, self.high_rad)
+
     def apply(self, action, data):
         self._set(np.asarray(action, dtype=float), data)
 
@@ -216,6 +239,10 @@ class JointVelocityController(Controller):
     def _make_space(self) -> spaces.Box:
         return spaces.Box(-self.max_speed_rad_s, self.max_speed_rad_s, (self.n_joints,),
                           np.float32)
+
+    def setpoint_for(self, action):
+        return np.clip(self.setpoint_rad + self.dt_s * np.asarray(action, dtype=float),
+                       self.low_rad, self.high_rad)
 
     def apply(self, action, data):
         self._set(self.setpoint_rad + self.dt_s * np.asarray(action, dtype=float), data)

@@ -39,6 +39,7 @@ from rehabbot.envs.build import EnvParts
 from rehabbot.envs.control import UnitActions, checked_action
 from rehabbot.envs.env_base import RehabEnvBase
 from rehabbot.envs.env_rendering import EnvRendering
+from rehabbot.sim.randomization import RandomizationDraw, Randomizer, check_preset
 from rehabbot.tasks.agent_observation import AgentObservation
 from rehabbot.tasks.reward import StepOutcome
 
@@ -118,6 +119,7 @@ class RehabEnvCore(RehabEnvBase):
                                        base_rot[0])
         self._record = self.render_mode is not None
         self._adopt_agent_interface()
+        self._adopt_randomization()
         self._bind_views()
         scene.reset_data(data)
 
@@ -142,11 +144,22 @@ class RehabEnvCore(RehabEnvBase):
             low, high = agent.space_bounds
             self.observation_space = gym.spaces.Box(low, high, (agent.layout.size,), np.float32)
 
+    def _adopt_randomization(self) -> None:
+        """Randomisation for transfer (:mod:`rehabbot.sim.randomization`), when the config
+        names a preset: its randomizer over this scene; None (nothing drawn) otherwise."""
+        preset = check_preset(getattr(self.config, "randomization", None))
+        self._randomizer: Randomizer | None = None if preset is None else Randomizer(
+            self.scene, preset, self.robot.torque_limit_nm)
+        self.randomization: RandomizationDraw | None = None  # the episode's draw
+
     # ------------------------------------------------------------------------------------------
     # Gymnasium API
     # ------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._start_episode(seed, options)
+        if self._randomizer is not None:  # draw the episode's model, then load its home state
+            self.randomization = self._randomizer.apply(self.np_random)
+            self.scene.reset_data(self.data)
         data = self.data
         home = self.scene.home_setpoints  # per arm, at this weight level
         self.controller.reset(data, home if self._arms > 1 else home[0])
@@ -166,6 +179,8 @@ class RehabEnvCore(RehabEnvBase):
         info = self._info(None, False, self.safety.cuff_force_n(data),
                           self._reward.zero_terms(), 0)
         self._needs_reset = False
+        if self.randomization is not None and self._randomizer is not None:
+            info["randomization"] = self.randomization.to_dict()
         if self.render_mode == "human":
             self.render()
         return self._observation_out(info), info
@@ -174,14 +189,17 @@ class RehabEnvCore(RehabEnvBase):
         if self._needs_reset:
             self._refuse_step()
         data, clipped = self.data, 0
-        if self._unit_actions is not None:  # -v2: Box(-1, 1) onto the controller's box
-            action, clipped = self._unit_actions.native(action)
-        if not self.controller.apply_fast(action):  # a float32 array inside the box: checked
-            action, native_clipped = checked_action(action, self.controller.action_space,
-                                                    self._clip_low, self._clip_high,
-                                                    self._clip_bounds)
-            clipped += native_clipped
-            self.controller.apply(action, data)
+        if self._randomizer is not None:  # randomisation: the action arrives k decisions late
+            action, clipped = self._delayed_control(action)
+        else:
+            if self._unit_actions is not None:  # -v2: Box(-1, 1) onto the controller's box
+                action, clipped = self._unit_actions.native(action)
+            if not self.controller.apply_fast(action):  # a float32 array inside the box
+                action, native_clipped = checked_action(action, self.controller.action_space,
+                                                        self._clip_low, self._clip_high,
+                                                        self._clip_bounds)
+                clipped += native_clipped
+                self.controller.apply(action, data)
         violation, force_n = self._physics.step(self.model, data, self._goal, self.np_random)
         self._steps += 1
 
@@ -247,6 +265,17 @@ class RehabEnvCore(RehabEnvBase):
         if self.render_mode == "human":
             self.render()
         return self._observation_out(info), reward, terminated, False, info
+
+    def setpoints_for(self, action) -> np.ndarray:
+        """The servo setpoints [rad] ``step(action)`` would command, the same floats, without
+        stepping: what a robot is sent when this env's policy drives it
+        (:mod:`rehabbot.deploy`). ``ValueError`` for an action ``step`` refuses, or a control
+        mode without setpoints."""
+        if self._unit_actions is not None:
+            action, _ = self._unit_actions.native(action)
+        action, _ = checked_action(action, self.controller.action_space, self._clip_low,
+                                   self._clip_high, self._clip_bounds)
+        return self.controller.setpoint_for(action)
 
     # ------------------------------------------------------------------------------------------
     # Properties
@@ -420,7 +449,10 @@ class RehabEnvCore(RehabEnvBase):
         target switch), the setpoints, the joint velocities and the cuff forces."""
         agent = self._agent
         if agent is None:
-            return self._obs.copy()
+            obs = self._obs.copy()
+            if self._randomizer is not None:  # randomisation: the sensors' noise
+                self._add_sensor_noise(obs, None)
+            return obs
         info["paper_observation"] = self._obs.copy()
         x = agent.input
         x[agent.paper] = self._obs
@@ -432,6 +464,8 @@ class RehabEnvCore(RehabEnvBase):
             velocity, forces = x[agent.velocity], x[agent.forces]  # NumPy warning the user)
             velocity[~np.isfinite(velocity)] = 0.0
             forces[~np.isfinite(forces)] = 1e9  # finite: 0 x inf would spread NaN
+        if self._randomizer is not None:  # randomisation: the sensors' noise
+            self._add_sensor_noise(x[agent.paper], x[agent.velocity])
         v = agent.matrix @ x
         head, bounded = v[:agent.tanh_stop], v[agent.bounded]
         np.tanh(head, out=head)
@@ -441,6 +475,39 @@ class RehabEnvCore(RehabEnvBase):
         v[one_hot] = 1.0
         v[agent.progress] = progress
         return v.astype(np.float32)
+
+    # -- randomisation for transfer (rehabbot.sim.randomization) ---------------------------
+    def _delayed_control(self, action) -> tuple[np.ndarray, int]:
+        """Check the agent's action now (errors and clipping at the call that sent it), then
+        apply the one sent ``latency_steps`` decisions ago; while none has arrived the robot
+        holds its setpoint (no command). Returns the applied action in the controller's units
+        (zeros while none arrived) and the clipped count."""
+        clipped = 0
+        if self._unit_actions is not None:
+            action, clipped = self._unit_actions.native(action)
+        action, native_clipped = checked_action(action, self.controller.action_space,
+                                                self._clip_low, self._clip_high,
+                                                self._clip_bounds)
+        assert self._randomizer is not None
+        arrived = self._randomizer.delay.push(action)
+        if arrived is None:
+            return np.zeros(np.shape(action)), clipped + native_clipped
+        self.controller.apply(arrived, self.data)
+        return arrived, clipped + native_clipped
+
+    def _add_sensor_noise(self, paper: np.ndarray, velocity: np.ndarray | None) -> None:
+        """Add one decision's encoder noise, in place, to the robot joint angles and the
+        patient's joint angles of a paper observation, and to the joint velocities."""
+        assert self._randomizer is not None
+        layout = self.layout
+        theta, phi = layout.slice("theta"), layout.slice("phi")
+        n_velocity = 0 if velocity is None else len(velocity)
+        theta_noise, velocity_noise, phi_noise = self._randomizer.noise(
+            self.np_random, theta.stop - theta.start, n_velocity, phi.stop - phi.start)
+        paper[theta] += theta_noise
+        paper[phi] += phi_noise
+        if velocity is not None:
+            velocity += velocity_noise
 
     def _record_trace(self) -> None:
         if self._record:
