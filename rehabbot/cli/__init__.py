@@ -70,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``rehabbot`` command."""
     from rehabbot.cli.demo import add_demo_parser
     from rehabbot.cli.evaluate import add_evaluate_parser
+    from rehabbot.cli.export import add_export_parser
     from rehabbot.cli.listing import add_list_parser
     from rehabbot.cli.plot import add_plot_parser
     from rehabbot.cli.render import add_render_parser
@@ -96,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_render_parser(commands)
     add_demo_parser(commands)
     add_zoo_parser(commands)
+    add_export_parser(commands)
     add_scene_parsers(commands)
     return parser
 

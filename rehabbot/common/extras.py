@@ -33,6 +33,8 @@ OPTIONAL_MODULES: dict[str, tuple[str, str]] = {
     "myo_sim": ("myo-sim", "myo"),
     "warp": ("warp-lang", "gpu"),
     "rsl_rl": ("rsl-rl-lib", "gpu"),
+    "onnx": ("onnx", "onnx"),
+    "onnxruntime": ("onnxruntime", "onnx"),
 }
 
 
