@@ -68,6 +68,7 @@ for SIGTERM). Every failure is one line on stderr."""
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``rehabbot`` command."""
+    from rehabbot.cli.calibrate import add_calibrate_parser
     from rehabbot.cli.demo import add_demo_parser
     from rehabbot.cli.evaluate import add_evaluate_parser
     from rehabbot.cli.export import add_export_parser
@@ -98,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_demo_parser(commands)
     add_zoo_parser(commands)
     add_export_parser(commands)
+    add_calibrate_parser(commands)
     add_scene_parsers(commands)
     return parser
 

@@ -131,8 +131,10 @@ class SimulatorBackend:
 
     # ------------------------------------------------------------------------------------------
     def cuff_force_vector_n(self) -> np.ndarray:
-        """The cuff's constraint force [N], world frame (the equality's three rows; zero when
-        the cuff is not active), a new array."""
+        """The cuff's constraint force [N], world frame, as it acts on the robot (the
+        equality's three rows; zero when the cuff is not active), a new array: the limb feels
+        its opposite. It is the force of the last physics step, one step older than the
+        state's joint angles."""
         data = self.env.data
         row = self._cuff_row
         if data.efc_force.shape[0] < row + 3 or data.ne < row + 3:
