@@ -17,6 +17,7 @@ LAYERS: tuple[tuple[str, str], ...] = (
     ("rehabbot.cli", "`rehabbot.cli`: the command line"),
     ("rehabbot.zoo", "`rehabbot.zoo`: the shipped agents"),
     ("rehabbot.analysis", "`rehabbot.analysis`: metrics, evaluation, figures, video"),
+    ("rehabbot.deploy", "`rehabbot.deploy`: safety filter, robot backends, sessions, calibration"),
     ("rehabbot.rl", "`rehabbot.rl`: training, policies, experts, the zoo's loader"),
     ("rehabbot.batch", "`rehabbot.batch`: the batched backend on MuJoCo Warp (`[gpu]`)"),
     ("rehabbot.envs", "`rehabbot.envs`: the Gymnasium envs, their config and ids"),

@@ -70,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``rehabbot`` command."""
     from rehabbot.cli.calibrate import add_calibrate_parser
     from rehabbot.cli.demo import add_demo_parser
+    from rehabbot.cli.deploy import add_deploy_parser
     from rehabbot.cli.evaluate import add_evaluate_parser
     from rehabbot.cli.export import add_export_parser
     from rehabbot.cli.listing import add_list_parser
@@ -100,6 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_zoo_parser(commands)
     add_export_parser(commands)
     add_calibrate_parser(commands)
+    add_deploy_parser(commands)
     add_scene_parsers(commands)
     return parser
 

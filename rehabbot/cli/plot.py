@@ -40,6 +40,10 @@ the patient's side (for every trace that holds it; --no-patient-figures leaves t
                                             the limb (> 0: into the limb)
   Fig. 10 fig10_overlay_<env>.*             the controllers evaluated together, over each
                                             other (one per evaluation of 2 policies or more)
+a deployment session (what `rehabbot deploy` wrote: its folder, session.json or one episode):
+  session_<folder>_ep<k>.*                  joint commands against the measured joints with
+                                            the filter's interventions, the cuff force against
+                                            its limit, the filter's hold share
 <label> is <policy>_<env>. Every title names the patient and condition, every limit line its
 value and source; a safety stop is marked with its rule. RUN_DIR may be an evaluation folder
 (what `rehabbot evaluate` wrote: drawn from its files, nothing is run again), a training run,
@@ -55,6 +59,7 @@ examples:
   rehabbot plot runs/rehab-reach-v2/sac/seed0 --out figures/
   rehabbot plot runs/a runs/b --smooth 50 --formats png
   rehabbot plot runs --source eval --no-evaluate     # Fig. 4 from eval/evaluations.npz
+  rehabbot plot sessions/knee                        # a session of `rehabbot deploy`
 
 exit codes: 0 success, 1 unreadable input file, unwritable output or missing matplotlib,
 2 bad usage (missing directory, nothing to plot, bad option value)"""
@@ -71,7 +76,8 @@ def add_plot_parser(commands: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", type=Path,
-                        help="training run directories, their parents, or trace directories")
+                        help="training run directories, their parents, trace directories or "
+                             "deployment sessions")
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="output directory; its parent folder must exist (default: "
                              "<first RUN_DIR>/figures)")
@@ -140,6 +146,10 @@ def cmd_plot(args: argparse.Namespace) -> int:
         out_dir = first / "figures"
     if out_dir.exists() and not out_dir.is_dir():
         raise CliError(f"--out {out_dir}: exists and is not a directory", EXIT_USAGE)
+    from rehabbot.deploy.session_log import is_session
+
+    sessions = [path for path in run_dirs if is_session(path)]
+    run_dirs = [path for path in run_dirs if path not in sessions]
     try:
         runs_or_traces = [path for path in run_dirs
                           if find_files([path], MANIFEST_NAME) or find_traces([path])]
@@ -156,7 +166,12 @@ def cmd_plot(args: argparse.Namespace) -> int:
                                formats=args.formats, evaluate=args.evaluate,
                                patient=args.patient, dpi=args.dpi,
                                announce=lambda text: print(f"rehabbot plot: {text}",
-                                                           flush=True))
+                                                           flush=True)) if run_dirs else []
+            if sessions:
+                from rehabbot.analysis.session_figures import plot_session
+
+                for session in sessions:
+                    written += plot_session(session, out_dir, args.formats, args.dpi)
     except ImportError as err:
         raise CliError(str(err)) from err
     except ValueError as err:
