@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 
 import numpy as np
 import pytest
@@ -371,17 +370,15 @@ def test_the_history_keeps_configurations_apart() -> None:
     assert safety.safe_configurations == 3  # full: the oldest forgotten
 
 
-def test_a_call_costs_far_less_than_a_500_hz_servo_cycle() -> None:
-    safety = started()
-    rng = np.random.default_rng(0)
-    commands = rng.normal(0.0, 0.005, (2000, 3))
-    costs = []
-    given = state()
-    for command in commands:
-        start = time.perf_counter()
-        safety.filter(given, command, 0.0)
-        costs.append(time.perf_counter() - start)
-    assert float(np.median(costs)) < 0.5e-3  # measured ~30 us; a 500 Hz cycle is 2 ms
+def test_a_hold_from_outside_the_joint_box_moves_one_capped_step() -> None:
+    """A robot reset outside the box (a home pose beyond the env's setpoint box) and then held
+    is commanded from where it is, one capped step into the box, never onto the box's edge."""
+    safety = SafetyFilter(config())
+    outside = (1.5, 0.0, 0.0)
+    safety.reset(state(q=outside))
+    decision = safety.filter(state(t=DT, q=outside, force=70.0), np.array(outside), DT)
+    assert decision.action == "hold"
+    assert np.max(np.abs(decision.q_rad - np.array(outside))) <= STEP * (1 + ROUND)
 
 
 # -- on the simulator -------------------------------------------------------------------------

@@ -558,9 +558,8 @@ class SafetyFilter:
         lies between the last command and the target moves from there: the command first
         drops back onto where the robot is (which asks for no motion: it ends the servo's push)."""
         last = self._q_last
-        if self._box:
+        if self._box:  # the target is in the box; the robot may not be (after a reset)
             target = np.minimum(np.maximum(target, self._box_low), self._box_high)
-            measured = np.minimum(np.maximum(measured, self._box_low), self._box_high)
         base = last
         if self.config.release_to_measured:
             base = np.where((measured - last) * (target - measured) >= 0.0, measured, last)
