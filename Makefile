@@ -33,8 +33,13 @@ XVFB := $(if $(DISPLAY),,$(shell command -v xvfb-run >/dev/null 2>&1 && echo xvf
 # the end of the run.
 PARALLEL := -n auto --maxprocesses 4 --dist worksteal
 
+# Tests marked realtime run a robot's 1 kHz control loop against franka-sim (the libfranka
+# protocol's simulator, in .venv-franka-sim: tools/franka-sim-venv.sh); they run after the rest,
+# in one process, so that no other test competes with the loop for the CPU.
 test: $(STAMP)
-	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q --full $(PARALLEL) -rf --durations=30
+	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q --full $(PARALLEL) -rf --durations=30 \
+	  -m "not realtime"
+	$(PY) -m pytest -q --full -rf -m realtime -p no:xdist
 
 test-fast: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q $(PARALLEL)
