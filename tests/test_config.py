@@ -23,7 +23,7 @@ def test_every_flat_keyword_lives_in_exactly_one_group():
     names = RehabEnvConfig.flat_names()
     assert set(RehabEnvConfig.GROUPS) == {"scene", "patient", "task", "control", "safety",
                                           "reward", "render"}
-    assert len(names) == 40 and set(kwarg_names()) == set(names)
+    assert len(names) == 41 and set(kwarg_names()) == set(names)
     assert names["patient_model"] == ("scene", "patient_model")
     assert names["reward"] == ("reward", "design")
     assert names["time_cost"] == ("reward", "time_cost")

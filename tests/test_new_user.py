@@ -22,6 +22,7 @@ from rehabbot.envs.registration import (
     ENV_SPECS,
     MYO_VARIANTS,
     POPULATION_VARIANTS,
+    RANDOMIZED_VARIANTS,
 )
 
 ENV = "rehab-reach-v0"
@@ -105,9 +106,11 @@ def test_the_readme_session_plots_the_comparison_it_evaluated(trained_run, tmp_p
                                     for env_id in ENV_SPECS
                                     # (the variants share their base id's spaces: tested in
                                     # test_conditions.py, test_population.py and, for MyoSuite's
-                                    # legs, which seat one profile, test_myo_patient.py)
+                                    # legs, which seat one profile, test_myo_patient.py;
+                                    # the randomised ids in test_randomization.py)
                                     if env_id not in CONDITION_VARIANTS
                                     and env_id not in POPULATION_VARIANTS
+                                    and env_id not in RANDOMIZED_VARIANTS
                                     and env_id not in MYO_VARIANTS])
 def test_spaces_do_not_depend_on_the_patient_or_the_weight_level(env_id: str) -> None:
     for mode in ("joint_delta", "joint_position"):

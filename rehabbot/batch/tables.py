@@ -170,6 +170,7 @@ def check_supported(env_id: str, env: Any) -> None:
         ("safety_penalty", config.reward.safety_penalty, "hold"),
         ("safety_penalty_steps", config.reward.safety_penalty_steps, None),
         ("patients", getattr(config, "patients", None), None),
+        ("randomization", getattr(config, "randomization", None), None),
         ("patient_model", env.scene.patient_model, "rigid"),
     )
     for name, value, wanted in checks:

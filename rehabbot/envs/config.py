@@ -6,7 +6,7 @@ group           class              keyword arguments (the env docstring's table)
 ==============  =================  ===========================================================
 ``scene``       SceneConfig        ``limb``, ``side``, ``robot``, ``cuff``,
                                    ``base_reorientation_deg``, ``timestep_s``,
-                                   ``patient_model``
+                                   ``patient_model``, ``randomization``
 ``patient``     PatientConfig      ``profile``, ``condition``, ``weight_level``
 ``task``        TaskConfig         ``task_type``, ``exercises``, ``exercise``,
                                    ``target_tolerance_rad``, ``observation``,
@@ -48,6 +48,7 @@ from rehabbot.sim.conditions import PatientCondition, as_condition
 from rehabbot.sim.myo_patient import check_myo_profile
 from rehabbot.sim.patient import PatientProfile
 from rehabbot.sim.physics import ISO_TS_15066_QUASI_STATIC_N, SafetyThresholds
+from rehabbot.sim.randomization import check_preset
 from rehabbot.sim.robots import ROBOT_NAMES, get_robot
 from rehabbot.sim.scene import CAMERA_NAMES, SIDES, WEIGHT_LEVELS, SceneOptions, check_weight_level
 from rehabbot.tasks.exercises import LIMBS, TASK_TYPES, Exercise, exercise_table
@@ -130,7 +131,8 @@ def _check_numbers(group: Any) -> None:
 @dataclass(frozen=True)
 class SceneConfig:
     """Where the therapy happens: the limb and side (the scene preset), the robot on the cuff,
-    the cuff, the robot base's orientation and the physics step."""
+    the cuff, the robot base's orientation, the physics step, and the randomisation preset
+    drawn per episode (``randomization``, :mod:`rehabbot.sim.randomization`)."""
 
     limb: str = "arm"
     side: str = "right"
@@ -139,8 +141,12 @@ class SceneConfig:
     base_reorientation_deg: float = 0.0
     timestep_s: float = 0.002
     patient_model: str = "rigid"
+    # Randomisation for transfer (rehabbot.sim.randomization): a preset's name drawn per
+    # episode, or None (nothing drawn: every id but the -randomized- variants).
+    randomization: str | None = None
 
     def __post_init__(self) -> None:
+        check_preset(self.randomization)  # UsageError (a ValueError) naming a bad preset
         check_choice("limb", self.limb, LIMBS)
         check_choice("side", self.side, SIDES)
         check_choice("robot", self.robot, ROBOT_NAMES)

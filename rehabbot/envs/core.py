@@ -150,7 +150,7 @@ class RehabEnvCore(RehabEnvBase):
         preset = check_preset(getattr(self.config, "randomization", None))
         self._randomizer: Randomizer | None = None if preset is None else Randomizer(
             self.scene, preset, self.robot.torque_limit_nm)
-        self.randomization: RandomizationDraw | None = None  # the episode's draw
+        self.randomization_draw: RandomizationDraw | None = None  # the episode's draw
 
     # ------------------------------------------------------------------------------------------
     # Gymnasium API
@@ -158,7 +158,7 @@ class RehabEnvCore(RehabEnvBase):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._start_episode(seed, options)
         if self._randomizer is not None:  # draw the episode's model, then load its home state
-            self.randomization = self._randomizer.apply(self.np_random)
+            self.randomization_draw = self._randomizer.apply(self.np_random)
             self.scene.reset_data(self.data)
         data = self.data
         home = self.scene.home_setpoints  # per arm, at this weight level
@@ -179,8 +179,8 @@ class RehabEnvCore(RehabEnvBase):
         info = self._info(None, False, self.safety.cuff_force_n(data),
                           self._reward.zero_terms(), 0)
         self._needs_reset = False
-        if self.randomization is not None and self._randomizer is not None:
-            info["randomization"] = self.randomization.to_dict()
+        if self.randomization_draw is not None and self._randomizer is not None:
+            info["randomization"] = self.randomization_draw.to_dict()
         if self.render_mode == "human":
             self.render()
         return self._observation_out(info), info

@@ -148,6 +148,23 @@ for _base_id in ("rehabbot/rehab-reach-l-v2", "rehabbot/rehab-hip-v2"):
     ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], "patients": "train"},
                       f"{ENV_SPECS[_base_id][1]}; a patient of a population each episode")
 
+# Randomisation for transfer (rehabbot.sim.randomization; docs/deployment/randomisation.md):
+# each one-arm and leg population -v2 id with the adult envelope's training cohort (a body of
+# another size each episode: the segment lengths) and the "transfer" preset (masses, passive
+# stiffness and damping, cuff compliance, joint friction, encoder noise, 0-2 decisions of
+# action latency, drawn every episode). Same spaces as the base id; what the agent sees
+# changes (noise, latency), hence new ids.
+RANDOMIZED_VARIANTS: dict[str, str] = {
+    _id.replace("-population-v2", "-randomized-v2"): _id
+    for _id in ("rehabbot/rehab-reach-population-v2", "rehabbot/rehab-knee-population-v2",
+                "rehabbot/rehab-reach-l-population-v2", "rehabbot/rehab-hip-population-v2")}
+RANDOMIZED_KWARGS = {"patients": "envelope-train", "randomization": "transfer"}
+for _id, _base_id in RANDOMIZED_VARIANTS.items():
+    ENV_SPECS[_id] = ({**ENV_SPECS[_base_id][0], **RANDOMIZED_KWARGS},
+                      f"{ENV_SPECS[_base_id][1]} (the envelope's training cohort); "
+                      "masses, passive joints, cuff, friction, sensor noise and action latency "
+                      "randomised every episode")
+
 # MyoSuite's musculoskeletal legs (rehabbot.sim.myo_patient) and right arm
 # (rehabbot.sim.myo_arm; pip install "rehabbot[myo]"): the -v2 task of the base id on
 # patient_model="myo", the same observation and actions.

@@ -168,6 +168,7 @@ applied on top; ``RehabEnv(config)`` takes a whole config instead.
 | ``frame_skip`` | control | 10 | physics steps per decision |
 | ``timestep_s`` | scene | 0.002 | physics step in [1e-4, 0.005] s; ``dt = frame_skip * timestep_s`` (0.02 s, 50 Hz) |
 | ``patient_model`` | scene | ``"rigid"`` | the patient's body: ``"rigid"`` links, or ``"myo"``: MyoSuite's musculoskeletal legs (knee and hip) or right arm (reach, right side) |
+| ``randomization`` | scene | None | ``"transfer"``: segment masses, passive stiffness and damping, the cuff's compliance, joint friction, sensor noise and 0-2 decisions of action latency drawn every episode (:mod:`rehabbot.sim.randomization`); None draws nothing |
 | ``target_tolerance_rad`` | task | 0.05 | epsilon of eq. (5) |
 | ``reward`` | reward | ``"paper"`` | ``"paper"`` (eq. (5), the -v0 ids) or ``"progress"`` (the -v1 ids); see Rewards |
 | ``observation`` | task | ``"paper"`` | ``"paper"`` (the paper's 23 fields, -v0 and -v1) or ``"agent"`` (the -v2 ids; see Observation space) |
