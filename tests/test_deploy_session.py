@@ -18,6 +18,7 @@ import pytest
 import rehabbot.envs  # noqa: F401  (registers the ids)
 from rehabbot.common.errors import DataError, UsageError
 from rehabbot.deploy.backend import RobotState
+from rehabbot.deploy.launch import env_caps, filter_configs
 from rehabbot.deploy.safety_filter import SafetyFilter
 from rehabbot.deploy.session import (
     DeploymentError,
@@ -25,8 +26,6 @@ from rehabbot.deploy.session import (
     SessionInterrupted,
     SessionSettings,
     combine,
-    env_caps,
-    filter_configs,
     twin_reset_state,
 )
 from rehabbot.deploy.session_log import (

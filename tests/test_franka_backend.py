@@ -1,7 +1,8 @@
 """The Franka backend (rehabbot.deploy.franka) against franka-sim, a server of the libfranka
-network protocol on MuJoCo (tests/franka_sim_server.py; its own venv, .venv-franka-sim, made
-by tools/franka-sim-venv.sh): a 10 s joint trajectory tracked at 1 kHz, a stop that reaches
-the robot, the watchdog. Skipped, with the reason, where the venv or pylibfranka is missing.
+network protocol on MuJoCo (rehabbot/deploy/franka_sim_server.py; its own venv,
+.venv-franka-sim, made by tools/franka-sim-venv.sh): a 10 s joint trajectory tracked at 1 kHz,
+a stop that reaches the robot, the watchdog, a policy in shadow mode. Skipped, with the
+reason, where the venv or pylibfranka is missing.
 """
 
 from __future__ import annotations
@@ -9,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,9 +18,7 @@ import numpy as np
 import pytest
 
 from rehabbot.common.errors import UsageError
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from franka_sim_server import NICENESS, SIM_PYTHON, franka_sim_server
+from rehabbot.deploy.franka_sim_server import NICENESS, SIM_PYTHON, franka_sim_server
 
 TRACKING_TOLERANCE_RAD = 0.01
 #: After stop() returns, the robot's joint speeds must fall below this within REST_WITHIN_S.
@@ -145,3 +143,25 @@ def test_watchdog_stops_the_robot_when_commands_stop(server: None) -> None:
         assert np.abs(backend.state().dq_rad_s).max() < REST_SPEED_RAD_S
     finally:
         backend.close()
+
+
+@pytest.mark.slow
+@pytest.mark.realtime
+def test_a_policy_runs_in_shadow_mode_on_franka_sim(server: None, tmp_path: Path) -> None:
+    """rehabbot deploy on franka-sim: the FR3 hip agent, its simulator twin computing the
+    observation, every command through both filters to the robot, to the episode's end with no
+    robot fault (acceleration cap, velocity discontinuity, watchdog). Whether the agent also
+    finishes the exercise depends on how the robot's filter clipped the commands, which
+    depends on the robot's timing: not asserted."""
+    from rehabbot.deploy.launch import deploy
+    from rehabbot.deploy.session_log import read_session
+
+    result = deploy("zoo:rehab-hip-v2/ppo-fr3", tmp_path / "session", "franka",
+                    robot_ip="127.0.0.1", robot_watchdog_s=0.5,
+                    filter_settings={"hold_fraction": 0.8, "back_off_fraction": 0.9})
+    assert result.status == "completed", result.reason
+    session = read_session(tmp_path / "session")
+    episode = session.episodes[0]
+    assert episode.end in ("terminated", "truncated")
+    assert np.all(episode["stepped"]) and episode.decisions > 100
+    assert episode.shadow and np.all(np.isfinite(episode["robot_q_rad"]))

@@ -17,7 +17,7 @@ FENCE = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
 # page -> the extra module it needs (None: a core install runs it)
 PAGES = {"docs/musculoskeletal-patient.md": "myo_sim", "docs/envs.md": None,
          "docs/conditions.md": None, "docs/robots.md": None,
-         "docs/deployment/export.md": "onnxruntime"}
+         "docs/deployment/export.md": "onnxruntime", "docs/deployment/randomisation.md": None}
 FAST = ("docs/musculoskeletal-patient.md", "docs/envs.md")
 
 

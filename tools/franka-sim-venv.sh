@@ -4,7 +4,7 @@
 # Franka backend's tests (tests/test_franka_backend.py) and benchmark
 # (benchmarks/deploy/franka_tracking.py) start the server from it; without it they skip.
 # Every package is pinned (the versions these were checked with); nothing is downloaded at
-# run time (tests/franka_sim_server.py builds the robot model from the wheel's own URDF).
+# run time (rehabbot/deploy/franka_sim_server.py builds the robot model from the wheel's own URDF).
 set -euo pipefail
 
 cd "$(dirname "$0")/.."

@@ -2,12 +2,12 @@
 
 franka-sim (a server of the libfranka network protocol on MuJoCo, its own venv
 ``.venv-franka-sim``: ``tools/franka-sim-venv.sh``) is started on 127.0.0.1 with the FCI's
-motion limits enforced (``tests/franka_sim_server.py``: its offline FR3 model, built from the
-URDF in the franka-sim wheel). :class:`rehabbot.deploy.franka.FrankaBackend` connects with
-pylibfranka, and the script sends one target per control period (0.02 s, paced by the robot's
-clock) of ``q0 + a (1 - cos(2 pi f t))`` on all seven joints for ``--seconds`` (a few tenths of
-a rad at 0.125-0.175 Hz, as in ``tests/test_franka_backend.py``), then calls ``stop()`` while
-the arm moves. Every 1 ms tick of the loop is recorded.
+motion limits enforced (``rehabbot/deploy/franka_sim_server.py``: its offline FR3 model,
+built from the URDF in the franka-sim wheel). :class:`rehabbot.deploy.franka.FrankaBackend`
+connects with pylibfranka, and the script sends one target per control period (0.02 s, paced
+by the robot's clock) of ``q0 + a (1 - cos(2 pi f t))`` on all seven joints for ``--seconds``
+(a few tenths of a rad at 0.125-0.175 Hz, as in ``tests/test_franka_backend.py``), then calls
+``stop()`` while the arm moves. Every 1 ms tick of the loop is recorded.
 
 * **Tracking error**: per joint, the largest ``|q_measured(tick i) - setpoint(tick i - 1)|``
   over the run (the robot measures at a tick what the setpoint sent one tick before made of
@@ -56,9 +56,9 @@ from benchmarks.common.documents import (
     write_page,
 )
 from benchmarks.common.machine import describe_machine
+from rehabbot.deploy.franka_sim_server import NICENESS, SIM_PYTHON, franka_sim_server
 
 sys.path.insert(0, str(ROOT / "tests"))
-from franka_sim_server import NICENESS, SIM_PYTHON, franka_sim_server
 from test_franka_backend import command_paced, tracking_targets
 
 REST_SPEED_RAD_S = 0.01

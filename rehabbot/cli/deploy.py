@@ -55,7 +55,7 @@ fault stopped exits 1; a folder holding a session is refused (exit 2)."""
 
 def add_deploy_parser(commands: argparse._SubParsersAction) -> None:
     """Add ``deploy`` to the ``rehabbot`` subcommands."""
-    from rehabbot.deploy.session import BACKENDS
+    from rehabbot.deploy.launch import BACKENDS
 
     parser = commands.add_parser(
         "deploy", help="run a policy through the deployment safety filter on the simulator "
@@ -86,6 +86,10 @@ def add_deploy_parser(commands: argparse._SubParsersAction) -> None:
                         default=0.2, metavar="RAD_S",
                         help="joint speed of the move to each episode's start pose "
                              "(franka, ur), at most 1 (default: 0.2 rad/s)")
+    parser.add_argument("--robot-watchdog", type=bounded_float(0.0, 1.0, low_open=True),
+                        default=None, metavar="S",
+                        help="the robot's servo loop brakes to rest when no target came for "
+                             "this long (franka, ur; default: the backend's, 0.1 s)")
     parser.set_defaults(func=cmd_deploy)
 
 
@@ -121,7 +125,8 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     """Run ``rehabbot deploy``: the session, its summary, the ``rehabbot plot`` line."""
     from rehabbot.cli.needs import policy_modules, require
     from rehabbot.cli.threads import one_torch_thread
-    from rehabbot.deploy.session import SessionSettings, deploy
+    from rehabbot.deploy.launch import deploy
+    from rehabbot.deploy.session import SessionSettings
 
     if args.backend == "sim" and args.robot_ip is not None:
         raise CliError("--robot-ip is for --backend franka or ur", EXIT_USAGE)
@@ -131,7 +136,8 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     result = deploy(args.policy, args.out, args.backend, episodes=args.episodes,
                     seed=args.seed, env_id=args.env, env_kwargs=args.env_kwargs,
                     filter_settings=settings, robot_ip=args.robot_ip,
-                    settings=SessionSettings(approach_speed_rad_s=args.approach_speed))
+                    settings=SessionSettings(approach_speed_rad_s=args.approach_speed),
+                    robot_watchdog_s=args.robot_watchdog)
     for line in result.episodes:
         actions = ", ".join(f"{k} {v}" for k, v in line["filter_actions"].items())
         print(f"episode {line['episode']} (seed {line['seed']}): {line['decisions']} "

@@ -50,10 +50,13 @@ acceleration jumps. The rule, shared by every hardware backend:
 
 :class:`ServoSupervisor` adds what every backend's servo loop checks on each tick: a watchdog
 (no new target for ``watchdog_s`` of the loop's own clock, counted from the first target:
-brake to rest and finish), a speed and an acceleration cap (a setpoint whose velocity or
-acceleration would exceed a joint's cap is not sent: the setpoint brakes from the last one
-sent and the motion finishes) and the stop request; after any of the three it refuses every
-later target. It holds no thread and reads no clock: the backend calls
+brake to rest and finish), a speed cap (a setpoint whose velocity would exceed a joint's cap
+is not sent: the setpoint brakes from the last one sent and the motion finishes), an
+acceleration cap (where the interpolation would accelerate beyond it, as targets that change
+direction within a period or come late ask, the setpoint sent chases the interpolation at the
+cap instead, and follows it exactly again once it caught up: rate limiting, as libfranka's
+``limitRate``) and the stop request; after a stop, the watchdog or the speed cap it refuses
+every later target. It holds no thread and reads no clock: the backend calls
 :meth:`ServoSupervisor.tick` with the time that passed, so the same code is tested on
 synthetic inputs (:func:`interpolate_targets`) and drives the robots.
 """
@@ -69,6 +72,15 @@ from rehabbot.common.errors import UsageError
 #: Default peak deceleration of a brake [rad/s^2]: half of the FCI's joint acceleration limit
 #: (10 rad/s^2).
 BRAKE_DECELERATION_RAD_S2 = 5.0
+
+#: Where the interpolation would accelerate beyond the cap, the setpoint sent chases it at the
+#: cap instead, closing the gap in this time; it is in sync again once the gap is below
+#: SYNC_GAP_RAD (and the velocity's below SYNC_GAP_RAD / CHASE_TIME_S).
+CHASE_TIME_S = 0.01
+SYNC_GAP_RAD = 1e-6
+#: The chase's jerk cap [rad/s^3]: half the FCI's joint jerk limit (5000 rad/s^3), which
+#: libfranka reports as a velocity discontinuity.
+MAX_JERK_RAD_S3 = 2500.0
 
 #: Targets that may wait for their segment; one more drops the oldest (the caller runs ahead),
 #: whose period the next one's segment takes over (the path keeps its timing: no jump).
@@ -345,6 +357,12 @@ class ServoSupervisor:
             raise UsageError(f"watchdog_s={watchdog_s} must be at least one policy period "
                              f"({policy_dt_s} s)")
         self.max_speed_rad_s = cap
+        # The setpoint last sent, its velocity and acceleration: the interpolator's own while
+        # in sync with it, else the acceleration-limited chase of it.
+        q0 = self.interpolator.p
+        self._sent = (q0.copy(), np.zeros(n), np.zeros(n))
+        self._synced = True
+        self.limited_ticks = 0
         self.watchdog_s = float(watchdog_s)
         self.time_s = 0.0
         self.last_command_s: float | None = None  # the watchdog runs from the first target
@@ -367,7 +385,7 @@ class ServoSupervisor:
         """Brake to rest now and finish; the first reason given is kept."""
         if self.stop_reason is None:
             self.stop_reason = reason
-            self.interpolator.brake()
+            self.interpolator.brake_from(tuple(x.copy() for x in self._sent))
 
     def tick(self, elapsed_s: float) -> tuple[np.ndarray, bool]:
         """The next setpoint, ``elapsed_s`` after the last one, and whether it is the last
@@ -377,23 +395,47 @@ class ServoSupervisor:
         if self.stop_reason is None and last is not None and self.time_s - last > self.watchdog_s:
             self.request_stop(f"watchdog: no command for {self.watchdog_s} s")
         interpolator = self.interpolator
-        before = interpolator.snapshot()
         setpoint = interpolator.step(elapsed_s)
         if not interpolator.braking:
-            for name, value, cap, unit in (
-                    ("speed", interpolator.v, self.max_speed_rad_s, "rad/s"),
-                    ("acceleration", interpolator.a, self.max_acceleration_rad_s2, "rad/s^2")):
-                if np.any(np.abs(value) > cap):
-                    j = int(np.argmax(np.abs(value) / cap))
-                    self.stop_reason = self.stop_reason or (
-                        f"{name} cap: joint {j} would reach {abs(value[j]):.3f} {unit} "
-                        f"(cap {cap[j]} {unit})")
-                    # not sent: brake from the last setpoint sent (the brake is not capped)
-                    interpolator.brake_from(before)
-                    setpoint = interpolator.step(elapsed_s)
-                    break
+            value, cap = interpolator.v, self.max_speed_rad_s
+            if np.any(np.abs(value) > cap):
+                j = int(np.argmax(np.abs(value) / cap))
+                self.stop_reason = self.stop_reason or (
+                    f"speed cap: joint {j} would reach {abs(value[j]):.3f} rad/s "
+                    f"(cap {cap[j]} rad/s)")
+                # not sent: brake from the last setpoint sent (the brake is not capped)
+                interpolator.brake_from(tuple(x.copy() for x in self._sent))
+                setpoint = interpolator.step(elapsed_s)
+            elif (not self._synced
+                  or np.any(np.abs(interpolator.a) > self.max_acceleration_rad_s2)
+                  or np.any(np.abs(interpolator.a - self._sent[2])
+                            > MAX_JERK_RAD_S3 * elapsed_s)):
+                setpoint = self._chase(setpoint, elapsed_s)
+        if interpolator.braking or self._synced:
+            self._sent = (setpoint.copy(), interpolator.v.copy(), interpolator.a.copy())
         self.finished = self.stop_reason is not None and interpolator.at_rest
         return setpoint, self.finished
+
+    def _chase(self, setpoint: np.ndarray, elapsed_s: float) -> np.ndarray:
+        """The acceleration-limited chase of the interpolator's ``setpoint``: its velocity plus
+        the gap closed in :data:`CHASE_TIME_S`, reached at no more than the acceleration cap
+        and :data:`MAX_JERK_RAD_S3` (libfranka's rate limiting does the same); in sync again
+        once the gap is closed."""
+        p, v, a_sent = self._sent
+        wanted = self.interpolator.v + (setpoint - p) / CHASE_TIME_S
+        jerk = MAX_JERK_RAD_S3 * elapsed_s
+        a = np.clip(np.clip((wanted - v) / elapsed_s, a_sent - jerk, a_sent + jerk),
+                    -self.max_acceleration_rad_s2, self.max_acceleration_rad_s2)
+        v = np.clip(v + a * elapsed_s, -self.max_speed_rad_s, self.max_speed_rad_s)
+        p = p + v * elapsed_s
+        self.limited_ticks += 1
+        self._synced = bool(np.max(np.abs(p - setpoint)) < SYNC_GAP_RAD
+                            and np.max(np.abs(v - self.interpolator.v)) < SYNC_GAP_RAD
+                            / CHASE_TIME_S)
+        if self._synced:
+            return setpoint
+        self._sent = (p, v, a)
+        return p.copy()
 
 
 def interpolate_targets(q0_rad: Sequence[float] | np.ndarray, targets_rad: np.ndarray,

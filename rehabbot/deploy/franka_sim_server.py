@@ -1,7 +1,10 @@
-"""Start and stop franka-sim (the libfranka network protocol on MuJoCo) for the Franka tests.
+"""Start and stop franka-sim (the libfranka network protocol on MuJoCo) on 127.0.0.1: the robot
+the Franka backend's tests, its benchmark and the deployment tutorial drive.
 
 franka-sim 1.1.7 pins numpy 1.26.4 and MuJoCo < 3.3, so it lives in its own venv,
-``.venv-franka-sim`` at the repository root (``tools/franka-sim-venv.sh`` makes it). It loads
+``.venv-franka-sim`` at the repository root (``tools/franka-sim-venv.sh`` makes it; the
+environment variable ``REHABBOT_FRANKA_SIM_PYTHON`` names another venv's Python). This module
+imports nothing of rehabbot: the sim venv runs it as a script. It loads
 its FR3 from MuJoCo Menagerie through ``robot_descriptions``, which downloads the Menagerie on
 first use; to run offline this module builds the arm from the URDF that ships inside the
 franka-sim wheel (``franka_sim/models/fr3.urdf``, the model the server also serves to
@@ -29,8 +32,9 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-SIM_PYTHON = REPO / ".venv-franka-sim" / "bin" / "python"
+REPO = Path(__file__).resolve().parents[2]
+SIM_PYTHON = Path(os.environ.get("REHABBOT_FRANKA_SIM_PYTHON",
+                                 REPO / ".venv-franka-sim" / "bin" / "python"))
 HOST = "127.0.0.1"
 PORT = 1337
 ARMATURE_KG_M2 = 0.5
