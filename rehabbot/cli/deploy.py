@@ -55,7 +55,7 @@ fault stopped exits 1; a folder holding a session is refused (exit 2)."""
 
 def add_deploy_parser(commands: argparse._SubParsersAction) -> None:
     """Add ``deploy`` to the ``rehabbot`` subcommands."""
-    from rehabbot.deploy.launch import BACKENDS
+    from rehabbot.deploy.backend import BACKENDS
 
     parser = commands.add_parser(
         "deploy", help="run a policy through the deployment safety filter on the simulator "
@@ -131,7 +131,9 @@ def cmd_deploy(args: argparse.Namespace) -> int:
     if args.backend == "sim" and args.robot_ip is not None:
         raise CliError("--robot-ip is for --backend franka or ur", EXIT_USAGE)
     settings = filter_settings(args.filter_config)
-    require("rehabbot deploy", policy_modules(args.policy))
+    robot_modules = {"franka": {"pylibfranka": "franka"},
+                     "ur": {"rtde_control": "ur", "rtde_receive": "ur"}}.get(args.backend, {})
+    require("rehabbot deploy", policy_modules(args.policy), robot_modules)
     one_torch_thread([args.policy])
     result = deploy(args.policy, args.out, args.backend, episodes=args.episodes,
                     seed=args.seed, env_id=args.env, env_kwargs=args.env_kwargs,

@@ -14,6 +14,10 @@
 ``snapshot``              ``[video]`` (imageio writes the PNG)
 ``sweep``                 ``[train]`` and ``[sweep]`` (Ray Tune; not for ``--dry-run``)
 ``demo``                  ``[train]``, ``[plot]`` and ``[video]`` (not with ``--no-video``)
+``export``                ``[onnx]`` (and, for a model zip, its backend's library)
+``deploy``                what the policy needs (``[onnx]``'s onnxruntime for an ONNX file);
+                          ``--backend franka``: ``[franka]``; ``--backend ur``: ``[ur]``
+``calibrate``             nothing (the core install)
 ========================  ==========================================================
 """
 

@@ -35,6 +35,9 @@ OPTIONAL_MODULES: dict[str, tuple[str, str]] = {
     "rsl_rl": ("rsl-rl-lib", "gpu"),
     "onnx": ("onnx", "onnx"),
     "onnxruntime": ("onnxruntime", "onnx"),
+    "pylibfranka": ("pylibfranka", "franka"),
+    "rtde_control": ("ur_rtde", "ur"),
+    "rtde_receive": ("ur_rtde", "ur"),
 }
 
 

@@ -25,6 +25,10 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+#: The backends ``rehabbot deploy`` drives: the simulator, a Franka (pylibfranka), a UR
+#: (ur_rtde).
+BACKENDS = ("sim", "franka", "ur")
+
 
 @dataclass(frozen=True)
 class RobotState:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from rehabbot.common.errors import UsageError
-from rehabbot.deploy.backend import RobotBackend, RobotState
+from rehabbot.deploy.backend import BACKENDS, RobotBackend, RobotState
 from rehabbot.deploy.safety_filter import FilterConfig, SafetyFilter
 from rehabbot.deploy.session import (
     DeploymentSession,
@@ -29,7 +29,6 @@ from rehabbot.deploy.simulator import SimulatorBackend
 from rehabbot.rl.experts import native_action_box
 from rehabbot.rl.policies import LoadedPolicy, PolicyError, env_for, load_policy
 
-BACKENDS = ("sim", "franka", "ur")
 ONNX_SUFFIX = ".onnx"
 #: Margin on the env's own caps, so that the policy's largest step is not clipped by round-off.
 CAP_MARGIN = 1e-6
