@@ -87,6 +87,7 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(torch|stable_baselines3|sbx|jax|flax|optax|ray|matplotlib|imageio)(\..*)?"),
     (r"py:.*", r"(ndarray|NDArray|ArrayLike|DTypeLike|MjModel|MjData|MjSpec|Env|Space|Box)"),
     (r"py:.*", r"(collections|typing|pathlib|argparse|os|io|json|types|dataclasses|enum|abc)\..*"),
+    (r"py:class", r"subprocess\.Popen"),
     (r"py:class", r"(Figure|Axes)"),  # matplotlib's, in rehabbot.analysis.figures' annotations
     (r"py:.*", r"(Path|Callable|Iterable|Iterator|Sequence|Mapping|Any|Literal|Self)"),
 ]

@@ -9,11 +9,11 @@ the calibration protocol (:mod:`rehabbot.deploy.calibration`) talk to a backend 
 member             meaning
 =================  ==========================================================================
 ``joint_names``    the robot's joints, in the order of every array below
-``control_dt_s``   seconds between two :meth:`command` calls (the policy's decision period)
+``control_dt_s``   seconds between two ``command`` calls (the policy's decision period)
 ``state()``        the latest :class:`RobotState` (a copy)
 ``command(q)``     move toward the joint positions ``q`` [rad] during the next period
 ``stop()``         stop the robot now (hold position, brakes where the robot has them); every
-                   later :meth:`command` is refused until the backend is made again
+                   later ``command`` is refused until the backend is made again
 ``healthy()``      False once the robot stopped, faulted or its connection was lost
 =================  ==========================================================================
 """

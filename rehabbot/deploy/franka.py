@@ -22,9 +22,9 @@ jump or exceed the joint limits. The backend therefore:
   the setpoint brakes from the last one sent and the motion finishes;
 * :meth:`FrankaBackend.stop`: the same brake, then the motion finishes (``motion_finished``
   on the last setpoint, so the robot holds still under its controller) and the loop calls
-  libfranka's ``Robot.stop()``; :meth:`stop` waits for that. If the loop does not answer within
+  libfranka's ``Robot.stop()``; ``stop()`` waits for that. If the loop does not answer within
   the brake's time and a margin, its process is ended, which drops the connection (the robot
-  then stops on its own communication check). Every later :meth:`command` is refused
+  then stops on its own communication check). Every later ``command`` is refused
   (:class:`UsageError`);
 * :meth:`FrankaBackend.healthy` is False once stopped, after the loop ended for any reason (a
   reflex, a lost connection: the message is in :attr:`FrankaBackend.stop_reason`) and while

@@ -6,9 +6,10 @@ a body, the FR3). :meth:`SimulatorBackend.command` makes the joint targets the s
 (clipped to the env's setpoint box, as the env's controller clips) and runs one env step with
 an action that holds them, so the patient, the safety rules, the target switching and the
 reward all run as in ``env.step``. :meth:`SimulatorBackend.policy_target` is the setpoint a
-policy's action would command (the env's own law, :meth:`RehabEnvCore.setpoints_for`): a
-closed loop ``policy -> policy_target -> command`` therefore reproduces ``env.step(action)``
-bit for bit, while a filter between the two may change the command.
+policy's action would command (the env's own law,
+:meth:`rehabbot.envs.core.RehabEnvCore.setpoints_for`): a closed loop
+``policy -> policy_target -> command`` therefore reproduces ``env.step(action)`` bit for bit,
+while a filter between the two may change the command.
 
 One difference remains with a reward that charges the change of action (a ``smoothness``
 weight): a commanded step's own action is the hold action, so that term reads it.

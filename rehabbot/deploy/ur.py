@@ -24,8 +24,8 @@
 * a stop (:meth:`URBackend.stop`, the watchdog, a cap): the setpoint brakes to rest, then
   ``servoStop`` ends servo mode (the tool decelerating at 2 m/s^2) and ``stopJ`` brings every
   joint to a halt (at ``stop_deceleration_rad_s2``, 2 rad/s^2); if the loop does not end
-  within the brake's time and a margin, :meth:`stop` sends ``servoStop`` and ``stopJ`` itself.
-  Every later :meth:`command` is refused (:class:`UsageError`);
+  within the brake's time and a margin, ``stop()`` sends ``servoStop`` and ``stopJ`` itself.
+  Every later ``command`` is refused (:class:`UsageError`);
 * :meth:`URBackend.healthy` is False once stopped, after the loop ended, and when the receive
   interface is disconnected or reports a protective or emergency stop, or the control
   script no longer runs.
