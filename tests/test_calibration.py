@@ -16,6 +16,7 @@ from rehabbot.common.errors import DataError, UsageError
 from rehabbot.deploy import calibration as cal
 from rehabbot.deploy import calibration_fit as cf
 from rehabbot.deploy import calibration_protocol as cp
+from rehabbot.deploy.backend import RobotState
 from rehabbot.sim import build_scene
 from rehabbot.sim.conditions import MAS_GRADES
 
@@ -35,14 +36,16 @@ TRUE = {"stiffness": 3.0, "damping": 1.0, "inertia": 0.45, "gravity": (-8.0, 3.0
 def synthetic_signals(grade: str, resistive: bool, true: dict | None = None,
                       rng: np.random.Generator | None = None,
                       torque_noise_nm: float = 0.0) -> list[cf.JointSignals]:
-    """One joint driven through slow ramps, holds and fast stretches, its cuff torque made
-    from known parameters (gravity: a cos q + b sin q)."""
+    """One joint driven through slow ramps and holds, small oscillations and fast stretches,
+    its cuff torque made from known parameters (gravity: a cos q + b sin q)."""
     true = true or TRUE
     t = np.arange(0.0, 60.0, DT_S)
     slow = 0.9 + 0.8 * np.sin(2 * np.pi * t / 30.0)
+    wave = 0.9 + 0.14 * np.sin(2 * np.pi * t) * (1.0 + 0.5 * np.sin(2 * np.pi * t / 5.0))
     fast = 0.9 + 0.8 * np.sin(2 * np.pi * t / 1.5) * (np.sin(2 * np.pi * t / 7.0) > 0.3)
-    stretch = t >= 30.0
-    q = np.where(stretch, fast, slow)
+    oscillation = (t >= 30.0) & (t < 45.0)
+    stretch = t >= 45.0
+    q = np.where(stretch, fast, np.where(oscillation, wave, slow))
     dq = np.gradient(q, DT_S)
     ddq = np.gradient(dq, DT_S)
     gravity = np.column_stack([np.cos(q), np.sin(q)])
@@ -51,12 +54,12 @@ def synthetic_signals(grade: str, resistive: bool, true: dict | None = None,
         joint="knee_flexion_r", q_rad=q, q_all_rad=q[:, None], dq_rad_s=dq, ddq_rad_s2=ddq,
         delayed_dq_rad_s=np.interp(t - 0.03, t, dq, left=0.0),
         other_ddq_rad_s2=np.zeros((len(t), 0)), command_dq_rad_s=np.zeros(len(t)),
-        stretch=stretch, tau_nm=np.zeros(len(t)), gravity=gravity,
+        stretch=stretch, oscillation=oscillation, tau_nm=np.zeros(len(t)), gravity=gravity,
         posture=np.zeros(len(t), dtype=int), own=np.ones(len(t), dtype=bool), rest_rad=0.9,
         rom_rad=(0.0, math.radians(135.0)), strength_nm=strength,
         reflex_gain_nms_per_rad=2.0)
-    # The stretches' own inertia, damping and command terms are nuisance columns; give the
-    # synthetic stretches the same physics.
+    # The ramps' and stretches' own inertia, damping and command terms are nuisance columns;
+    # give them the same physics.
     tau = (true["inertia"] * ddq + true["damping"] * dq + true["stiffness"] * (q - 0.9)
            + gravity @ np.array(true["gravity"]) - cf.reflex_column(signals, grade))
     if resistive:
@@ -98,16 +101,93 @@ def test_recovery_within_bounds_with_noise():
 
 
 def test_a_wrong_parameter_is_caught():
-    """A patient 10 % stiffer reads 10 % stiffer; a grade left out of the hypotheses fits
-    worse than the true one."""
-    stiffer = {**TRUE, "stiffness": 1.1 * TRUE["stiffness"]}
-    fit = cf.fit_signals(synthetic_signals("0", resistive=False, true=stiffer))
-    assert fit.joints["knee_flexion_r"].stiffness_nm_per_rad == pytest.approx(
-        1.1 * TRUE["stiffness"], rel=1e-6)
+    """A patient 10 % stiffer (or more damped, or heavier) reads so; a grade left out of the
+    hypotheses fits worse than the true one."""
+    for key in ("stiffness", "damping", "inertia"):
+        changed = {**TRUE, key: 1.1 * TRUE[key]}
+        fit = cf.fit_signals(synthetic_signals("0", resistive=False, true=changed))
+        joint = fit.joints["knee_flexion_r"]
+        fitted = {"stiffness": joint.stiffness_nm_per_rad,
+                  "damping": joint.damping_nms_per_rad, "inertia": joint.inertia_kg_m2[0]}
+        assert fitted[key] == pytest.approx(1.1 * TRUE[key], rel=1e-6)
     signals = synthetic_signals("3", resistive=False)
     wrong = cf.fit_signals(signals, grades=("2",))
     right = cf.fit_signals(signals, grades=("3",))
     assert wrong.joints["knee_flexion_r"].vaf < right.joints["knee_flexion_r"].vaf - 1e-3
+
+
+def test_damping_and_inertia_come_from_the_oscillations_only():
+    """Off the oscillations, a velocity or acceleration term is a free nuisance: a torque
+    that follows the ramps' speed (a servo's, not the limb's) leaves the damping as it is."""
+    signals = synthetic_signals("0", resistive=False)
+    s = signals[0]
+    off = ~s.oscillation & ~s.stretch
+    s.tau_nm = s.tau_nm + np.where(off, 0.7 * s.dq_rad_s + 0.2 * s.ddq_rad_s2, 0.0)
+    joint = cf.fit_signals(signals).joints["knee_flexion_r"]
+    assert joint.damping_nms_per_rad == pytest.approx(TRUE["damping"], rel=1e-6)
+    assert joint.inertia_kg_m2[0] == pytest.approx(TRUE["inertia"], rel=1e-6)
+
+
+def test_a_tiny_resistive_share_is_no_effort():
+    """A push below MIN_EFFORT_SHARE of the healthy strength fits as the passive patient; one
+    above it is found."""
+    small = {**TRUE, "share": 0.5 * cf.MIN_EFFORT_SHARE}
+    fit = cf.fit_signals(synthetic_signals("0", resistive=True, true=small))
+    assert (fit.effort, fit.effort_share) == ("passive", 0.0)
+    large = {**TRUE, "share": 2.0 * cf.MIN_EFFORT_SHARE}
+    fit = cf.fit_signals(synthetic_signals("0", resistive=True, true=large))
+    assert fit.effort == "resistive"
+    assert fit.effort_share == pytest.approx(large["share"], rel=1e-6)
+
+
+def small_recording(rows: int, dt_s: float, kinds: list[str]) -> cp.Recording:
+    """A recording of ``rows`` samples split evenly into segments of ``kinds`` (the knee)."""
+    joints = ("hip_flexion_r", "hip_abduction_r", "knee_flexion_r")
+    segment = (np.arange(rows) * len(kinds)) // rows
+    t = np.arange(rows) * dt_s
+    q = np.column_stack([0.1 * t, 0.2 * t, 1.0 + 0.3 * t])
+    return cp.Recording(
+        time_s=t, patient_q_rad=q, patient_dq_rad_s=np.zeros((rows, 3)),
+        cuff_force_n=np.column_stack([t, 2 * t, np.ones(rows)]), target_q_rad=q.copy(),
+        segment=segment, segments=[(k, "knee_flexion_r", 0.1, 0, "") for k in kinds],
+        exercised_joints=joints, joints=("knee_flexion_r",),
+        ranges_rad={"knee_flexion_r": (0.2, 1.5)},
+        patient_rom_rad={"knee_flexion_r": (0.0, 2.3)}, rest_q_rad=q[0].copy())
+
+
+def test_block_average_means_whole_blocks():
+    fast = small_recording(103, 0.002, ["hold", "oscillation"])
+    slow = cf.block_average(fast, 0.02)
+    assert len(slow.time_s) == 10  # the last 3 rows make no whole block
+    assert np.allclose(slow.time_s, 0.002 * (np.arange(10) * 10 + 4.5), rtol=0, atol=1e-12)
+    assert np.allclose(slow.cuff_force_n[:, 1], 2 * slow.time_s, rtol=0, atol=1e-12)
+    assert np.allclose(slow.patient_q_rad[:, 2], 1.0 + 0.3 * slow.time_s, rtol=0, atol=1e-12)
+    assert slow.segment.tolist() == [0] * 5 + [1] * 5  # each block's middle row's
+    same = small_recording(50, 0.02, ["hold"])
+    assert cf.block_average(same, 0.02) is same
+
+
+def test_follower_accelerations_are_fitted_on_the_oscillation():
+    """On an oscillation, the other joints' accelerations become their fit on the moving
+    joint's motion: exact for a follower that is such a combination, its noise removed."""
+    rows = 600
+    recording = small_recording(rows, DT_S, ["hold", "oscillation"])
+    t = recording.time_s
+    q = np.column_stack([np.zeros(rows), np.zeros(rows), 1.0 + 0.1 * np.sin(2 * np.pi * t)])
+    dq = np.column_stack([np.zeros(rows), np.zeros(rows), 0.2 * np.pi * np.cos(2 * np.pi * t)])
+    ddq = np.column_stack([np.zeros(rows), np.zeros(rows), -(2 * np.pi) ** 2 * (q[:, 2] - 1)])
+    follower = 0.3 * ddq[:, 2] + 0.05 * dq[:, 2]
+    ddq[:, 0] = follower
+    out = cf._follower_accelerations(recording, q, dq, ddq)
+    wave = recording.segment == 1
+    assert np.allclose(out[wave, 0], follower[wave], rtol=0, atol=1e-9)
+    assert np.array_equal(out[:, 2], ddq[:, 2])  # the moving joint is left alone
+    noise = np.random.default_rng(3).normal(0.0, 0.5, rows)
+    ddq[:, 0] = follower + noise
+    out = cf._follower_accelerations(recording, q, dq, ddq)
+    assert np.array_equal(out[~wave, 0], ddq[~wave, 0])  # off the oscillation: as measured
+    error = np.sqrt(np.mean((out[wave, 0] - follower[wave]) ** 2))
+    assert error < 0.2 * 0.5
 
 
 def test_savitzky_golay_differentiates_a_cubic_exactly():
@@ -163,6 +243,34 @@ def test_protocol_segments_cover_the_range_at_their_speeds(knee_scene):
             assert np.ptp(others, axis=0).max() == 0.0
     assert [t.shape for t in protocol.robot_targets_rad] == [
         (len(s.patient_q_rad), knee_scene.n_robot_joints) for s in protocol.segments]
+    # The oscillations: per centre and frequency one, between the ramps and the stretches.
+    waves = [s for s in protocol.segments if s.kind == "oscillation"]
+    assert len(waves) == len(cp.OSCILLATION_CENTRES) * len(cp.OSCILLATION_FREQUENCIES_HZ)
+    kinds = [s.kind for s in protocol.segments]
+    last_ramp = max(k for k, kind in enumerate(kinds) if kind == "ramp")
+    first_stretch = kinds.index("stretch")
+    assert last_ramp < kinds.index("oscillation") and \
+        max(k for k, kind in enumerate(kinds) if kind == "oscillation") < first_stretch
+    # The stretches start at the end nearer rest (90 deg: the high one here).
+    first = protocol.segments[first_stretch].patient_q_rad[:, i]
+    assert first[-1] == pytest.approx(low, abs=1e-12) and first[0] > high - 0.01
+    centres = sorted({round(float(w.patient_q_rad[-1, i]), 12) for w in waves})
+    assert centres == pytest.approx([low + f * (high - low) for f in cp.OSCILLATION_CENTRES],
+                                    abs=1e-12)
+
+
+def test_oscillation_profile_starts_and_ends_at_rest():
+    dt = 0.002
+    for frequency in cp.OSCILLATION_FREQUENCIES_HZ:
+        angles = cp.oscillation_profile(0.5, 0.1, frequency, dt)
+        steady = max(2, math.ceil(cp.OSCILLATION_STEADY_S * frequency))
+        assert len(angles) == round((steady + 2) / frequency / dt)
+        assert angles[-1] == pytest.approx(0.5, abs=1e-12)
+        assert np.abs(angles - 0.5).max() == pytest.approx(0.1, rel=1e-3)
+        speed = np.diff(np.concatenate([[0.5], angles])) / dt
+        peak = 2 * np.pi * frequency * 0.1
+        assert abs(speed[0]) < 1e-3 * peak and abs(speed[-1]) < 1e-2 * peak
+        assert np.abs(speed).max() == pytest.approx(peak, rel=1e-2)
 
 
 def test_stretch_profile_is_trapezoidal():
@@ -211,6 +319,83 @@ def test_ramps_stay_where_the_cuff_can_hold_the_limb(knee_scene):
     assert low <= narrow_low < narrow_high <= high
     with pytest.raises(UsageError, match="knee_flexion_r"):
         cal.within_force(knee_scene, ranges, 1.0)
+
+
+class ForceBackend:
+    """A backend whose cuff force on the limb is the first joint target [N] (x axis)."""
+
+    control_dt_s = DT_S
+    joint_names = ("a",)
+
+    def __init__(self) -> None:
+        self.target = np.zeros(1)
+        self.time_s = 0.0
+
+    def command(self, q_target_rad: np.ndarray) -> None:
+        self.target = np.asarray(q_target_rad, dtype=float)
+        self.time_s += DT_S
+
+    def state(self) -> RobotState:
+        return RobotState(self.time_s, self.target.copy(), np.zeros(1),
+                          patient_q_rad=np.zeros(1), patient_dq_rad_s=np.zeros(1))
+
+    def cuff_force_vector_n(self) -> np.ndarray:
+        return np.array([-self.target[0], 0.0, 0.0])  # on the robot: the limb feels +x
+
+    def stop(self) -> None:
+        pass
+
+    def healthy(self) -> bool:
+        return True
+
+
+def test_an_oscillation_predicted_above_the_limit_is_skipped():
+    """After a ramp peaking at 10 N and an oscillation at 1 rad/s peaking at 40 N, one at
+    2 rad/s predicts 10 + 30 x 2^2 = 130 N: above a 100 N limit it is skipped (and only it);
+    one at 1.2 rad/s (53 N) runs."""
+    def segment(kind: str, speed: float, peak_n: float) -> cp.ProtocolSegment:
+        return cp.ProtocolSegment(kind, "a", speed, 0, np.zeros((5, 1)), "a/0"), \
+            np.full((5, 1), peak_n)
+
+    parts = [segment("ramp", 0.1, 10.0), segment("oscillation", 1.0, 40.0),
+             segment("oscillation", 2.0, 40.0), segment("oscillation", 1.2, 40.0),
+             segment("hold", 0.0, 10.0)]
+    protocol = cp.Protocol(("a",), {"a": (0.0, 1.0)}, {"a": (0.0, 1.0)}, DT_S,
+                           [p[0] for p in parts], [p[1] for p in parts])
+    recording = cp.run_protocol(ForceBackend(), protocol, np.zeros(1), 100.0)
+    assert recording.skipped_blocks == ["a/0 oscillation at 2.00 rad/s"]
+    assert sorted(set(recording.segment.tolist())) == [0, 1, 3, 4]
+    assert recording.stopped_reason == ""
+    assert np.allclose(recording.cuff_force_n[:, 0], np.repeat([10.0, 40.0, 40.0, 10.0], 5))
+
+
+def test_ramps_stay_clear_of_the_leg_rest(knee_scene):
+    """The knee's foot rests near the leg rest: its ramps stop CONTACT_MARGIN_RAD short of
+    where the foot comes within the clearance; a range in contact throughout is refused."""
+    import mujoco
+
+    ranges = cp.protocol_ranges(knee_scene, cal._anatomical_rom(knee_scene))
+    (low, high), = ranges.values()
+    (clear_low, clear_high), = cal.contact_free(knee_scene, ranges).values()
+    assert clear_low == low and clear_high < high
+    model = knee_scene.model
+    data = mujoco.MjData(model)
+    i = list(knee_scene.exercised_joints).index("knee_flexion_r")
+    foot, rest = model.geom("foot_r").id, model.geom("leg_rest").id
+
+    def distance(angle: float) -> float:
+        data.qpos[:] = knee_scene.home_qpos
+        data.qpos[knee_scene.exercised_qpos_adr[i]] = angle
+        knee_scene.follow_coupled_joints(data.qpos)
+        mujoco.mj_kinematics(model, data)
+        return mujoco.mj_geomDistance(model, data, foot, rest, 1.0, None)
+
+    assert distance(clear_high) >= cal.CONTACT_CLEARANCE_M
+    beyond = clear_high + cal.CONTACT_MARGIN_RAD + math.radians(1.0) + cp.KNOT_SPACING_RAD
+    assert distance(beyond) < cal.CONTACT_CLEARANCE_M
+    touching = {"knee_flexion_r": (math.radians(100.0), math.radians(115.0))}
+    with pytest.raises(UsageError, match="knee_flexion_r comes within"):
+        cal.contact_free(knee_scene, touching)
 
 
 @pytest.mark.parametrize(("field", "value"), [("repetitions", 0), ("ramp_speed_rad_s", 2.0),

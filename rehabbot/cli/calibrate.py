@@ -19,8 +19,9 @@ examples:
   rehabbot calibrate --from-log session.npz --height 1.68 --sex female --out patient.json
 
 Then: gym.make(ENV_ID, **rehabbot.deploy.calibration.load_patient("patient.json")).
-The protocol moves each calibrated joint slowly over its range, then stretches it fast at
-two speeds, at two postures of the other joint (docs/deployment/calibration.md)."""
+The protocol moves each calibrated joint slowly over its range and oscillates it a little
+about two angles, at two postures of the other joint, then stretches it fast at two speeds
+(docs/deployment/calibration.md)."""
 
 
 @cli_command

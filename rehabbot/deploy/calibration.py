@@ -55,11 +55,13 @@ from rehabbot.sim.conditions import CONDITION_RANGES, PatientCondition
 from rehabbot.sim.scene import Scene
 
 PATIENT_FORMAT = "rehabbot-patient/1"
-# What a simulated calibration session needs of its env: one fixed body (no weight level
-# drawn), targets the session never reaches (so the exercise never ends it) and a horizon
-# longer than the protocol.
+#: The env keyword arguments of a simulated calibration session. One fixed body (no weight
+#: level drawn), targets the session never reaches (so the exercise never ends it), a
+#: horizon longer than the protocol, and a command every physics step (500 Hz, a real arm's
+#: servo rate; the fit averages the samples over its own period, ``block_average``).
 SIMULATOR_KWARGS: dict[str, Any] = {"weight_level": 0, "target_tolerance_rad": 1e-6,
-                                    "max_episode_steps": 10**6, "exercise": 0}
+                                    "max_episode_steps": 10**6, "exercise": 0,
+                                    "frame_skip": 1}
 HOLDING_SHARE = 0.7  # the ramps stay where holding the limb needs at most this of the limit
 ENCODER_NOISE_RAD = 1e-3
 FORCE_NOISE_N = 1.0
@@ -132,7 +134,7 @@ def calibrate(backend: Any, scene: Scene, *, joints: Sequence[str] | None = None
     if reader is not None:
         limit = min(limit, float(reader()))
     if not ranges_deg:
-        ranges = within_force(scene, ranges, limit)
+        ranges = contact_free(scene, within_force(scene, ranges, limit))
     rest = backend.state().patient_q_rad
     if len(rest) != len(scene.exercised_joints):
         raise UsageError("calibration: the backend reports no patient joint angles "
@@ -195,6 +197,71 @@ def within_force(scene: Scene, ranges_rad: dict[str, tuple[float, float]],
     return out
 
 
+CONTACT_CLEARANCE_M = 0.001
+#: An end of a range set by a contact stays this far inside it.
+CONTACT_MARGIN_RAD = math.radians(3.0)
+
+
+def contact_free(scene: Scene, ranges_rad: dict[str, tuple[float, float]],
+                 clearance_m: float = CONTACT_CLEARANCE_M) -> dict[str, tuple[float, float]]:
+    """``ranges_rad`` narrowed, per joint (the others at rest), to the interval around the
+    resting angle (or the clear angle nearest it, where the limb rests on a support) where
+    the limb moved by the joint stays ``clearance_m`` away from everything fixed to the world
+    that it can touch (a leg rest, a chair, the floor): a contact would push on the limb with
+    a force the cuff does not measure; an end set by a contact moves a further
+    :data:`CONTACT_MARGIN_RAD` inward (a stretch overshoots its end, a compliant foot sags).
+    ``UsageError`` where no angle is clear or less than 10 degrees remain."""
+    model = scene.model
+    data = mujoco.MjData(model)
+    exercised = list(scene.exercised_joints)
+    home = scene.home_qpos[scene.exercised_qpos_adr].astype(float)
+    fixed = [g for g in range(model.ngeom) if int(model.body_weldid[model.geom_bodyid[g]]) == 0]
+    out = {}
+    for joint, (low, high) in ranges_rad.items():
+        i = exercised.index(joint)
+        first = int(model.jnt_bodyid[model.joint(joint).id])
+        limb = [g for g in range(model.ngeom)
+                if _descends(model, int(model.geom_bodyid[g]), first)]
+        pairs = [(a, b) for a in limb for b in fixed
+                 if model.geom_contype[a] & model.geom_conaffinity[b]
+                 or model.geom_contype[b] & model.geom_conaffinity[a]]
+        grid = np.linspace(low, high, 1 + math.ceil((high - low) / KNOT_SPACING_RAD))
+        pose = home.copy()
+        ok = []
+        for angle in grid:
+            pose[i] = angle
+            data.qpos[:] = scene.home_qpos
+            data.qpos[scene.exercised_qpos_adr] = pose
+            scene.follow_coupled_joints(data.qpos)
+            mujoco.mj_kinematics(model, data)
+            ok.append(all(mujoco.mj_geomDistance(model, data, a, b, clearance_m, None)
+                          >= clearance_m for a, b in pairs))
+        clear = np.flatnonzero(ok)
+        if not len(clear):
+            raise UsageError(f"calibration: the limb moved by {joint} comes within "
+                             f"{1000 * clearance_m:.0f} mm of a fixed object at every angle")
+        a = b = int(clear[np.argmin(np.abs(grid[clear] - home[i]))])
+        while a > 0 and ok[a - 1]:
+            a -= 1
+        while b < len(grid) - 1 and ok[b + 1]:
+            b += 1
+        start = float(grid[a]) + (CONTACT_MARGIN_RAD if a > 0 else 0.0)
+        end = float(grid[b]) - (CONTACT_MARGIN_RAD if b < len(grid) - 1 else 0.0)
+        if end - start < math.radians(10.0):
+            raise UsageError(f"calibration: {joint} moves only "
+                             f"{math.degrees(end - start):.1f} deg clear of fixed objects")
+        out[joint] = (start, end)
+    return out
+
+
+def _descends(model: mujoco.MjModel, body: int, ancestor: int) -> bool:
+    while body > 0:
+        if body == ancestor:
+            return True
+        body = int(model.body_parentid[body])
+    return False
+
+
 def _anatomical_rom(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     model = scene.model
     ranges = np.array([model.jnt_range[model.joint(j).id] for j in scene.exercised_joints])
@@ -250,7 +317,8 @@ def model_gravity_nm(scene: Scene, q_rad: np.ndarray, joint: str) -> np.ndarray:
     return out
 
 
-GRAVITY_SAMPLES = 200  # rows per joint the gravity comparison uses
+#: Rows per joint the gravity comparison uses.
+GRAVITY_SAMPLES = 200
 
 
 def gravity_rows(signal: JointSignals) -> np.ndarray:
@@ -298,9 +366,9 @@ def _condition(scene: Scene, recording: Recording, fit: Fit) -> PatientCondition
         "spasticity_mas": fit.spasticity_mas,
         "stiffness_scale": round(min(max(stiffness, low), high), 3),
         "rom_scale": rom_scale(scene, recording)}
-    share = fit.effort_share
-    if fit.effort == "resistive" and share > 0:
-        fields.update(effort="resistive", effort_fraction=round(min(share, 1.0), 3))
+    share = round(min(fit.effort_share, 1.0), 3)
+    if fit.effort == "resistive" and share > 0:  # a share below 0.0005 is no effort
+        fields.update(effort="resistive", effort_fraction=share)
     return PatientCondition(**fields)
 
 

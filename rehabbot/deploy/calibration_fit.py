@@ -6,16 +6,23 @@ the body model (the scene) at the measured joint angles. On a real robot ``F`` c
 force/torque sensor at the cuff and the Jacobian from the calibrated body's kinematics: a
 wrong body model biases every torque.
 
-Speeds and accelerations are the derivatives of the measured angles (a Savitzky-Golay filter,
+A recording faster than :data:`FIT_PERIOD_S` is first averaged over blocks of whole control
+periods that span it (:func:`block_average`): the mean of the force over a block is the mean
+of the torque law's terms, and the mean acceleration is the change of speed across the block,
+which the derivatives of the block means give; a single sample at the end of a period would
+catch the servo between two setpoints, its acceleration below the motion's. Speeds and
+accelerations are the derivatives of the (averaged) angles (a Savitzky-Golay filter,
 :data:`SG_WINDOW` samples, cubic). Per joint ``j`` the model is the limb's rigid-body and
 passive dynamics with the patient's own torque subtracted::
 
     tau_j = I_j,p q''_j + b_j q'_j + k_j (q_j - q_rest,j) + G_j(q) - tau_patient,j
 
-* ``I_j,p``: the limb's inertia about the joint, one per posture ``p`` of the other joints
-  (the mass matrix's diagonal entry, armature included);
-* ``b_j``, ``k_j``: passive damping and stiffness about the resting posture ``q_rest`` (the
-  posture the session starts from);
+* ``I_j``: the limb's inertia about the joint (the mass matrix's diagonal entry, armature
+  included) and ``b_j`` its passive damping, both fitted on the joint's small oscillations
+  (the other joints at rest), with a free term per other exercised joint's acceleration (the
+  mass matrix's coupling: the cuff lets them move a little);
+* ``k_j``: passive stiffness about the resting posture ``q_rest`` (the posture the session
+  starts from);
 * ``G_j(q)``: gravity, linear in each rigid part's mass and first moment (4 numbers per
   part, shared by every joint the part hangs from), its regressor from the body model's
   kinematics at the measured angles. The posture changes of the protocol turn the gravity
@@ -24,6 +31,12 @@ passive dynamics with the patient's own torque subtracted::
   (:func:`rehabbot.sim.conditions.reflex_torque_nm`, fed by the speed of
   :data:`~rehabbot.sim.conditions.REFLEX_LATENCY_S` earlier) and, for a resistive patient,
   ``-s S_dir tanh(v / 0.1 rad/s)`` with ``s`` the share of the healthy strength ``S_dir``.
+
+On the ramps, holds and stretches, whose speed follows the command's (a velocity term there
+is the servo's as much as the limb's), the speed, acceleration, command speed and coupling
+terms are free nuisance terms per joint and kind of motion: those rows weigh only on the
+stiffness, gravity and the patient's torque. A joint with no oscillation recorded (a session
+stopped before them) is fitted with damping and inertia 0.
 
 Every hypothesis (6 grades x passive or resistive) is a weighted linear least-squares fit over
 all calibrated joints at once; the one with the lowest Bayesian information criterion wins.
@@ -52,9 +65,17 @@ from rehabbot.sim.conditions import (
 from rehabbot.sim.patient_drive import RESIST_VELOCITY_RAD_S
 from rehabbot.sim.scene import Scene
 
+#: Samples of the Savitzky-Golay derivative filter.
 SG_WINDOW = 7
+RCOND = 1e-10  # singular values of the scaled design below this share of the largest are cut
+#: The period the fit works at (faster recordings are block-averaged).
+FIT_PERIOD_S = 0.02
 SG_ORDER = 3
 EFFORT_HYPOTHESES = ("passive", "resistive")
+# A resistive fit below this share of the healthy strength is the passive one: so small a
+# push, saturated in the speed's sign, is a friction the sensors' noise can mimic, and would
+# take its share of the damping.
+MIN_EFFORT_SHARE = 0.01
 QUASI_STATIC = ("ramp",)  # the rows of other joints' motions a joint's equation uses
 
 
@@ -88,6 +109,7 @@ class JointSignals:
     other_ddq_rad_s2: np.ndarray  # (T, n_exercised - 1) the other exercised joints' accelerations
     command_dq_rad_s: np.ndarray  # the speed of the joint's targets (the commands' own)
     stretch: np.ndarray  # (T,) bool: rows of the joint's own stretches
+    oscillation: np.ndarray  # (T,) bool: rows of the joint's own oscillations
     tau_nm: np.ndarray  # the cuff's torque on the joint
     gravity: np.ndarray  # (T, n_gravity) regressor of the shared gravity parameters
     posture: np.ndarray  # (T,) index of the posture of the other joints (inertia column)
@@ -105,7 +127,7 @@ class JointFit:
     joint: str
     stiffness_nm_per_rad: float
     damping_nms_per_rad: float
-    inertia_kg_m2: tuple[float, ...]  # per posture (0: the resting posture of the others)
+    inertia_kg_m2: tuple[float, ...]  # (the others at their resting posture,)
     vaf: float
     rms_residual_nm: float
     range_reached_rad: tuple[float, float]
@@ -128,9 +150,37 @@ class Fit:
 
 
 # -- signals from a recording ----------------------------------------------------------------
+def block_average(recording: Recording, period_s: float = FIT_PERIOD_S) -> Recording:
+    """``recording`` averaged over consecutive blocks of ``round(period_s / dt)`` rows (the
+    last, incomplete block dropped): the time, angles, speeds, forces and targets are the
+    block's means; the segment is the one of the block's middle row. A recording at
+    ``period_s`` or slower is returned as it is."""
+    import dataclasses
+
+    if len(recording.time_s) < 2:
+        return recording
+    dt = float(np.median(np.diff(recording.time_s)))
+    factor = round(period_s / dt) if dt > 0 else 1
+    if factor <= 1:
+        return recording
+    blocks = len(recording.time_s) // factor
+
+    def mean(x: np.ndarray) -> np.ndarray:
+        x = x[:blocks * factor]
+        return x.reshape(blocks, factor, *x.shape[1:]).mean(axis=1)
+
+    return dataclasses.replace(
+        recording, time_s=mean(recording.time_s), patient_q_rad=mean(recording.patient_q_rad),
+        patient_dq_rad_s=mean(recording.patient_dq_rad_s),
+        cuff_force_n=mean(recording.cuff_force_n), target_q_rad=mean(recording.target_q_rad),
+        segment=recording.segment[factor // 2:blocks * factor:factor].copy())
+
+
 def joint_signals(recording: Recording, scene: Scene) -> list[JointSignals]:
     """Per calibrated joint, its signals from ``recording`` on the body model ``scene``; a
-    joint the session stopped before moving is left out."""
+    joint the session stopped before moving is left out. A recording faster than
+    :data:`FIT_PERIOD_S` is block-averaged first (:func:`block_average`)."""
+    recording = block_average(recording)
     if len(recording.time_s) < 4 * SG_WINDOW:
         raise DataError(f"calibration: the recording holds {len(recording.time_s)} samples; "
                         f"the fit needs at least {4 * SG_WINDOW}")
@@ -144,6 +194,7 @@ def joint_signals(recording: Recording, scene: Scene) -> list[JointSignals]:
     q, dq, ddq = (np.column_stack([savitzky_golay(recording.patient_q_rad[:, i], dt, d,
                                                   shift_s=lag)
                                    for i in range(len(exercised))]) for d in (0, 1, 2))
+    ddq = _follower_accelerations(recording, q, dq, ddq)
     delayed = np.column_stack([np.interp(recording.time_s - REFLEX_LATENCY_S,
                                          recording.time_s, dq[:, i], left=0.0)
                                for i in range(len(exercised))])
@@ -161,7 +212,7 @@ def joint_signals(recording: Recording, scene: Scene) -> list[JointSignals]:
     out = []
     for n, joint in enumerate(joints):
         i = exercised.index(joint)
-        own = (movers == joint) & np.isin(kinds, ("ramp", "stretch", "hold"))
+        own = (movers == joint) & np.isin(kinds, ("ramp", "stretch", "hold", "oscillation"))
         if own.sum() < 4 * SG_WINDOW:  # a session stopped before this joint's motions
             continue
         rows = own | np.isin(kinds, QUASI_STATIC)
@@ -172,6 +223,7 @@ def joint_signals(recording: Recording, scene: Scene) -> list[JointSignals]:
             delayed_dq_rad_s=delayed[rows, i],
             other_ddq_rad_s2=np.delete(ddq[rows], i, axis=1),
             command_dq_rad_s=command[rows, i], stretch=(own & (kinds == "stretch"))[rows],
+            oscillation=(own & (kinds == "oscillation"))[rows],
             tau_nm=tau[rows, n], gravity=gravity[n][rows],
             posture=np.where(own, postures, 0)[rows], own=own[rows],
             rest_rad=float(recording.rest_q_rad[i]),
@@ -181,6 +233,29 @@ def joint_signals(recording: Recording, scene: Scene) -> list[JointSignals]:
     if not out:
         raise DataError("calibration: the recording holds no joint's own motions (the "
                         f"session stopped: {recording.stopped_reason or 'no reason given'})")
+    return out
+
+
+def _follower_accelerations(recording: Recording, q: np.ndarray, dq: np.ndarray,
+                            ddq: np.ndarray) -> np.ndarray:
+    """``ddq`` with, on each oscillation, the other exercised joints' accelerations replaced
+    by their least-squares fit on the moving joint's angle, speed and acceleration (and a
+    constant): the joints the cuff lets follow a little move at the oscillation's frequency,
+    an acceleration far below the encoders' noise once differentiated twice, and their
+    coupling torque is a large share of the damping's."""
+    out = ddq.copy()
+    exercised = list(recording.exercised_joints)
+    bounds = np.flatnonzero(np.diff(recording.segment)) + 1
+    for rows in np.split(np.arange(len(recording.segment)), bounds):
+        kind, joint = recording.segments[int(recording.segment[rows[0]])][:2]
+        if kind != "oscillation" or joint not in exercised or len(rows) < 8:
+            continue
+        i = exercised.index(joint)
+        basis = np.column_stack([np.ones(len(rows)), q[rows, i] - q[rows, i].mean(),
+                                 dq[rows, i], ddq[rows, i]])
+        others = [k for k in range(len(exercised)) if k != i]
+        fit, *_ = np.linalg.lstsq(basis, ddq[np.ix_(rows, others)], rcond=None)
+        out[np.ix_(rows, others)] = basis @ fit
     return out
 
 
@@ -268,28 +343,35 @@ def resist_column(signals: JointSignals) -> np.ndarray:
 
 def _design(signals: Sequence[JointSignals], effort: str) -> tuple[np.ndarray, list[tuple]]:
     """The stacked regressor and the meaning of each column: per joint its physics (damping,
-    stiffness, per posture its inertia and its coupling to the other joints' accelerations),
-    then the nuisance terms (the command's own transient on the ramps; on the stretches a
-    free velocity, acceleration and command term), then the shared gravity and share."""
+    inertia and the coupling to the other joints' accelerations on the oscillations;
+    stiffness everywhere), then the nuisance terms (on the ramps and holds, per posture, and
+    on the stretches: a free velocity, acceleration, command and coupling term), then the
+    shared gravity and share."""
     n_gravity = signals[0].gravity.shape[1]
     per_joint = []
     for n, s in enumerate(signals):
-        still = ~s.stretch
+        wave = s.oscillation
+        others = range(s.other_ddq_rad_s2.shape[1])
         cols: list[tuple[tuple, np.ndarray]] = [
-            (("damping", n), np.where(still, s.dq_rad_s, 0.0)),
-            (("stiffness", n), s.q_rad - s.rest_rad)]
+            (("damping", n), np.where(wave, s.dq_rad_s, 0.0)),
+            (("stiffness", n), s.q_rad - s.rest_rad),
+            (("inertia", n, 0), np.where(wave, s.ddq_rad_s2, 0.0))]
+        cols += [(("coupling", n, k), np.where(wave, s.other_ddq_rad_s2[:, k], 0.0))
+                 for k in others]
+        still = ~s.stretch & ~wave
+        cols += [(("slow velocity", n), np.where(still, s.dq_rad_s, 0.0)),
+                 (("slow command", n), np.where(still, s.command_dq_rad_s, 0.0))]
         for p in range(int(s.posture.max()) + 1):
             mask = s.own & still & (s.posture == p)
-            cols.append((("inertia", n, p), np.where(mask, s.ddq_rad_s2, 0.0)))
-            cols += [(("coupling", n, p, k), np.where(mask, s.other_ddq_rad_s2[:, k], 0.0))
-                     for k in range(s.other_ddq_rad_s2.shape[1])]
-        cols.append((("command", n), np.where(still, s.command_dq_rad_s, 0.0)))
+            cols.append((("slow acceleration", n, p), np.where(mask, s.ddq_rad_s2, 0.0)))
+            cols += [(("slow coupling", n, p, k), np.where(mask, s.other_ddq_rad_s2[:, k], 0.0))
+                     for k in others]
         fast = s.stretch
         cols += [(("stretch velocity", n), np.where(fast, s.dq_rad_s, 0.0)),
                  (("stretch acceleration", n), np.where(fast, s.ddq_rad_s2, 0.0)),
                  (("stretch command", n), np.where(fast, s.command_dq_rad_s, 0.0))]
         cols += [(("stretch coupling", n, k), np.where(fast, s.other_ddq_rad_s2[:, k], 0.0))
-                 for k in range(s.other_ddq_rad_s2.shape[1])]
+                 for k in others]
         per_joint.append(cols)
     columns = [name for cols in per_joint for name, _ in cols]
     columns += [("gravity", k) for k in range(n_gravity)]
@@ -318,9 +400,9 @@ def fit_hypothesis(signals: Sequence[JointSignals], grade: str, effort: str,
     w = np.concatenate([np.full(len(s.q_rad), weights[n]) for n, s in enumerate(signals)])
     scale = np.linalg.norm(design, axis=0)
     scale[scale == 0] = 1.0
-    params, *_ = np.linalg.lstsq(design * w[:, None] / scale, target * w, rcond=1e-10)
+    params, *_ = np.linalg.lstsq(design * w[:, None] / scale, target * w, rcond=RCOND)
     params = params / scale
-    if effort == "resistive" and params[-1] < 0.0:  # a negative share is no effort at all
+    if effort == "resistive" and params[-1] < MIN_EFFORT_SHARE:  # no effort at all
         params = np.append(fit_hypothesis(signals, grade, "passive", weights)[0], 0.0)
     residual = (target - design @ params) * w
     return params, columns, float(residual @ residual), len(target)
@@ -377,7 +459,7 @@ def _fit_result(signals: Sequence[JointSignals], grade: str, effort: str, params
         start += len(s.q_rad)
         mine = {c: params[k] for k, c in enumerate(columns) if len(c) > 1
                 and c[0] != "gravity" and c[1] == n}
-        inertia = tuple(float(mine[("inertia", n, p)]) for p in range(int(s.posture.max()) + 1))
+        inertia = (float(mine[("inertia", n, 0)]),)
         predicted = predicted_all[rows] - reflex_column(s, grade)
         own = s.own
         error = s.tau_nm[own] - predicted[own]

@@ -6,18 +6,24 @@ Per calibrated joint (a compliant exercised joint that the limb's workspace box 
 * **slow ramps** over the joint's range, both ways, at ``ramp_speed_rad_s`` (5 deg/s by
   default: below every Modified Ashworth grade's reflex threshold, so quasi-static: the
   passive spring, gravity and any voluntary effort);
-* **fast stretches** at two speeds (trapezoidal velocity, both ways): the velocity-dependent
-  torques (damping, the limb's inertia, the stretch reflex's catch that grades spasticity);
-* ``repetitions`` of each, the whole set at two postures of the other calibrated joint where
-  there is one (the elbow with the shoulder at home and near the far end of its range): the
-  gravity torque on a joint turns with the posture of the joints before it, its spring does
-  not, which is what tells them apart.
+* **fast stretches** at two speeds (trapezoidal velocity, both ways, first away from the
+  end nearer rest): the stretch reflex's catch that grades spasticity;
+* **small oscillations** (the other joints at rest): sinusoids of
+  :data:`OSCILLATION_AMPLITUDE_RAD` at :data:`OSCILLATION_FREQUENCIES_HZ` about
+  :data:`OSCILLATION_CENTRES` of the range, the amplitude raised and lowered over one period
+  at either end: continuous speeds and accelerations that the damping and the limb's inertia
+  are fitted on (a ramp's speed is its command's, so the two cannot be told apart there);
+* ``repetitions`` of the ramps and stretches, the whole set at two postures of the other
+  calibrated joint where there is one (the elbow with the shoulder at home and near the far
+  end of its range): the gravity torque on a joint turns with the posture of the joints
+  before it, its spring does not, which is what tells them apart.
 
-Each motion is a :class:`ProtocolSegment` of patient joint targets at the backend's control
-period; the robot targets come from the scene's inverse kinematics
-(:func:`rehabbot.sim.paths.coupled_path`: the setpoints that carry the limb at that pose, as
-the env's targets are built), solved once per degree along each line and interpolated.
-Segments are joined by minimum-jerk moves, one joint at a time.
+The ramps and oscillations of every joint come first, the stretches (which may reach the
+force limit and stop the session) last. Each motion is a :class:`ProtocolSegment` of patient
+joint targets at the backend's control period; the robot targets come from the scene's
+inverse kinematics (:func:`rehabbot.sim.paths.coupled_path`: the setpoints that carry the
+limb at that pose, as the env's targets are built), solved once per degree along each line
+and interpolated. Segments are joined by minimum-jerk moves, one joint at a time.
 
 :func:`run_protocol` drives any :class:`~rehabbot.deploy.backend.RobotBackend` through it
 (``command`` and ``state`` at ``control_dt_s``) and records a :class:`Recording`: time,
@@ -44,7 +50,7 @@ from rehabbot.sim.scene import Scene
 from rehabbot.tasks.exercises import exercise_table
 from rehabbot.tasks.workspace import WORKSPACE_DEG
 
-SEGMENT_KINDS = ("move", "hold", "ramp", "stretch")
+SEGMENT_KINDS = ("move", "hold", "ramp", "stretch", "oscillation")
 RAMP_SPEED_RAD_S = math.radians(5.0)
 STRETCH_SPEEDS_RAD_S = (math.radians(60.0), math.radians(180.0))
 STRETCH_ACCELERATION_RAD_S2 = 30.0
@@ -53,9 +59,17 @@ HOLD_S = 1.0
 RANGE_MARGIN_RAD = math.radians(2.0)  # the ramps stop this short of the range's ends
 KNOT_SPACING_RAD = math.radians(1.0)
 POSTURE_SHIFT_RAD = math.radians(20.0)  # the second posture's least distance from home
-# The default ramps: the span of the limb's exercises (and the resting angle), widened by
-# this on either side, inside the workspace box and the patient's range.
+#: The default ramps span the limb's exercises (and the resting angle), widened by this on
+#: either side, inside the workspace box and the patient's range.
 EXERCISE_WIDENING_RAD = math.radians(15.0)
+#: The oscillations' amplitude.
+OSCILLATION_AMPLITUDE_RAD = math.radians(8.0)
+#: The oscillations' frequencies, about each centre.
+OSCILLATION_FREQUENCIES_HZ = (0.5, 1.0, 1.5)
+#: The oscillations' centres, as fractions of the ramps' range.
+OSCILLATION_CENTRES = (1.0 / 3.0, 2.0 / 3.0)
+#: An oscillation stays at least this long, and two periods, at full amplitude.
+OSCILLATION_STEADY_S = 1.5
 RECORDING_FORMAT = "rehabbot-calibration-recording/1"
 
 
@@ -101,7 +115,8 @@ class ProtocolSegment:
     # The ramps and stretches of one joint at one posture share a block, "joint/posture";
     # the faster speed's stretches are skipped when the slower ones predict a force above
     # the session's limit: the ramps' peak force plus the slower stretches' excess over it,
-    # scaled by the speed ratio. "" for the moves.
+    # scaled by the speed ratio (an oscillation, by the square of the ratio to the previous
+    # one's speed: only it is skipped). "" for the moves.
     block: str = ""
 
 
@@ -234,6 +249,21 @@ def stretch_profile(start: float, end: float, speed: float, acceleration: float,
     return start + math.copysign(1.0, end - start) * s
 
 
+def oscillation_profile(centre: float, amplitude: float, frequency_hz: float,
+                        dt_s: float) -> np.ndarray:
+    """Angles [rad] of a sinusoid about ``centre``: one period of rising amplitude (a raised
+    cosine), whole periods at ``amplitude`` (at least two and :data:`OSCILLATION_STEADY_S`),
+    one period of falling amplitude; it starts and ends at ``centre`` at rest."""
+    steady = max(2, math.ceil(OSCILLATION_STEADY_S * frequency_hz))
+    period = 1.0 / frequency_hz
+    total = (steady + 2) * period
+    t = np.arange(1, round(total / dt_s) + 1) * dt_s
+    t[-1] = total
+    envelope = np.clip(np.minimum(t, total - t) / period, 0.0, 1.0)
+    envelope = 0.5 - 0.5 * np.cos(math.pi * envelope)
+    return centre + amplitude * envelope * np.sin(2.0 * math.pi * frequency_hz * t)
+
+
 def build_protocol(scene: Scene, ranges_rad: dict[str, tuple[float, float]],
                    patient_rom_rad: tuple[np.ndarray, np.ndarray], dt_s: float,
                    settings: ProtocolSettings | None = None,
@@ -284,29 +314,45 @@ def build_protocol(scene: Scene, ranges_rad: dict[str, tuple[float, float]],
             rows.append(row)
         add(kind, joint, speed, rep, rows)
 
-    for joint in joints:
-        i = exercised.index(joint)
-        low, high = ranges_rad[joint]
-        for p, posture in enumerate(_postures(joint, ranges_rad, exercised, home)):
-            block = ""
-            start = posture.copy()
-            start[i] = low
-            move_to(start)
-            block = f"{joint}/{p}"
-            hold(joint)
-            for rep in range(settings.repetitions):
-                along("ramp", joint, settings.ramp_speed_rad_s, rep,
-                      ramp_profile(low, high, settings.ramp_speed_rad_s, dt_s))
+    # The gentle motions of every joint first, the stretches (which may reach the force
+    # limit and stop the session) last.
+    for fast in (False, True):
+        for joint in joints:
+            i = exercised.index(joint)
+            low, high = ranges_rad[joint]
+            for p, posture in enumerate(_postures(joint, ranges_rad, exercised, home)):
+                block = ""
+                # The stretches go first away from the end nearer rest (the lighter start).
+                ends = (low, high) if abs(low - home[i]) > abs(high - home[i]) else (high, low)
+                start = posture.copy()
+                start[i] = ends[1] if fast else low
+                move_to(start)
+                block = f"{joint}/{p}"
                 hold(joint)
-                along("ramp", joint, settings.ramp_speed_rad_s, rep,
-                      ramp_profile(high, low, settings.ramp_speed_rad_s, dt_s))
-                hold(joint)
-            for speed in settings.stretch_speeds_rad_s:
+                if fast:
+                    for speed in settings.stretch_speeds_rad_s:
+                        for rep in range(settings.repetitions):
+                            for a, b in (ends[::-1], ends):
+                                along("stretch", joint, speed, rep, stretch_profile(
+                                    a, b, speed, settings.stretch_acceleration_rad_s2, dt_s))
+                                hold(joint)
+                    continue
                 for rep in range(settings.repetitions):
                     for a, b in ((low, high), (high, low)):
-                        along("stretch", joint, speed, rep, stretch_profile(
-                            a, b, speed, settings.stretch_acceleration_rad_s2, dt_s))
+                        along("ramp", joint, settings.ramp_speed_rad_s, rep,
+                              ramp_profile(a, b, settings.ramp_speed_rad_s, dt_s))
                         hold(joint)
+                if p == 0:  # the oscillations, the other joints at rest
+                    for fraction in OSCILLATION_CENTRES:
+                        along("move", joint, MOVE_SPEED_RAD_S, 0,
+                              _move_profile(current[i], low + fraction * (high - low), dt_s))
+                        hold(joint)
+                        for frequency in OSCILLATION_FREQUENCIES_HZ:
+                            along("oscillation", joint,
+                                  2 * math.pi * frequency * OSCILLATION_AMPLITUDE_RAD, 0,
+                                  oscillation_profile(current[i], OSCILLATION_AMPLITUDE_RAD,
+                                                      frequency, dt_s))
+                            hold(joint)
             block = ""
     move_to(home)
     rom = {j: (float(patient_rom_rad[0][exercised.index(j)]),
@@ -314,6 +360,12 @@ def build_protocol(scene: Scene, ranges_rad: dict[str, tuple[float, float]],
     protocol = Protocol(joints, dict(ranges_rad), rom, float(dt_s), segments)
     protocol.robot_targets_rad = robot_targets(scene, segments)
     return protocol
+
+
+def _move_profile(start: float, end: float, dt_s: float) -> np.ndarray:
+    """A minimum-jerk move of one joint at the mean speed :data:`MOVE_SPEED_RAD_S`."""
+    n = max(2, math.ceil(abs(end - start) / (MOVE_SPEED_RAD_S * dt_s)))
+    return start + (end - start) * minimum_jerk(np.arange(1, n + 1) / n)
 
 
 def _postures(joint: str, ranges_rad: dict[str, tuple[float, float]], exercised: list[str],
@@ -482,7 +534,8 @@ def run_protocol(backend: Any, protocol: Protocol, rest_q_rad: np.ndarray,
                  force_lag_s: float = 0.0) -> Recording:
     """Drive ``backend`` through ``protocol`` (one ``command`` per row) and record it. The
     session stops early (``backend.stop()``, the reason in ``stopped_reason``) when the cuff
-    force exceeds ``max_cuff_force_n`` or the backend reports itself unhealthy.
+    force exceeds ``max_cuff_force_n`` or the backend reports itself unhealthy; a block's
+    faster stretches and an oscillation predicted above it are skipped (``ProtocolSegment``).
     ``force_lag_s``: how much older the backend's force is than its joint angles."""
     if abs(float(backend.control_dt_s) - protocol.dt_s) > 1e-12:
         raise UsageError(f"calibration: the protocol's period {protocol.dt_s} s is not the "
@@ -496,10 +549,17 @@ def run_protocol(backend: Any, protocol: Protocol, rest_q_rad: np.ndarray,
     # block -> [slower speed, its stretches' peak force, the holds' peak force]
     peaks: dict[str, list[float]] = {}
     skipped: list[str] = []
+    wave = (math.inf, 0.0)  # the last oscillation's speed and peak force
     for s, (segment, targets) in enumerate(zip(protocol.segments, protocol.robot_targets_rad,
                                                strict=True)):
         if segment.block in skipped:
             continue
+        if segment.kind == "oscillation" and segment.speed_rad_s > wave[0]:
+            static = peaks.get(segment.block, [0.0, 0.0, 0.0])[2]
+            if static + max(wave[1] - static, 0.0) * (segment.speed_rad_s / wave[0]) ** 2 \
+                    > max_cuff_force_n:  # the inertia's share grows with the square
+                skipped.append(f"{segment.block} oscillation at {segment.speed_rad_s:.2f} rad/s")
+                continue
         if segment.kind == "stretch" and segment.block in peaks:
             slow, peak, static = peaks[segment.block]
             if segment.speed_rad_s > slow and static + (peak - static) * \
@@ -529,11 +589,13 @@ def run_protocol(backend: Any, protocol: Protocol, rest_q_rad: np.ndarray,
                 break
         if reason:
             break
+        force_peak = float(np.linalg.norm(force[start:k], axis=1).max(initial=0.0))
+        if segment.kind == "oscillation":
+            wave = (segment.speed_rad_s, force_peak)
         if segment.block:
             entry = peaks.setdefault(segment.block, [math.inf, 0.0, 0.0])
             if segment.kind == "stretch":
                 entry[0] = min(entry[0], segment.speed_rad_s)
-            force_peak = float(np.linalg.norm(force[start:k], axis=1).max(initial=0.0))
             if segment.kind == "ramp":
                 entry[2] = max(entry[2], force_peak)
             elif segment.kind == "stretch" and segment.speed_rad_s <= entry[0]:
