@@ -54,6 +54,7 @@ from rehabbot.deploy.interpolation import (
     BRAKE_DECELERATION_RAD_S2,
     ServoSupervisor,
     brake_duration_s,
+    checked_target,
 )
 from rehabbot.sim.robots import ROBOTS
 
@@ -147,16 +148,8 @@ class FrankaBackend:
                           dq_rad_s=values[_DQ].copy(), cuff_force_n=float(values[_FORCE]))
 
     def command(self, q_target_rad: Any) -> None:
-        target = np.asarray(q_target_rad, dtype=float)
-        if target.shape != (N_JOINTS,):
-            raise UsageError(f"franka backend: a command needs 7 joint positions, got shape "
-                             f"{target.shape}")
-        outside = ~np.isfinite(target) | (target < self._low) | (target > self._high)
-        if np.any(outside):
-            j = int(np.argmax(outside))
-            raise UsageError(f"franka backend: target {float(target[j])!r} rad of "
-                             f"{self.joint_names[j]} is outside its range "
-                             f"[{self._low[j]}, {self._high[j]}]")
+        target = checked_target("franka backend", q_target_rad, self.joint_names, self._low,
+                                self._high)
         self._collect()
         if self._stopped or self._shared[_STOPPING] or not self._process.is_alive():
             if self._reason is None and self._conn.poll(STOP_MARGIN_S):

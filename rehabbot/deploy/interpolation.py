@@ -64,6 +64,7 @@ synthetic inputs (:func:`interpolate_targets`) and drives the robots.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -331,6 +332,23 @@ class SetpointInterpolator:
         self._duration_s = duration_s
         self._braking = braking
         self._coasting = False
+
+
+def checked_target(who: str, q_target_rad: Any, joint_names: Sequence[str],
+                   low_rad: np.ndarray, high_rad: np.ndarray) -> np.ndarray:
+    """``q_target_rad`` as float64 joint positions, each finite and inside the joint's range;
+    else a :class:`~rehabbot.common.errors.UsageError` naming the value, the joint and its
+    range (``who``: the backend, in the message)."""
+    target = np.asarray(q_target_rad, dtype=float)
+    if target.shape != (len(joint_names),):
+        raise UsageError(f"{who}: a command needs {len(joint_names)} joint positions, got "
+                         f"shape {target.shape}")
+    outside = ~np.isfinite(target) | (target < low_rad) | (target > high_rad)
+    if np.any(outside):
+        j = int(np.argmax(outside))
+        raise UsageError(f"{who}: target {float(target[j])!r} rad of {joint_names[j]} is "
+                         f"outside its range [{low_rad[j]}, {high_rad[j]}]")
+    return target
 
 
 class ServoSupervisor:

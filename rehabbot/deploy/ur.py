@@ -52,6 +52,7 @@ from rehabbot.deploy.interpolation import (
     BRAKE_DECELERATION_RAD_S2,
     ServoSupervisor,
     brake_duration_s,
+    checked_target,
 )
 from rehabbot.sim.robots import ROBOTS
 
@@ -161,16 +162,8 @@ class URBackend:
             return self._state
 
     def command(self, q_target_rad: Any) -> None:
-        target = np.asarray(q_target_rad, dtype=float)
-        if target.shape != (N_JOINTS,):
-            raise UsageError(f"ur backend: a command needs 6 joint positions, got shape "
-                             f"{target.shape}")
-        outside = ~np.isfinite(target) | (target < self._low) | (target > self._high)
-        if np.any(outside):
-            j = int(np.argmax(outside))
-            raise UsageError(f"ur backend: target {float(target[j])!r} rad of "
-                             f"{self.joint_names[j]} is outside its range "
-                             f"[{self._low[j]}, {self._high[j]}]")
+        target = checked_target("ur backend", q_target_rad, self.joint_names, self._low,
+                                self._high)
         with self._lock:
             if self._stopped or self._supervisor.stopping or not self._thread.is_alive():
                 raise UsageError(f"ur backend: stopped ({self.stop_reason}); commands are "
