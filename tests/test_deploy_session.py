@@ -529,6 +529,7 @@ def _loose_json(spec) -> str:
     return json.dumps(_loose(twin))
 
 
+@pytest.mark.slow
 def test_deploy_then_plot(tmp_path, capsys):
     out = tmp_path / "knee"
     (tmp_path / "filter.json").write_text(_loose_json(KNEE))
@@ -573,6 +574,7 @@ def test_a_robot_backend_needs_its_robot_and_address(tmp_path, capsys):
     assert not (tmp_path / "s").exists()
 
 
+@pytest.mark.slow
 def test_deploy_an_onnx_policy(tmp_path):
     pytest.importorskip("onnxruntime")
     pytest.importorskip("onnx")

@@ -67,6 +67,7 @@ def test_constant_targets_hold_still() -> None:
     assert np.array_equal(setpoints, np.tile(q0, (len(setpoints), 1)))
 
 
+@pytest.mark.slow
 def test_velocity_and_acceleration_are_continuous_across_every_knot() -> None:
     rng = np.random.default_rng(7)
     amplitude, frequency = rng.uniform(0.1, 0.4, 4), rng.uniform(0.2, 0.6, 4)

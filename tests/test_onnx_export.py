@@ -110,6 +110,7 @@ def test_export_refuses_a_graph_that_does_not_act_as_the_policy(monkeypatch,
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_v1_agent_and_a_run_folder_go_through_the_zoo_program(tmp_path) -> None:
     """A -v1 agent (its tracking-error step) and a run folder (a batched run's actor,
     exported through ``zoo_export`` as ``rehabbot zoo export`` reads it) act as their zoo

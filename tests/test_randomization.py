@@ -292,6 +292,7 @@ def test_the_randomised_test_episodes_repeat_the_nominal_cells_on_seeds_of_their
     assert not set(seeds) & set(range(20_001, 20_021))  # the run's expert demonstrations
 
 
+@pytest.mark.slow
 def test_the_recorded_latencies_are_the_episodes_own_and_a_refused_patient_is_skipped():
     from benchmarks.results import heldout_results as heldout
     from benchmarks.results import transfer_results as transfer
