@@ -211,6 +211,56 @@ def test_supervisor_rate_limits_targets_that_would_accelerate_beyond_the_cap() -
     np.testing.assert_array_equal(sent[-M:], free_sent[-M:])  # in sync again, exactly
 
 
+def test_fr3_speed_envelope_narrows_to_zero_at_a_position_limit() -> None:
+    """Far from its limits a joint may use its rated speed both ways; towards a limit only
+    sqrt(2 * deceleration * distance) - offset; at the limit nothing towards it."""
+    from rehabbot.sim.robots import fr3
+
+    middle = (fr3.JOINT_LOW_RAD + fr3.JOINT_HIGH_RAD) / 2
+    low, high = fr3.speed_envelope_rad_s(middle)
+    np.testing.assert_array_equal(high, fr3.MAX_JOINT_SPEED_RAD_S)
+    np.testing.assert_array_equal(low, -fr3.MAX_JOINT_SPEED_RAD_S)
+    near = fr3.JOINT_HIGH_RAD - 0.1
+    low, high = fr3.speed_envelope_rad_s(near)
+    expected = np.sqrt(2 * fr3.SPEED_LIMIT_DECELERATION_RAD_S2 * 0.1) - fr3.SPEED_LIMIT_OFFSET_RAD_S
+    np.testing.assert_allclose(high, expected, rtol=1e-12)
+    np.testing.assert_array_equal(low, -fr3.MAX_JOINT_SPEED_RAD_S)  # away from it: rated
+    assert np.all(fr3.speed_envelope_rad_s(fr3.JOINT_HIGH_RAD)[1] == 0.0)
+    assert np.all(fr3.speed_envelope_rad_s(fr3.JOINT_LOW_RAD - 0.01)[0] == 0.0)
+
+
+def test_supervisor_rate_limits_to_a_position_based_speed_envelope() -> None:
+    """A ramp at 1 rad/s towards a limit at 0.3 rad, on a robot that allows only
+    sqrt(2 * 2 * distance) there: the setpoints slow down inside the envelope instead of
+    running at the 2 rad/s cap into it, and nothing stops; without the envelope the same
+    targets run at 1 rad/s up to the limit."""
+    limit_rad, deceleration = 0.3, 2.0
+
+    def envelope(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (np.full_like(q, -2.0),
+                np.clip(np.sqrt(2 * deceleration * np.maximum(limit_rad - q, 0.0)), 0.0, 2.0))
+
+    def run(speed_envelope) -> np.ndarray:
+        supervisor = ServoSupervisor(np.zeros(1), T, 0.1, [2.0], 9.0,
+                                     speed_envelope=speed_envelope)
+        sent = [np.zeros(1)]
+        for k in range(60):
+            supervisor.command(np.array([min(1.0 * (k + 1) * T, 0.29)]))
+            for _ in range(M):
+                sent.append(supervisor.tick(DT)[0])
+        assert not supervisor.stopping
+        return np.array(sent)[:, 0]
+
+    limited, free = run(envelope), run(None)
+    speeds = np.diff(limited) / DT
+    allowed = np.sqrt(2 * deceleration * np.maximum(limit_rad - limited[:-1], 0.0))
+    assert np.all(speeds <= allowed - 0.05 + 1e-9)
+    free_speeds = np.diff(free) / DT
+    free_allowed = np.sqrt(2 * deceleration * np.maximum(limit_rad - free[:-1], 0.0))
+    assert np.any(free_speeds > free_allowed)  # what the envelope saves the robot from
+    assert abs(limited[-1] - 0.29) < 1e-3  # and it still arrives
+
+
 def test_a_far_first_target_gets_a_longer_segment_within_the_cap() -> None:
     supervisor = ServoSupervisor(np.zeros(1), T, 1.0, [1.0], 9.0)
     supervisor.command(np.array([0.05]))  # 0.05 rad in 30 ms would need ~330 rad/s^2

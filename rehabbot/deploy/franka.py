@@ -19,7 +19,9 @@ jump or exceed the joint limits. The backend therefore:
   clock): the setpoint brakes to rest and the motion finishes; the backend is then stopped;
 * **speed and acceleration caps**: a setpoint faster than a joint's cap (the FR3's rated joint
   speeds by default) or accelerating more than 9 rad/s^2 (the FCI aborts at 10) is not sent;
-  the setpoint brakes from the last one sent and the motion finishes;
+  the setpoint brakes from the last one sent and the motion finishes. Near a position limit,
+  where the robot allows only the speed that stops in time
+  (:func:`rehabbot.sim.robots.fr3.speed_envelope_rad_s`), setpoints are rate-limited to it;
 * :meth:`FrankaBackend.stop`: the same brake, then the motion finishes (``motion_finished``
   on the last setpoint, so the robot holds still under its controller) and the loop calls
   libfranka's ``Robot.stop()``; ``stop()`` waits for that. If the loop does not answer within
@@ -57,6 +59,7 @@ from rehabbot.deploy.interpolation import (
     checked_target,
 )
 from rehabbot.sim.robots import ROBOTS
+from rehabbot.sim.robots.fr3 import speed_envelope_rad_s
 
 FR3 = ROBOTS["fr3"]
 N_JOINTS = 7
@@ -309,7 +312,7 @@ def _move(robot: Any, control: Any, settings: dict[str, Any], conn: Any, shared:
     commands: list[tuple[float, np.ndarray]] = []
     supervisor = ServoSupervisor(q0, settings["control_dt_s"], settings["watchdog_s"],
                                  settings["max_speed_rad_s"], settings["max_acceleration_rad_s2"],
-                                 settings["deceleration_rad_s2"])
+                                 settings["deceleration_rad_s2"], speed_envelope_rad_s)
     try:
         first = True
         while True:
@@ -342,7 +345,11 @@ def _move(robot: Any, control: Any, settings: dict[str, Any], conn: Any, shared:
         robot.stop()
         conn.send(("stopped", supervisor.stop_reason))
     except Exception as err:
-        conn.send(("error", f"control loop: {type(err).__name__}: {err}"))
+        p, v, a = supervisor.sent
+        conn.send(("error", f"control loop: {type(err).__name__}: {err} (at "
+                            f"{supervisor.time_s:.3f} s of the motion; last setpoint "
+                            f"{np.round(p, 4).tolist()} rad, {np.round(v, 3).tolist()} rad/s, "
+                            f"{np.round(a, 2).tolist()} rad/s^2)"))
         shared[_STOPPING] = 1.0
     finally:
         shared[_MOVING] = 0.0

@@ -55,15 +55,17 @@ is not sent: the setpoint brakes from the last one sent and the motion finishes)
 acceleration cap (where the interpolation would accelerate beyond it, as targets that change
 direction within a period or come late ask, the setpoint sent chases the interpolation at the
 cap instead, and follows it exactly again once it caught up: rate limiting, as libfranka's
-``limitRate``) and the stop request; after a stop, the watchdog or the speed cap it refuses
-every later target. It holds no thread and reads no clock: the backend calls
+``limitRate``), the robot's position-based speed envelope where it has one (near a position
+limit the FR3 allows only the speed that stops in time: a faster setpoint is rate-limited the
+same way, to the envelope) and the stop request; after a stop, the watchdog or the speed cap
+it refuses every later target. It holds no thread and reads no clock: the backend calls
 :meth:`ServoSupervisor.tick` with the time that passed, so the same code is tested on
 synthetic inputs (:func:`interpolate_targets`) and drives the robots.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -82,6 +84,12 @@ SYNC_GAP_RAD = 1e-6
 #: The chase's jerk cap [rad/s^3]: half the FCI's joint jerk limit (5000 rad/s^3), which
 #: libfranka reports as a velocity discontinuity.
 MAX_JERK_RAD_S3 = 2500.0
+#: How far inside a robot's position-based speed envelope the setpoints stay [rad/s].
+ENVELOPE_MARGIN_RAD_S = 0.05
+
+#: A robot's position-based speed envelope: the lowest and highest speed [rad/s] per joint
+#: at a configuration [rad] (:func:`rehabbot.sim.robots.fr3.speed_envelope_rad_s`).
+SpeedEnvelope = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 #: Targets that may wait for their segment; one more drops the oldest (the caller runs ahead),
 #: whose period the next one's segment takes over (the path keeps its timing: no jump).
@@ -359,8 +367,10 @@ class ServoSupervisor:
     def __init__(self, q0_rad: Sequence[float] | np.ndarray, policy_dt_s: float,
                  watchdog_s: float, max_speed_rad_s: Sequence[float] | np.ndarray,
                  max_acceleration_rad_s2: Sequence[float] | np.ndarray | float,
-                 deceleration_rad_s2: float = BRAKE_DECELERATION_RAD_S2) -> None:
+                 deceleration_rad_s2: float = BRAKE_DECELERATION_RAD_S2,
+                 speed_envelope: SpeedEnvelope | None = None) -> None:
         self.interpolator = SetpointInterpolator(q0_rad, policy_dt_s, deceleration_rad_s2)
+        self.speed_envelope = speed_envelope
         n = self.interpolator.p.size
         cap = np.broadcast_to(np.asarray(max_speed_rad_s, dtype=float), (n,)).copy()
         if not np.all(cap > 0.0):
@@ -425,6 +435,7 @@ class ServoSupervisor:
                 interpolator.brake_from(tuple(x.copy() for x in self._sent))
                 setpoint = interpolator.step(elapsed_s)
             elif (not self._synced
+                  or self._outside_envelope(setpoint, interpolator.v)
                   or np.any(np.abs(interpolator.a) > self.max_acceleration_rad_s2)
                   or np.any(np.abs(interpolator.a - self._sent[2])
                             > MAX_JERK_RAD_S3 * elapsed_s)):
@@ -433,6 +444,29 @@ class ServoSupervisor:
             self._sent = (setpoint.copy(), interpolator.v.copy(), interpolator.a.copy())
         self.finished = self.stop_reason is not None and interpolator.at_rest
         return setpoint, self.finished
+
+    @property
+    def sent(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The setpoint last sent, its velocity and its acceleration."""
+        return self._sent
+
+    def _speed_bounds(self, q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The speeds a setpoint at ``q_rad`` may have: the caps, narrowed to the robot's
+        position-based envelope (less :data:`ENVELOPE_MARGIN_RAD_S`) where it has one."""
+        cap = self.max_speed_rad_s
+        if self.speed_envelope is None:
+            return -cap, cap
+        low, high = self.speed_envelope(q_rad)
+        return (np.clip(low + ENVELOPE_MARGIN_RAD_S, -cap, 0.0),
+                np.clip(high - ENVELOPE_MARGIN_RAD_S, 0.0, cap))
+
+    def _outside_envelope(self, q_rad: np.ndarray, v_rad_s: np.ndarray) -> bool:
+        """Whether the speed ``v_rad_s`` at ``q_rad`` leaves the robot's envelope: the
+        setpoint then follows the interpolation at the envelope (:meth:`_chase`)."""
+        if self.speed_envelope is None:
+            return False
+        low, high = self._speed_bounds(q_rad)
+        return bool(np.any(v_rad_s < low) or np.any(v_rad_s > high))
 
     def _chase(self, setpoint: np.ndarray, elapsed_s: float) -> np.ndarray:
         """The acceleration-limited chase of the interpolator's ``setpoint``: its velocity plus
@@ -444,7 +478,8 @@ class ServoSupervisor:
         jerk = MAX_JERK_RAD_S3 * elapsed_s
         a = np.clip(np.clip((wanted - v) / elapsed_s, a_sent - jerk, a_sent + jerk),
                     -self.max_acceleration_rad_s2, self.max_acceleration_rad_s2)
-        v = np.clip(v + a * elapsed_s, -self.max_speed_rad_s, self.max_speed_rad_s)
+        low, high = self._speed_bounds(p)
+        v = np.clip(v + a * elapsed_s, low, high)
         p = p + v * elapsed_s
         self.limited_ticks += 1
         self._synced = bool(np.max(np.abs(p - setpoint)) < SYNC_GAP_RAD

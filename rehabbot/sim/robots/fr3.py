@@ -48,6 +48,22 @@ JOINT_LOW_RAD = np.array([-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -
 JOINT_HIGH_RAD = np.array([2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159])
 MAX_JOINT_SPEED_RAD_S = np.array([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
 TORQUE_LIMIT_NM = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
+# Position-based speed limits [FR3-LIMITS]: towards a position limit at distance d [rad] a
+# joint may move at most sqrt(2 * deceleration * d) - offset [rad/s] (never above its rated
+# speed), so that it can always stop before the limit; the robot aborts a motion past it.
+SPEED_LIMIT_OFFSET_RAD_S = np.array([0.30, 0.20, 0.20, 0.30, 0.35, 0.35, 0.35])
+SPEED_LIMIT_DECELERATION_RAD_S2 = np.array([6.0, 2.585, 3.5, 4.0, 17.0, 5.5, 17.0])
+
+
+def speed_envelope_rad_s(q_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lowest and highest joint speeds [rad/s] the FR3 allows at ``q_rad`` (7 joints): its
+    rated speeds, narrowed near a position limit to what stops in time (zero at the limit)."""
+    up_rad = np.maximum(JOINT_HIGH_RAD - q_rad, 0.0)
+    down_rad = np.maximum(q_rad - JOINT_LOW_RAD, 0.0)
+    ramp = 2.0 * SPEED_LIMIT_DECELERATION_RAD_S2
+    high = np.clip(np.sqrt(ramp * up_rad) - SPEED_LIMIT_OFFSET_RAD_S, 0.0, MAX_JOINT_SPEED_RAD_S)
+    low = np.clip(np.sqrt(ramp * down_rad) - SPEED_LIMIT_OFFSET_RAD_S, 0.0, MAX_JOINT_SPEED_RAD_S)
+    return -low, high
 
 # Inertial parameters of links 1-7 in Craig frame i [FR3-INERTIALS]: mass [kg], centre of mass
 # [m], inertia tensor about the centre of mass (ixx, iyy, izz, ixy, ixz, iyz) [kg m^2].
