@@ -77,7 +77,7 @@ VIOLATIONS = (None, "instability", "range_of_motion", "cuff_force", "unintended_
 # The comparison (:func:`first_difference`). Another CPU rounds differently in the last bits
 # (other SIMD paths in MuJoCo), and a few of these rollouts amplify that: in ``torque`` mode
 # the servos are off and random torques swing the limb, so a 1e-16 difference grows to 1e-5
-# within 40-80 steps (issue 25), and an event near a threshold (a contact, a clamp, a float32
+# within 40-80 steps, and an event near a threshold (a contact, a clamp, a float32
 # rounding of the observation fed back by the policy) can jump. So the comparison has two tiers:
 # 1. every float within ``RTOL``/``ATOL`` and every discrete field equal (a rollout that is
 #    not sensitive, on the recording machine: all of them);
@@ -94,7 +94,7 @@ VIOLATIONS = (None, "instability", "range_of_motion", "cuff_force", "unintended_
 RTOL = 1e-6
 ATOL = 1e-6
 # 1e-10 rad/s is the smallest noise (of 1e-14, 1e-12, 1e-10) whose shadow runs, on an AMD EPYC
-# with AVX-512, reproduce the differences from the recording machine that issue 25 reported:
+# with AVX-512, reproduce the differences from the recording machine seen on such a CPU:
 # a MuJoCo event in the step (the cuff's impact at a safety stop) that a difference far below
 # 1e-12 can flip, moving the force by 0.013 N in one row while the rows before agree to 1e-7.
 SHADOW_NOISE = 1e-10

@@ -1,9 +1,9 @@
-"""IQM and bootstrap intervals across seeds (rehabbot.analysis.aggregate)."""
+"""IQM and bootstrap intervals across seeds (benchmarks.common.aggregate)."""
 
 import numpy as np
 import pytest
 
-from rehabbot.analysis.aggregate import iqm, iqm_interval
+from benchmarks.common.aggregate import iqm, iqm_interval
 
 
 def test_iqm_drops_the_outer_quartiles():

@@ -22,7 +22,7 @@ pytest.importorskip("warp")
 pytest.importorskip("mujoco.mjx")
 
 import rehabbot.batch as batch  # noqa: E402
-from rehabbot.analysis.batch_parity import (  # noqa: E402
+from benchmarks.common.batch_parity import (  # noqa: E402
     batched_rollout,
     cpu_episode,
     replay_expert,

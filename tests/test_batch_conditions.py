@@ -26,7 +26,7 @@ pytest.importorskip("warp")
 pytest.importorskip("mujoco.mjx")
 
 import rehabbot.batch as batch  # noqa: E402
-from rehabbot.analysis.batch_parity import (  # noqa: E402
+from benchmarks.common.batch_parity import (  # noqa: E402
     band_rms,
     cpu_episode,
     hold_still,

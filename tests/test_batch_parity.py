@@ -42,7 +42,7 @@ pytest.importorskip("mujoco.mjx")
 import jax.numpy as jp  # noqa: E402
 
 import rehabbot.batch as batch  # noqa: E402
-from rehabbot.analysis.batch_parity import (  # noqa: E402
+from benchmarks.common.batch_parity import (  # noqa: E402
     START,
     batched_rollout,
     cpu_episode,

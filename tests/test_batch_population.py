@@ -24,7 +24,7 @@ pytest.importorskip("mujoco.mjx")
 import gymnasium as gym  # noqa: E402
 
 import rehabbot.batch as batch  # noqa: E402
-from rehabbot.analysis.batch_parity import cpu_episode, replay_population  # noqa: E402
+from benchmarks.common.batch_parity import cpu_episode, replay_population  # noqa: E402
 from rehabbot.batch.tables import POPULATION_IDS  # noqa: E402
 
 OBS_TOL = 1e-3

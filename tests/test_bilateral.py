@@ -145,7 +145,7 @@ def test_synchronisation_gap_of_the_expert_is_small_and_one_arm_first_pays():
         sync.append(step_info["reward_sync"])
         assert not terminated
     assert sum(sync) < -10.0
-    assert min(sync) >= -env.unwrapped.sync_weight
+    assert min(sync) >= -env.unwrapped.config.reward.sync_weight
 
 
 def test_progress_telescopes_over_both_arms():
@@ -171,7 +171,7 @@ def test_progress_telescopes_over_both_arms():
             break
     theta = base.data.qpos[np.concatenate([h.qpos_adr for h in base.handles])]
     assert info["is_success"]
-    expected = base.progress_weight * (path(theta0, 0) - path(theta, len(seq) - 1))
+    expected = base.config.reward.progress_weight * (path(theta0, 0) - path(theta, len(seq) - 1))
     assert progress == pytest.approx(expected, rel=1e-9)
 
 

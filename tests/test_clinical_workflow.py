@@ -1,4 +1,4 @@
-"""The clinician's workflow without dead ends (issue 27, item 6): any object with ``predict``
+"""The clinician's workflow without dead ends: any object with ``predict``
 in the evaluator, each episode's patient, the patient-side figures, no overwritten
 evaluation, render's progress, extras hints, no third-party warnings, one torch thread."""
 

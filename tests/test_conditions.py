@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.analysis.condition_probes import stretch_test, tremor_spectrum
+from benchmarks.common.condition_probes import stretch_test, tremor_spectrum
 from rehabbot.envs.registration import CONDITION_VARIANTS
 from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.rl.experts import ScriptedExpert

@@ -91,7 +91,8 @@ def test_an_env_made_from_groups_steps_as_one_made_from_flat_keywords():
                                                          "time_cost": 0.1},
                        task={"exercise": 1}, patient={"weight_level": 2})
     assert flat.unwrapped.config == grouped.unwrapped.config
-    assert grouped.unwrapped.time_cost == 0.1 and grouped.unwrapped.reward == "progress"
+    reward = grouped.unwrapped.config.reward
+    assert reward.time_cost == 0.1 and reward.design == "progress"
     obs_a, _ = flat.reset(seed=3)
     obs_b, _ = grouped.reset(seed=3)
     action = np.full(6, 0.5 * np.pi / 400, np.float32)

@@ -1,4 +1,4 @@
-"""The documentation cites no file that is not in the repository (issue 27).
+"""The documentation cites no file that is not in the repository.
 
 Checked: every relative link and every backticked repository path (``benchmarks/x.py``,
 ``docs/y.md``, ``rehabbot/...py``) in README.md and docs/**/*.md (the pages written at build
@@ -25,16 +25,16 @@ TOP_DIRS = ("rehabbot", "benchmarks", "docs", "examples", "sweeps", "tests", ".c
 TOP_FILES = ("README.md", "CHANGELOG.md", "CITATION.cff", "pyproject.toml", "Makefile",
              "LICENSE")
 
-# The research notes are historical records: they name files of the commit they were measured
-# with (each page says which) that later versions removed. Only these may be missing, and only
-# on those pages.
+# The research notes are records of measurements: they name files of the commit they were
+# measured with (each page says which) that the repository does not hold. Only these may be
+# missing, and only on those pages.
 HISTORICAL = {
-    "rehabbot/rl/features_jax.py": "the JAX TrackingErrorFeatures, removed by issue 26 (51d9d71)",
-    "rehabbot/rl/features.py": "TrackingErrorFeatures, removed by issue 26 (51d9d71)",
-    "tests/test_normalized_actions.py": "the normalised-action policy's test, issue 26 (51d9d71)",
+    "rehabbot/rl/features_jax.py": "the JAX TrackingErrorFeatures (commit 51d9d71)",
+    "rehabbot/rl/features.py": "TrackingErrorFeatures (commit 51d9d71)",
+    "tests/test_normalized_actions.py": "the normalised-action policy's test (commit 51d9d71)",
 }
 HISTORICAL_PATTERNS = (
-    re.compile(r"sweeps/[\w*.-]*-v1\.yaml"),  # the -v1 sweep files, removed by issue 26
+    re.compile(r"sweeps/[\w*.-]*-v1\.yaml"),  # the -v1 sweep files (commit 51d9d71)
 )
 
 LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")

@@ -173,7 +173,7 @@ def test_targets_are_feasible_distinct_and_inside_the_bounds(envs):
             assert np.all(seq.robot_rad <= base.setpoint_high_rad)
             assert np.all(seq.ik_error_m < 1e-4), "every target is reachable with the cuff on"
             assert np.all(seq.patient_deg >= rom[:, 0]) and np.all(seq.patient_deg <= rom[:, 1])
-            assert ws.within_table3(base.scene, base.limb, seq.patient_deg)
+            assert ws.within_table3(base.scene, base.config.scene.limb, seq.patient_deg)
             if seq.task_type == "reaching":
                 assert len(seq) == 6
             else:
@@ -198,8 +198,8 @@ def test_trajectory_waypoints_follow_a_minimum_jerk_profile():
 def test_setpoint_bounds_cover_table3_workspace_and_stay_in_ur5e_ranges(envs):
     for env in envs.values():
         base = env.unwrapped
-        grid = ws.workspace_grid_deg(base.scene, base.limb)
-        assert ws.within_table3(base.scene, base.limb, grid)
+        grid = ws.workspace_grid_deg(base.scene, base.config.scene.limb)
+        assert ws.within_table3(base.scene, base.config.scene.limb, grid)
         assert np.all(base.setpoint_low_rad > -2 * math.pi)
         assert np.all(base.setpoint_high_rad < 2 * math.pi)
         # The robot's joint limits were narrowed around the setpoint bounds.
@@ -385,8 +385,8 @@ def test_bad_reset_options_raise(envs):
 
 
 def test_a_refused_first_reset_leaves_a_usable_env():
-    """Regression: with Gymnasium's passive checker (gym.make's default) a first reset that
-    raised broke the next step with a TypeError; the ids disable that checker."""
+    """A first reset that raises leaves a usable env: the ids disable Gymnasium's passive
+    checker (gym.make's default), under which the next step would raise a TypeError."""
     env = gym.make("rehabbot/rehab-reach-v0")
     with pytest.raises(ValueError, match="exercise=5"):
         env.reset(options={"exercise": 5})

@@ -92,11 +92,11 @@ def _project(env: RehabEnv, camera: str, points_world: np.ndarray) -> np.ndarray
     cam = model.camera(camera).id
     rot = data.cam_xmat[cam].reshape(3, 3)
     local = (np.atleast_2d(points_world) - data.cam_xpos[cam]) @ rot  # camera looks along -z
-    focal_px = 0.5 * env.height / np.tan(np.radians(model.cam_fovy[cam]) / 2)
+    focal_px = 0.5 * env.config.render.height / np.tan(np.radians(model.cam_fovy[cam]) / 2)
     depth = -local[:, 2]
     assert np.all(depth > 0), "point behind the camera"
-    return np.column_stack([0.5 * env.width + focal_px * local[:, 0] / depth,
-                            0.5 * env.height - focal_px * local[:, 1] / depth])
+    return np.column_stack([0.5 * env.config.render.width + focal_px * local[:, 0] / depth,
+                            0.5 * env.config.render.height - focal_px * local[:, 1] / depth])
 
 
 def _pixel_distance(mask: np.ndarray, points_px: np.ndarray) -> np.ndarray:
@@ -294,7 +294,8 @@ def test_active_target_marker_is_drawn_where_the_target_projects(expert_run,
     # The active target (observation p*, base frame) in world coordinates.
     target_world = base.data.xpos[body] + base.data.xmat[body].reshape(3, 3) @ obs[P_STAR]
     centre_px = _project(base, "front", target_world)[0]
-    assert 0 <= centre_px[0] < base.width and 0 <= centre_px[1] < base.height
+    render = base.config.render
+    assert 0 <= centre_px[0] < render.width and 0 <= centre_px[1] < render.height
 
     def green_near_target(image: np.ndarray) -> int:
         green = _green(image)

@@ -35,10 +35,10 @@ def _run_until_terminated(env, policy, max_steps=300):
 def _assert_safety_penalty(env, reward, info):
     base = env.unwrapped
     steps_left = base.max_episode_steps - base._steps + 1
-    if base.safety_penalty_steps is not None:
-        steps_left = min(steps_left, base.safety_penalty_steps)
+    if base.config.reward.safety_penalty_steps is not None:
+        steps_left = min(steps_left, base.config.reward.safety_penalty_steps)
     assert not info["is_success"]
-    if base.safety_penalty == "worst_case":
+    if base.config.reward.safety_penalty == "worst_case":
         assert info["reward_safety"] == pytest.approx(steps_left * base.worst_step_reward)
         # Never better than continuing: at least the worst return of the remaining steps in
         # this patient's bounds.
@@ -48,9 +48,9 @@ def _assert_safety_penalty(env, reward, info):
     else:
         # "hold": at least what holding still from the state before the step would cost
         # until the time limit, at the larger of its distance and this step's.
-        extras = base.smoothness_weight + base.effort_weight
+        extras = base.config.reward.smoothness_weight + base.config.reward.effort_weight
         per_step = max(-info["reward_distance"], info["test_hold_distance"]) + extras
-        if base.safety_penalty_steps is None:
+        if base.config.reward.safety_penalty_steps is None:
             # The gap G to the best hold of the episode, this step's other terms, one step,
             # the margin.
             rest = info["reward_distance"] + info["reward_smoothness"] + info["reward_effort"]
@@ -148,9 +148,8 @@ def test_profiles_that_cannot_do_the_exercise_are_refused_when_the_env_is_built(
     with pytest.raises(ValueError, match=r"target 0 of exercise 'shoulder_flexion_150' needs "
                                          r"robot joint 2 at .* outside its setpoint bounds"):
         gym.make("rehabbot/rehab-reach-v0", exercises=(beyond,))
-    # Short patients' arms were refused until the robot's stand stopped moving with the
-    # patient's height (0.2.0: "outside its setpoint bounds" at 1.35 m on the left arm,
-    # "cannot reach the patient's cuff" at 1.20 m); every arm profile builds now.
+    # The robot's stand does not move with the patient's height, so short patients' arms
+    # (1.20 m) build and reach their targets too.
     for env_id in ("rehabbot/rehab-reach-l-v0", "rehabbot/rehab-reach-v0"):
         env = gym.make(env_id, profile={"height_m": 1.2, "mass_kg": 30.0, "sex": "male"})
         _, info = env.reset(seed=0)
@@ -263,7 +262,8 @@ def test_hold_penalty_never_pays_better_than_holding_still():
     penalty name is refused."""
     env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque")
     base = env.unwrapped
-    assert base.safety_penalty == "hold" and base.safety_penalty_steps is None
+    reward_config = base.config.reward
+    assert reward_config.safety_penalty == "hold" and reward_config.safety_penalty_steps is None
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})
     reward, info = _run_until_terminated(env, _pull_cuff_away_from_shoulder(base, 400.0))
     steps_left = base.max_episode_steps - base._steps + 1
@@ -276,7 +276,7 @@ def test_hold_penalty_never_pays_better_than_holding_still():
 
 
 def test_safety_penalty_steps_caps_the_steps_counted():
-    assert gym.make("rehabbot/rehab-reach-v0").unwrapped.safety_penalty_steps is None
+    assert gym.make("rehabbot/rehab-reach-v0").unwrapped.config.reward.safety_penalty_steps is None
     env = gym.make("rehabbot/rehab-reach-v0", control_mode="torque", safety_penalty_steps=50)
     base = env.unwrapped
     env.reset(seed=0, options={"exercise": 0, "weight_level": 0})

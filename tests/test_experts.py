@@ -104,9 +104,9 @@ ARM_PROFILES = ({"height_m": 1.50, "mass_kg": 50.0, "sex": "female"},
 @pytest.mark.parametrize("env_id", ["rehabbot/rehab-reach-v1", "rehabbot/rehab-reach-l-v1"])
 @pytest.mark.parametrize("profile", ARM_PROFILES, ids=lambda p: f"{p['height_m']}m")
 def test_expert_finishes_both_arm_exercises_for_short_and_tall_patients(env_id, profile):
-    """The robot stands at a fixed offset from the shoulder: when the offset scaled with the
-    patient's height, a 1.60 m patient's elbow extension drove the robot's forearm into its
-    own stand (unintended_contact) and the left arm past the cuff-force limit."""
+    """The robot stands at a fixed offset from the shoulder, whatever the patient's height, so
+    that a short patient's elbow extension keeps the robot's forearm clear of its own stand
+    (no unintended_contact) and the left arm within the cuff-force limit."""
     env = gym.make(env_id, profile=profile)
     expert = ScriptedExpert(env)
     for exercise in (0, 1):

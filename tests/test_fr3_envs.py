@@ -1,4 +1,4 @@
-"""The second robot on every scene and id (issue 14): with either robot the cuffs hold at home
+"""The second robot on every scene and id: with either robot the cuffs hold at home
 on every preset, side and posture; the FR3's redundant IK keeps one branch over a limb's whole
 workspace; the spaces follow the robot; the scripted expert finishes the bilateral exercises;
 bad robot arguments are refused. (The FR3's model against Franka's published numbers is in

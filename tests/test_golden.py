@@ -99,7 +99,7 @@ def test_a_rollout_perturbed_by_1e_12_passes(golden, env_id, mode):
 def test_the_perturbation_reaches_the_rollout_and_the_second_tier_absorbs_more(golden):
     """The nudge of the test above is real (it changes the rollout), and the second tier is
     needed and works: under the shadow runs' own noise level (1e-10 rad/s a step) some
-    torque-mode rollout of reach-v1 leaves the 1e-6 tolerance (issue 25's failing id), and the
+    torque-mode rollout of reach-v1 leaves the 1e-6 tolerance, and the
     comparison still accepts every one of them."""
     env_id, mode = "rehabbot/rehab-reach-v1", "torque"
     env = gym.make(env_id, control_mode=mode)

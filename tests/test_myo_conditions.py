@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.analysis.condition_probes import stretch_test, tremor_spectrum
+from benchmarks.common.condition_probes import stretch_test, tremor_spectrum
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim.conditions import MAS_GRADES
 from rehabbot.sim.fatigue import ThreeCompartmentFatigue

@@ -1,11 +1,11 @@
-"""Outputs are complete or absent, and every failure is one line (issue 25, findings 5 and 7).
+"""Outputs are complete or absent, and every failure is one line.
 
-Finding 5: a full disk (simulated by a writer that raises ``ENOSPC`` midway, one that leaves a
+A full disk (simulated by a writer that raises ``ENOSPC`` midway, one that leaves a
 truncated file behind, or a real file-size limit, ``RLIMIT_FSIZE``, which FFmpeg's own writes
 hit too) never replaces an earlier good video, figure or evaluation, and exits 1 with one
 line; output paths are checked before any work starts.
 
-Finding 7: bad env kwargs, bad seeds, damaged files, Ctrl-C and third parties' ``__del__``
+Bad env kwargs, bad seeds, damaged files, Ctrl-C and third parties' ``__del__``
 reach the user as one line, never a traceback; Ctrl-C exits 130.
 """
 
@@ -115,7 +115,7 @@ def test_an_output_file_is_checked_before_work(tmp_path: Path) -> None:
     assert not (tmp_path / "new").exists()  # the probe leaves nothing behind
 
 
-# ----------------------------------------------------------------------- render (finding 5)
+# ----------------------------------------------------------------------- render
 
 
 @pytest.mark.parametrize("out, code, message", [
@@ -239,7 +239,7 @@ def test_render_on_a_really_full_disk_exits_1_and_keeps_the_old_video(good_video
     assert out.read_bytes() == good and _leftovers(tmp_path) == []
 
 
-# ----------------------------------------------------------------------- plot (finding 5)
+# ----------------------------------------------------------------------- plot
 
 
 @pytest.mark.slow
@@ -283,7 +283,7 @@ def test_plot_checks_its_output_folder_before_evaluating(tmp_path, monkeypatch,
     assert "exists and is not a directory" in _one_line(capsys.readouterr().err)
 
 
-# ----------------------------------------------------------------------- evaluate (finding 5)
+# ----------------------------------------------------------------------- evaluate
 
 
 @pytest.mark.parametrize("failing", ["json", "trace"])
@@ -315,7 +315,7 @@ def test_evaluate_that_runs_out_of_space_keeps_the_old_pair(evaluated, tmp_path,
     assert _leftovers(out) == []
 
 
-# ----------------------------------------------------------------------- one line (finding 7)
+# ----------------------------------------------------------------------- one line
 
 
 @pytest.mark.parametrize("command", ["train", "evaluate", "sweep", "render"])
@@ -342,7 +342,7 @@ def test_an_env_kwarg_out_of_range_is_one_line_in_every_command(command, tmp_pat
 
 @pytest.mark.parametrize("command", ["evaluate", "render"])
 def test_whatever_the_env_raises_is_one_line(command, tmp_path, monkeypatch, capsys) -> None:
-    """An env that fails in an unforeseen way (the OverflowError of finding 7) still gives
+    """An env that fails in an unforeseen way (an OverflowError) still gives
     one line that says what it was."""
     import gymnasium
 
@@ -481,7 +481,7 @@ def _tiny_ppo(folder: Path) -> Path:
     return path
 
 
-# ----------------------------------------------------------------------- Ctrl-C (finding 7)
+# ----------------------------------------------------------------------- Ctrl-C
 
 MARKED_RUN = """\
 import importlib, sys

@@ -177,13 +177,13 @@ def _assert_limb_masses(env: RehabEnv, profile: pt.PatientProfile, level: int) -
     same segments of the other side are not scaled."""
     model = env.model
     segments = pt.segment_table(profile)
-    s = "r" if env.side == "right" else "l"
+    s = "r" if env.config.scene.side == "right" else "l"
     other = "l" if s == "r" else "r"
-    names = ("upper_arm", "forearm", "hand") if env.limb == "arm" else ("thigh", "shank",
-                                                                          "foot")
+    limb = env.config.scene.limb
+    names = ("upper_arm", "forearm", "hand") if limb == "arm" else ("thigh", "shank", "foot")
     limb_ids = {model.body(f"{n}_{s}").id for n in names}
     assert set(env.scene.limb_body_ids.tolist()) == limb_ids
-    factor = _weight_factor(env.limb, level)
+    factor = _weight_factor(limb, level)
     for name in names:
         nominal = segments[name].mass_kg
         assert model.body(f"{name}_{s}").mass[0] == pytest.approx(nominal * factor, rel=1e-9)
@@ -314,11 +314,11 @@ def _expected_controls(env: RehabEnv, setpoint_before: np.ndarray, action: np.nd
     """(servo setpoints, motor torques) that a checked, clipped ``action`` must produce."""
     ctrl = env.controller
     low, high = env.setpoint_low_rad, env.setpoint_high_rad
-    if env.control_mode == "joint_delta":
+    if env.config.control.control_mode == "joint_delta":
         return np.clip(setpoint_before + action, low, high), np.zeros(6)
-    if env.control_mode == "joint_position":
+    if env.config.control.control_mode == "joint_position":
         return np.clip(action, low, high), np.zeros(6)
-    if env.control_mode == "joint_velocity":
+    if env.config.control.control_mode == "joint_velocity":
         return np.clip(setpoint_before + ctrl.dt_s * action, low, high), np.zeros(6)
     return setpoint_before, ur.TORQUE_LIMIT_NM * action
 
@@ -451,17 +451,18 @@ def test_every_step_is_sound(limb, side, task_type, control_mode, profile, exerc
             if violation is None:
                 assert np.all(env.scene.cuff_errors_m(env.data) < CUFF_TOLERANCE_MOVING_M)
         # Bonus and target progress.
-        assert info["reward_bonus"] in (0.0, env.intermediate_bonus, env.final_bonus)
+        bonuses = env.config.reward
+        assert info["reward_bonus"] in (0.0, bonuses.intermediate_bonus, bonuses.final_bonus)
         if info["reward_bonus"] == 0.0:
             assert info["target_index"] == target_before and not info["is_success"]
         elif info["is_success"]:
-            assert info["reward_bonus"] == env.final_bonus
+            assert info["reward_bonus"] == env.config.reward.final_bonus
             assert target_before == info["num_targets"] - 1
         else:
             assert info["target_index"] == target_before + 1
         if info["reward_bonus"] > 0.0:
             assert np.max(np.abs(env.data.qpos[env.handle.qpos_adr] - target_rad)) < \
-                env.target_tolerance_rad
+                env.config.task.target_tolerance_rad
         assert 0 <= info["target_index"] < info["num_targets"] == len(env.target_sequence)
         assert (info["exercise"], info["weight_level"]) == (exercise, level)
         if terminated or truncated:

@@ -1,13 +1,13 @@
 """The learnable -v1 reward (rehabbot.tasks.reward) and the safety audit of every id:
 reaching a target is worth more than stalling short of it for gamma in [0.95, 0.999], and a
-safety stop never pays better than holding still (rehabbot.analysis.reward_audit)."""
+safety stop never pays better than holding still (benchmarks.common.reward_audit)."""
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.analysis.reward_audit import stall_cases, stop_cases
+from benchmarks.common.reward_audit import stall_cases, stop_cases
 from rehabbot.envs.registration import (
     BILATERAL_IDS,
     CONDITION_VARIANTS,
@@ -58,7 +58,7 @@ def test_v1_progress_telescopes_and_terms_sum_to_the_reward(env_id):
         obs, reward, terminated, truncated, info = env.step(expert(obs))
         steps += 1
         assert reward == pytest.approx(sum(info[k] for k in V1_TERMS), abs=1e-12)
-        assert info["reward_time"] == -base.time_cost == -0.05
+        assert info["reward_time"] == -base.config.reward.time_cost == -0.05
         assert info["cost"] == 0.0 and info["reward_safety"] == 0.0
         total_progress += info["reward_progress"]
         bonuses += info["reward_bonus"] > 0
@@ -67,8 +67,9 @@ def test_v1_progress_telescopes_and_terms_sum_to_the_reward(env_id):
     assert info["is_success"] and bonuses == len(sequence)
     theta = base.data.qpos[base.handle.qpos_adr]
     d_end = np.linalg.norm(theta - sequence[-1])
-    assert total_progress == pytest.approx(base.progress_weight * (d_start - d_end), rel=1e-9)
-    assert total_progress > 0.9 * base.progress_weight * d_start
+    weight = base.config.reward.progress_weight
+    assert total_progress == pytest.approx(weight * (d_start - d_end), rel=1e-9)
+    assert total_progress > 0.9 * weight * d_start
 
 
 def test_v1_arguments_are_validated():
@@ -112,7 +113,7 @@ def _assert_stops_never_pay(cases):
         if case.violation is None:
             continue
         # From the reset state: worse than the expert finishing the exercise, and than holding
-        # still to the time limit (the penalty covers every earlier state: issue 25).
+        # still to the time limit (the penalty covers every earlier state).
         assert case.stop_return < case.expert_return, case
         assert case.stop_return < case.hold_return, case
         # From the state before the stop: the stopping step pays less than holding still

@@ -172,9 +172,9 @@ def test_settings_naming_a_removed_policy_class_say_so(tmp_path: Path, policy: s
     with pytest.raises(HyperparameterError) as caught:
         load_hyperparameters(path, "rehab-reach-v1", "sac", backend)
     assert str(caught.value) == (
-        f"{path} [rehabbot/rehab-reach-v1]: the policy class {policy} was removed from "
-        "rehabbot with issue 26 (the -v2 ids observe what an agent needs, and the libraries' "
-        "own MlpPolicy learns them); rehabbot at commit 51d9d71, the last with it, loads it")
+        f"{path} [rehabbot/rehab-reach-v1]: the policy class {policy} is refused: rehabbot "
+        "does not define it (the -v2 ids observe what an agent needs, and the libraries' "
+        "own MlpPolicy learns them); rehabbot at commit 51d9d71 defines and loads it")
 
 
 # --------------------------------------------------------------------------- RL Zoo

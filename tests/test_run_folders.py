@@ -1,5 +1,4 @@
-"""A run folder is data, never code, and never a door; runs that can always finish
-(issue 25, findings 2, 3, 4 and 6).
+"""A run folder is data, never code, and never a door; runs that can always finish.
 
 * links: a run folder that is a symbolic link is refused, and nothing is ever deleted
   through a link (``--overwrite``, the sweep's restart, the cleanup of a failed start);
@@ -235,7 +234,7 @@ def _as_old_run(run_dir: Path, marker: Path) -> None:
 def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, finished_run,
                                                              capsys) -> None:
     """evaluate, render, the zoo's export and --resume of a run whose model names a policy
-    class removed with issue 26 fail with one line that names the class and the release that
+    class that rehabbot refuses fail with one line that names the class and the commit that
     loads it: no import of the class, no traceback, nothing unpickled or changed."""
     from rehabbot.cli import main
 
@@ -243,9 +242,9 @@ def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, fini
     marker = tmp_path / "pwned"
     _as_old_run(run_dir, marker)
     before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
-    why = (f"the policy class {REMOVED_CLASS} was removed from rehabbot with issue 26 "
+    why = (f"the policy class {REMOVED_CLASS} is refused: rehabbot does not define it "
            "(the -v2 ids observe what an agent needs, and the libraries' own MlpPolicy learns "
-           "them); rehabbot at commit 51d9d71, the last with it, loads it")
+           "them); rehabbot at commit 51d9d71 defines and loads it")
     commands = {
         "evaluate": lambda: main(["evaluate", str(run_dir), "--episodes", "1",
                                   "--out", str(tmp_path / "evaluation")]),
@@ -264,7 +263,7 @@ def test_a_run_of_a_removed_policy_class_is_refused_by_name(tmp_path: Path, fini
     assert "rehabbot.rl.features" not in sys.modules
     assert not marker.exists() and not (tmp_path / "agent.npz").exists()
     assert {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()} == before
-    with pytest.raises(PolicyError, match="was removed from rehabbot with issue 26"):
+    with pytest.raises(PolicyError, match="is refused: rehabbot does not define it"):
         detect_model(run_dir / runs.MODEL_NAME)
 
 

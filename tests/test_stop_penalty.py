@@ -1,4 +1,4 @@
-"""A safety stop never pays (issue 25; design decision 6): an episode that a safety rule stops
+"""A safety stop never pays (design decision 6): an episode that a safety rule stops
 earns less than holding still from the states it passed through (the start, its middle and
 the step just before the stop), by a margin: undiscounted from every one of them, and for
 gamma in {0.95, 0.99, 0.999} from every one after which the episode never out-earned the
@@ -11,7 +11,7 @@ asserted (``benchmarks/probes/stop_audit.py`` prints the counts).
 
 The property test drives random joints of random ids, in every control mode, in a random
 direction at a random fraction of the action bound into a stop and checks it by replaying the
-episode and holding still (``rehabbot.analysis.reward_audit.push_audit``)."""
+episode and holding still (``benchmarks.common.reward_audit.push_audit``)."""
 
 import gymnasium as gym
 import pytest
@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.analysis.reward_audit import push_audit
+from benchmarks.common.reward_audit import push_audit
 from rehabbot.envs.registration import ENV_SPECS
 
 MODES = ("joint_delta", "joint_position", "joint_velocity", "torque")

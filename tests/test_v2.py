@@ -172,8 +172,8 @@ def test_v2_observation_space_is_the_same_for_every_patient() -> None:
 def test_the_rollout_records_angles_not_agent_fields_on_v2() -> None:
     """The clinical evaluator's episode record (rehabbot.rl.rollout) reads the robot's and the
     patient's angles and the tool position from the paper's fields, which a -v2 observation
-    does not hold: the same expert episode records the same kinematics on -v1 and -v2 (before
-    the fix, -v2 recorded tracking errors as angles: peak joint speeds of 10 rad/s)."""
+    does not hold: the same expert episode records the same kinematics on -v1 and -v2 (never the
+    tracking errors read as angles)."""
     from rehabbot.rl.policies import load_policy
     from rehabbot.rl.rollout import run_episode
 

@@ -1,5 +1,5 @@
 """One version, one truth: the package, ``rehabbot --version``, ``CITATION.cff`` and the
-CHANGELOG's newest entry name the same version (issue 27, item 7). The docs take theirs from
+CHANGELOG's newest entry name the same version. The docs take theirs from
 the package (``docs/conf.py`` imports it), so a release edits ``rehabbot/common/version.py``,
 ``CITATION.cff`` and the CHANGELOG together or this fails."""
 

@@ -32,8 +32,8 @@ import numpy as np
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.cli import add_page_argument, add_seed_argument, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -166,10 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f"one-robot env ids (default: {' '.join(DEFAULT_IDS)})")
     parser.add_argument("--bodies", type=int, default=2,
                         help="bodies of the envelope's test cohort per id (2)")
-    parser.add_argument("--seed", type=int, default=0,
-                        help="the first patient's noise seed; each next patient adds 1 (0)")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md")
+    add_seed_argument(
+        parser, help_text="the first patient's noise seed; each next patient adds 1 (0)")
+    add_page_argument(parser)
     return parser
 
 
@@ -191,7 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 row = rows[-1]
                 print(f"{env_id} {profile} MAS {grade} -> {row['fitted_grade']} "
                       f"({row['seconds']:.0f} s)", flush=True)
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     tables = [summary_table(rows), results_table(rows)]
     for table in tables:
         print(table_markdown(table))

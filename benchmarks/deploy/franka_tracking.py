@@ -47,9 +47,9 @@ import numpy as np
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.cli import add_page_argument, announce, script_command
 from benchmarks.common.documents import (
     ROOT,
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -145,8 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0,
                         help="length of the tracked trajectory (10)")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md")
+    add_page_argument(parser)
     return parser
 
 
@@ -159,11 +158,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"no franka-sim venv at {SIM_PYTHON.parent.parent}: run "
                      "tools/franka-sim-venv.sh first")
     result = run(args.seconds)
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     import pylibfranka
 
     machine = f"{describe_machine()}, pylibfranka {pylibfranka.__version__}, franka-sim 1.1.7"
-    print(f"command: {command}\nmachine: {machine}\n")
+    announce(command, machine)
     for table in tables(result):
         print(table_markdown(table))
     if args.page is not None:

@@ -43,8 +43,8 @@ import numpy as np
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.cli import add_page_argument, add_seed_argument, announce, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     replace_block,
@@ -238,11 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--episodes", type=int, default=5, help="episodes per policy (5)")
     parser.add_argument("--observations", type=int, default=1000,
                         help="more episodes until this many observations (1000)")
-    parser.add_argument("--seed", type=int, default=0, help="first reset seed (0)")
+    add_seed_argument(parser, help_text="first reset seed (0)")
     parser.add_argument("--train-steps", type=int, default=300,
                         help="SB3 training steps of the SAC and the PPO (300; 0: no SB3 rows)")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md")
+    add_page_argument(parser)
     parser.add_argument("--doc", type=Path, metavar="PAGE.md",
                         help="rewrite the block between the onnx-parity markers of PAGE.md")
     return parser
@@ -263,11 +262,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 for env_id, agent in agents]
         sb3_rows = [sb3_row(algo, folder, args.train_steps, args.episodes, args.observations,
                             args.seed) for algo in ("sac", "ppo")] if args.train_steps else []
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     import onnxruntime
 
     machine = f"{describe_machine()}, onnxruntime {onnxruntime.__version__}"
-    print(f"command: {command}\nmachine: {machine}\n")
+    announce(command, machine)
     tables = [parity_table(
         rows, "zoo", "The shipped -v2 agents: ONNX against the zoo's NumPy actor",
         "the agent",

@@ -65,8 +65,8 @@ import numpy as np
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.cli import add_page_argument, add_seed_argument, announce, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -521,9 +521,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--conditions", nargs="+", choices=list(CONDITIONS),
                         default=list(CONDITIONS), metavar="CONDITION",
                         help=f"patient conditions (all: {', '.join(CONDITIONS)})")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the first run (0)")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md")
+    add_seed_argument(parser, help_text="seed of the first run (0)")
+    add_page_argument(parser)
     return parser
 
 
@@ -549,10 +548,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                               settings, overrides)
             print(f"ablation {name}: breaches {result.breaches}", flush=True)
             ablations.append((name, result))
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     machine = f"{describe_machine()}, numpy {np.__version__}"
     tables = results_tables(results, ablations)
-    print(f"command: {command}\nmachine: {machine}\n")
+    announce(command, machine)
     for table in tables:
         print(table_markdown(table), "\n")
     if args.page is not None:

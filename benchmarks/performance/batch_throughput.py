@@ -35,8 +35,8 @@ import gymnasium as gym
 import numpy as np
 
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.cli import add_page_argument, add_seed_argument, announce, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -147,9 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=20, help="batched steps per round")
     parser.add_argument("--cpu-steps", type=int, default=500, help="CPU env steps per round")
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write STEM.json and its page STEM.md")
+    add_seed_argument(parser)
+    add_page_argument(parser)
     args = parser.parse_args(argv)
     for name in ("steps", "cpu_steps", "rounds"):
         if getattr(args, name) < 1:
@@ -162,8 +161,8 @@ def main(argv: list[str] | None = None) -> int:
             check_id(env_id)
     except ValueError as err:
         parser.error(str(err))
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
-    print(f"command: {command}", flush=True)
+    command = script_command(__file__, argv)
+    announce(command)
     tables, measured, device = [], [], "-"
     for env_id in env_ids:
         entry = measure(env_id, args)

@@ -46,8 +46,8 @@ import numpy as np
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.cli import add_page_argument, add_seed_argument, announce, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -189,9 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--rounds", type=int, default=5, help="rounds; medians are kept (5)")
     parser.add_argument("--episode-steps", type=int, default=50,
                         help="reset every N steps (50)")
-    parser.add_argument("--seed", type=int, default=0, help="first reset seed (0)")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md")
+    add_seed_argument(parser, help_text="first reset seed (0)")
+    add_page_argument(parser)
     return parser
 
 
@@ -210,9 +209,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ValueError as err:
             parser.error(str(err))
     rows = [measure(i, args.steps, args.rounds, args.episode_steps, args.seed) for i in ids]
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     machine = f"{describe_machine()}, gymnasium {gym.__version__}, numpy {np.__version__}"
-    print(f"command: {command}\nmachine: {machine}\n")
+    announce(command, machine)
     table = results_table(rows, args.episode_steps)
     print(table_markdown(table))
     if args.page is not None:

@@ -33,8 +33,8 @@ import numpy as np
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.cli import add_page_argument, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -187,9 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--robots", nargs="+", metavar="NAME", default=["ur5e"],
                         help="robots to put in each preset (default: ur5e)")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write results as JSON")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md "
-                             "(docs/results/physics-throughput)")
+    add_page_argument(parser, "docs/results/physics-throughput")
     return parser
 
 
@@ -225,8 +223,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.page is not None:
         document = make_document(
             title="Physics throughput of every scene preset",
-            intro=INTRO, command=command_line(__file__, argv if argv is not None
-                                              else sys.argv[1:]),
+            intro=INTRO, command=script_command(__file__, argv),
             generated_by=__file__, tables=[table], machine=describe_machine(),
             settings={"steps": args.steps, "warmup": args.warmup, "repeats": args.repeats,
                       "robots": list(args.robots), "presets": presets},

@@ -42,8 +42,8 @@ import numpy as np
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.cli import add_page_argument, add_seed_argument, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -175,13 +175,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--steps", type=int, default=300, help="env steps per round (300)")
     parser.add_argument("--rounds", type=int, default=7, help="rounds; medians are kept (7)")
     parser.add_argument("--warmup", type=int, default=100, help="untimed steps first (100)")
-    parser.add_argument("--seed", type=int, default=0, help="reset seed (0)")
+    add_seed_argument(parser, help_text="reset seed (0)")
     parser.add_argument("--ids", nargs="+", metavar="ID", help="default: every rehabbot/ id")
     parser.add_argument("--robot", metavar="NAME", help="make every id with this robot")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows as JSON")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md "
-                             "(docs/results/step-throughput)")
+    add_page_argument(parser, "docs/results/step-throughput")
     return parser
 
 
@@ -201,7 +199,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     rows = [measure(i, args.steps, args.rounds, args.warmup, args.seed, args.robot)
             for i in ids]
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     how = (f"gym.make(id), zero actions; median of {args.rounds} interleaved rounds of "
            f"{args.steps} steps against mj_step on a copy of the model and state; wrappers: "
            f"{rows[0].wrappers}; goal: physics share >= {PHYSICS_SHARE_GOAL:.0%}")

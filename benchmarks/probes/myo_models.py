@@ -1,4 +1,4 @@
-"""Groundwork for the musculoskeletal patient (issue 28): what MyoSuite's models give us.
+"""Groundwork for the musculoskeletal patient: what MyoSuite's models give us.
 
 Loads the models of the installed ``myo-sim`` package (``pip install myo-sim==0.2.3``; nothing
 is copied into this repository) through ``myo_sim.build.compose.build_spec`` and measures:

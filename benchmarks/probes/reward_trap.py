@@ -14,9 +14,13 @@
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.analysis.reward_audit import stall_cases, stop_cases
+from benchmarks.common.reward_audit import stall_cases, stop_cases
 from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import ENV_SPECS, resolve_env_id
 

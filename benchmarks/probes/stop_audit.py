@@ -1,7 +1,7 @@
 """Does a safety stop ever pay? Every joint of every id, in every control mode, pushed in both
 directions at the action bound until a safety rule stops the episode; its return from the
 start, the middle and the step before the stop against holding still from there
-(:func:`rehabbot.analysis.reward_audit.push_audit`), undiscounted and for gamma = 0.95, 0.99,
+(:func:`benchmarks.common.reward_audit.push_audit`), undiscounted and for gamma = 0.95, 0.99,
 0.999. Prints the counts the issue-25 closing note quotes and writes every comparison as JSON.
 
 A comparison is "asserted" by tests/test_stop_penalty.py when holding still avoids a stop and,
@@ -25,8 +25,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.analysis.reward_audit import AUDIT_GAMMAS, hold_action, push_action, push_audit
+from benchmarks.common.reward_audit import AUDIT_GAMMAS, hold_action, push_action, push_audit
 from rehabbot.common.files import atomic_write_json
 from rehabbot.envs.registration import ENV_SPECS, resolve_env_id
 

@@ -19,15 +19,7 @@ from pathlib import Path
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
-from benchmarks.common.documents import (
-    command_line,
-    make_document,
-    make_table,
-    table_markdown,
-    write_page,
-)
-from benchmarks.common.machine import describe_machine
-from rehabbot.analysis.batch_parity import (
+from benchmarks.common.batch_parity import (
     START,
     band_rms,
     hold_still,
@@ -36,6 +28,14 @@ from rehabbot.analysis.batch_parity import (
     replay_stops,
     tremor_spectrum,
 )
+from benchmarks.common.cli import add_page_argument, announce, script_command
+from benchmarks.common.documents import (
+    make_document,
+    make_table,
+    table_markdown,
+    write_page,
+)
+from benchmarks.common.machine import describe_machine
 
 INTRO = """The batched env (`rehabbot.batch`: MJX with `impl="warp"`, float32) against the CPU env
 (MuJoCo, float64), on Warp's CPU device. Each id's scripted-expert episode from
@@ -152,16 +152,15 @@ def condition_row(r: dict) -> list:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write STEM.json and its page STEM.md (docs/results/batch-parity)")
+    add_page_argument(parser, "docs/results/batch-parity")
     args = parser.parse_args(argv)
     import rehabbot.batch as batch  # needs the [gpu] extra: fail here, with its message
     from rehabbot.batch.tables import CONDITION_IDS, POPULATION_IDS
 
     cases = (MAS4_CASE, *((env_id, {}) for env_id in CONDITION_IDS))
 
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
-    print(f"command: {command}", flush=True)
+    command = script_command(__file__, argv)
+    announce(command)
     replays = []
     for env_id in batch.SUPPORTED_IDS:
         replays.append({**replay_expert(env_id), "kwargs": {}})

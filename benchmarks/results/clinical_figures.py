@@ -21,7 +21,7 @@ from pathlib import Path
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from benchmarks.common.documents import command_line
+from benchmarks.common.cli import script_command
 from rehabbot.cli import main as rehabbot
 
 ENV = "rehab-hip-v2"
@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("docs/images/clinical"),
                         help="folder of the page's figures (default: docs/images/clinical)")
     args = parser.parse_args(argv)
-    print(f"command: {command_line(__file__, argv if argv is not None else sys.argv[1:])}",
+    print(f"command: {script_command(__file__, argv)}",
           flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         evaluation, figures = Path(tmp) / "evaluation", Path(tmp) / "figures"

@@ -3,11 +3,11 @@
 Three tables, in Markdown:
 
 1. **Spasticity**: isokinetic elbow (or knee) stretches for every Modified Ashworth grade at
-   5 and 100 deg/s (:func:`rehabbot.analysis.condition_probes.stretch_test`): the reflex's peak
+   5 and 100 deg/s (:func:`benchmarks.common.condition_probes.stretch_test`): the reflex's peak
    and mean resistance, the share of the sweep it resists, and the dynamometer's mean torque
    (the passive joint's at grade 0).
 2. **Tremor**: the spectral peak of the held elbow's angle for several tremor frequencies
-   (:func:`~rehabbot.analysis.condition_probes.tremor_spectrum`) and its RMS.
+   (:func:`~benchmarks.common.condition_probes.tremor_spectrum`) and its RMS.
 3. **Work on the limb**: the scripted expert and the assist-as-needed controller on every
    exercise of a base -v1 id, for a list of conditions: success, peak cuff force, the robot's
    and the patient's work and the assistance ratio (mean over exercises and weight levels 0, 2
@@ -32,14 +32,14 @@ import numpy as np
 
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.cli import add_page_argument, script_command
+from benchmarks.common.condition_probes import stretch_test, tremor_spectrum
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_text,
     write_page,
 )
-from rehabbot.analysis.condition_probes import stretch_test, tremor_spectrum
 from rehabbot.envs.rehab_env import RehabEnv
 from rehabbot.rl.assist_as_needed import AssistAsNeeded
 from rehabbot.rl.experts import ScriptedExpert
@@ -169,12 +169,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sections", nargs="+", default=["spasticity", "tremor", "work"],
                         choices=["spasticity", "tremor", "work"])
     parser.add_argument("--json", default=None, help="also write the figures to this file")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md "
-                             "(docs/results/conditions)")
+    add_page_argument(parser, "docs/results/conditions")
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     out: dict = {"command": command}
     tables = []
     if "spasticity" in args.sections:

@@ -18,8 +18,8 @@ import numpy as np
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.cli import add_page_argument, add_seed_argument, announce, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -50,14 +50,12 @@ def run_episode(env, expert, exercise: int, level: int, seed: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seed", type=int, default=0)
+    add_seed_argument(parser)
     parser.add_argument("--json", default=None, help="also write the rows to this file")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md "
-                             "(docs/results/expert-baseline)")
+    add_page_argument(parser, "docs/results/expert-baseline")
     args = parser.parse_args(argv)
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
-    print(f"command: {command}", flush=True)
+    command = script_command(__file__, argv)
+    announce(command)
     rows, cells = [], []
     for env_id in ENV_SPECS:
         env = gym.make(env_id)

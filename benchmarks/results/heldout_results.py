@@ -47,8 +47,9 @@ from typing import Any
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.aggregate import iqm_interval
+from benchmarks.common.cli import add_page_argument, add_seed_argument, script_command
 from benchmarks.common.documents import (
-    command_line,
     document_json,
     make_document,
     make_table,
@@ -58,7 +59,6 @@ from benchmarks.common.documents import (
 )
 from benchmarks.common.sweeps import sweep_keys
 from benchmarks.results import stratified_results as stratified
-from rehabbot.analysis.aggregate import iqm_interval
 from rehabbot.envs import registration as reg
 from rehabbot.rl import runs, zoo
 from rehabbot.rl.policies import POLICY_KEYWORDS, load_policy
@@ -840,7 +840,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="scenes the expert plays even without a controller of theirs")
     add("--split", choices=tuple(PARTS), default="test",
         help="test (the bodies and conditions parts) or validation (selection)")
-    add("--seed", type=int, help="first episode seed (default 60000; 40000 for validation)")
+    add_seed_argument(parser, None,
+                      help_text="first episode seed (default 60000; 40000 for validation)")
     add("--tremor-episodes", type=int, default=TREMOR_EPISODES,
         help=f"episodes per cell of a patient with a tremor (default {TREMOR_EPISODES})")
     add("--workers", type=int, default=1, help="processes playing controllers (default 1)")
@@ -849,7 +850,7 @@ def build_parser() -> argparse.ArgumentParser:
     add("--levels", type=int, nargs="+", choices=WEIGHT_LEVELS, metavar="L",
         help="only these weight levels")
     add("--json", type=Path, help="write every episode to this file")
-    add("--page", type=Path, metavar="STEM", help="write STEM.json and its page STEM.md")
+    add_page_argument(parser)
     add("--from-json", type=Path, nargs="+", metavar="FILE",
         help="render files of --json or --page again, merged (no evaluation)")
     add("--zoo-figures", type=Path, metavar="FILE",
@@ -881,7 +882,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.error("nothing to evaluate: give --zoo, --runs or --env (or --from-json)")
         args.seed = SEEDS[args.split] if args.seed is None else args.seed
         data, provenance = evaluate_all(*collect(args, parser), args), None
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     document = heldout_document(data, command, title=args.title, sweeps=args.sweep,
                                 provenance=args.provenance or provenance)
     if args.json:  # the episodes are written first: a closed pipe on stdout loses nothing

@@ -23,15 +23,15 @@ import gymnasium as gym
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.cli import add_page_argument, add_seed_argument, announce, script_command
+from benchmarks.common.condition_probes import stretch_test, tremor_spectrum
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
     write_page,
 )
 from benchmarks.common.machine import describe_machine
-from rehabbot.analysis.condition_probes import stretch_test, tremor_spectrum
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.sim.conditions import MAS_GRADES, PatientCondition
 
@@ -39,7 +39,7 @@ INTRO = """MyoSuite's legs and right arm (`myo-sim` 0.2.3) with the conditions o
 `PatientCondition` acting on their muscles (`rehabbot.sim.muscle_drive`), measured beside the
 rigid patient in this run. The isokinetic stretches release the cuff and move the seated knee
 or elbow with a velocity servo through 5-99 % of its range at 100 deg/s, 30-70 % at 5 deg/s
-(`rehabbot.analysis.condition_probes.stretch_test`); the resistance is the reflex's torque
+(`benchmarks.common.condition_probes.stretch_test`); the resistance is the reflex's torque
 against the motion (on the myo patient, the muscles' active torque). The reflex's one
 constant was calibrated on the knee; the elbow rows check it. The tremor rows hold the elbow
 still and give the spectral peak of its angle. The expert rows run the
@@ -156,17 +156,16 @@ def _cell(value: float | None, digits: int) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seed", type=int, default=0)
+    add_seed_argument(parser)
     parser.add_argument("--levels", type=int, nargs="+", default=[0, 2, 4],
                         help="weight levels of the expert episodes")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write STEM.json and its page STEM.md (docs/results/myo-conditions)")
+    add_page_argument(parser, "docs/results/myo-conditions")
     args = parser.parse_args(argv)
     bad = [level for level in args.levels if level not in range(5)]
     if bad:
         parser.error(f"--levels must be weight levels 0-4, got {bad}")
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
-    print(f"command: {command}", flush=True)
+    command = script_command(__file__, argv)
+    announce(command)
     stretches = stretch_rows()
     stretch_table = make_table(
         "stretches", "Isokinetic stretches of the seated knee and elbow (cuff released; "

@@ -24,8 +24,8 @@ import numpy as np
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.cli import add_page_argument, add_seed_argument, announce, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     table_markdown,
@@ -125,16 +125,15 @@ def throughput_rows(steps: int) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seed", type=int, default=0)
+    add_seed_argument(parser)
     parser.add_argument("--steps", type=int, default=2000,
                         help="physics steps per throughput repeat (env steps: a tenth)")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write STEM.json and its page STEM.md (docs/results/myo-patient)")
+    add_page_argument(parser, "docs/results/myo-patient")
     args = parser.parse_args(argv)
     if args.steps < 10:
         parser.error(f"--steps must be >= 10, got {args.steps}")
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
-    print(f"command: {command}", flush=True)
+    command = script_command(__file__, argv)
+    announce(command)
     scene = build_scene("knee", patient_model="myo")
     curves = {f"hip_{hip}": [muscle_torque_nm(scene, "knee_flexion_r", {
         "hip_flexion_r": hip, "knee_flexion_r": a}) for a in KNEE_ANGLES_DEG] for hip in (90, 0)}

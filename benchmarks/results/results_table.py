@@ -8,7 +8,7 @@ of ``--profiles``: the default profile the runs trained on and, unless ``--profi
 two held-out ones (a 1.60 m, 60 kg woman and a 1.85 m, 90 kg man). Runs of one algorithm and env
 are then aggregated across seeds as rliable recommends: the interquartile mean of each seed's
 success rate and return, with a 95 % percentile-bootstrap interval
-(:mod:`rehabbot.analysis.aggregate`). Wall-clock is the training time from each run's
+(:mod:`benchmarks.common.aggregate`). Wall-clock is the training time from each run's
 manifest. Rows are printed as a Markdown table, and with ``--json`` written to a file.
 
 Usage::
@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabbot.analysis.aggregate import iqm_interval
+if not __package__:  # run as a script: make `benchmarks` importable
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from benchmarks.common.aggregate import iqm_interval
 from rehabbot.analysis.evaluation import evaluate
 from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import env_short_name

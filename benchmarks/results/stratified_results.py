@@ -1,6 +1,6 @@
 """Success of trained runs on held-out episodes stratified over every exercise x weight level x
 patient profile: the per-cell table and, per env and algorithm, the IQM over seeds with a 95 %
-percentile-bootstrap interval (rliable's recommendation, :mod:`rehabbot.analysis.aggregate`).
+percentile-bootstrap interval (rliable's recommendation, :mod:`benchmarks.common.aggregate`).
 
 Each run folder (``.../<env>/<algo>/seed<k>/`` with a ``model.zip``, or a batched run's
 ``policy.npz``) is evaluated with
@@ -54,10 +54,11 @@ import numpy as np
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.aggregate import iqm_interval
+from benchmarks.common.cli import add_page_argument, add_seed_argument, script_command
 from benchmarks.common.documents import (
     HEADLINE_END,
     HEADLINE_START,
-    command_line,
     make_document,
     make_figure,
     make_table,
@@ -71,7 +72,6 @@ from benchmarks.common.sweeps import KEY_FIELDS, run_key, sweep_keys
 from benchmarks.results import learning_figures
 from benchmarks.results.training_curves import SOURCES as CURVE_SOURCES
 from benchmarks.results.training_curves import run_curve
-from rehabbot.analysis.aggregate import iqm_interval
 from rehabbot.common.extras import missing_module_message
 from rehabbot.common.tables import markdown_table
 from rehabbot.envs.registration import POPULATION_VARIANTS, env_short_name
@@ -592,8 +592,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("roots", nargs="*", type=Path, help="folders holding run folders")
     parser.add_argument("--per-cell", type=int, default=2,
                         help="episodes per exercise x weight level x profile (default 2)")
-    parser.add_argument("--seed", type=int, default=DEFAULT_SEED,
-                        help=f"first episode seed (default {DEFAULT_SEED})")
+    add_seed_argument(parser, DEFAULT_SEED,
+                      help_text=f"first episode seed (default {DEFAULT_SEED})")
     parser.add_argument("--profiles", choices=tuple(PROFILE_SETS), default="test",
                         help="the patients: test (the training profile and two held out; "
                              "the published tables) or validation (three others, on which "
@@ -608,9 +608,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--from-json", type=Path, nargs="+", default=[], metavar="FILE",
                         help="render the tables from files written by --json or --page (no "
                              "evaluation; the runs of every file are merged)")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md "
-                             "(e.g. docs/results/learning-v2)")
+    add_page_argument(parser, "e.g. docs/results/learning-v2")
     parser.add_argument("--sweep", type=Path, nargs="+", default=[], metavar="FILE",
                         help="the sweep files that trained the runs: the page names them and "
                              "its runs table says which file trains each run")
@@ -682,7 +680,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "run_dir": None, "train_seed": None, "env_kwargs": run["env_kwargs"],
                 "episodes": evaluate_cells("expert", env_id, run["env_kwargs"], args.per_cell,
                                            args.seed)})
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     document = learning_document(results, args, command, args.provenance or provenance)
     if args.headline:
         print(headline_markdown(document))

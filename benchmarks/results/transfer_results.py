@@ -47,8 +47,8 @@ from typing import Any
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
+from benchmarks.common.cli import add_page_argument, add_seed_argument, script_command
 from benchmarks.common.documents import (
-    command_line,
     make_document,
     make_table,
     repo_path,
@@ -307,8 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the one-patient id of the scene (rehabbot/rehab-knee-v2)")
     parser.add_argument("--preset", default="transfer", choices=sorted(PRESETS),
                         help="the randomisation preset (transfer)")
-    parser.add_argument("--seed", type=int, default=heldout.SEEDS["test"],
-                        help="first nominal episode seed (60000)")
+    add_seed_argument(parser, heldout.SEEDS["test"], help_text="first nominal episode seed (60000)")
     parser.add_argument("--randomized-seed", type=int, default=70_000,
                         help="first randomised episode seed (70000)")
     parser.add_argument("--draws", type=int, default=3, help="randomised episodes per cell (3)")
@@ -319,15 +318,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--workers", type=int, default=1, help="processes that play (1)")
     parser.add_argument("--from-json", type=Path, metavar="F",
                         help="render a results document's JSON again, no episodes")
-    parser.add_argument("--page", type=Path, metavar="STEM",
-                        help="write the results document STEM.json and its page STEM.md")
+    add_page_argument(parser)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    command = command_line(__file__, argv if argv is not None else sys.argv[1:])
+    command = script_command(__file__, argv)
     if args.from_json is not None:
         saved = json.loads(args.from_json.read_text(encoding="utf-8"))
         document = transfer_document(unpacked(saved), saved["command"], saved["provenance"])

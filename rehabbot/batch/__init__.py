@@ -1,4 +1,4 @@
-"""The batched backend (issue 29): the ``-v2`` ids as functional JAX envs on
+"""The batched backend: the ``-v2`` ids as functional JAX envs on
 MuJoCo Warp (through MJX, ``impl="warp"``), in MuJoCo Playground's interface.
 
 ``import rehabbot`` never imports this package (nor JAX or Warp); it needs the ``[gpu]``

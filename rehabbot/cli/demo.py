@@ -25,8 +25,7 @@ Steps, each with its output under ``OUT``:
 
 The default budget (100 000 steps) trains in about 20 minutes on one CPU core (SBX) and ends
 with an agent that finishes most episodes of the knee exercises (SBX's runs:
-``docs/results/learning-v2.md``). Up to 0.3.0 the demo trained PPO through network code of ours on a
-``-v1`` id; before that SAC on ``rehab-reach-v0``, whose reward traps agents (0 %).
+``docs/results/learning-v2.md``).
 """
 
 from __future__ import annotations

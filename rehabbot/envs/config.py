@@ -76,8 +76,8 @@ PRESET_OF: dict[tuple[str, str], str] = {
     ("knee", "right"): "knee", ("knee", "left"): "knee",
 }
 
-# Physical upper bounds of the safety thresholds: a larger value would silently switch the
-# rule off (1e9 or True did, before these bounds).
+# Physical upper bounds of the safety thresholds: a larger value (1e9, True) would silently
+# switch the rule off, so it is refused.
 # Range-of-motion rule: the most a joint may go beyond its anatomical range. 10 deg is the
 # hyperextension a continuous-passive-motion device allows the knee (Artromot K1 extends to
 # -10 deg, its manual's range) and about the spread between the normal-range tables

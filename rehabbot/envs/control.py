@@ -53,7 +53,7 @@ SETPOINT_SPACE_MARGIN_RAD = 0.5
 # where no servo holds them (the safety penalty counts it: rehabbot.tasks.reward): the sag of
 # a hold under the limb's weight plus a braking distance of the joints' speed times
 # TORQUE_HOLD_BRAKE_S. Measured with a PD at 0.3 x the robot's gains (the audit's torque-mode
-# hold, rehabbot.analysis.reward_audit) after pushes of every joint at 0.3 and 1.0 of the
+# hold, benchmarks.common.reward_audit) after pushes of every joint at 0.3 and 1.0 of the
 # torque bound on the four -v0 ids: at most 0.148 rad at rest and 0.1 + 0.04 s x speed moving
 # (benchmarks/probes/stop_audit.py --drift).
 TORQUE_HOLD_SAG_RAD = 0.15

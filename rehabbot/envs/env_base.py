@@ -1,8 +1,9 @@
 """The Gymnasium plumbing every RehabBot env shares (:class:`rehabbot.envs.core.RehabEnvCore`,
 whose ``reset`` and ``step`` serve :class:`rehabbot.envs.rehab_env.RehabEnv` and
 :class:`rehabbot.envs.bilateral_env.BilateralEnv`): rendering and ``close``, the episode's state
-as read-only properties, the config's settings read as attributes, the start of an episode and
-the errors of a ``step()`` out of turn."""
+as read-only properties, the start of an episode and the errors of a ``step()`` out of turn.
+The settings are read from the config (``env.config.reward.time_cost``); the env forwards none
+of them as its own attributes."""
 
 from __future__ import annotations
 
@@ -13,8 +14,7 @@ import mujoco
 import numpy as np
 
 from rehabbot.common.checks import check_number, check_options
-from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES, kwarg_names
-from rehabbot.envs.time_limit import MakeTimeLimit
+from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
 from rehabbot.tasks import feasibility
 from rehabbot.tasks.targets import TargetSequence
@@ -22,7 +22,7 @@ from rehabbot.tasks.targets import TargetSequence
 RESET_OPTIONS = ("exercise", "weight_level")
 
 
-class RehabEnvBase(MakeTimeLimit, gym.Env):
+class RehabEnvBase(gym.Env):
     """The shared plumbing of the RehabBot envs. A subclass sets :attr:`config_class` and, in
     its constructor, ``config``, calls :meth:`_adopt_parts` on its built parts, and sets
     ``_rendering``, ``_healthy_low`` and ``_healthy_high``; ``reset`` and ``step`` keep
@@ -93,8 +93,8 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
     def set_time_limit(self, max_episode_steps: int) -> None:
         """Make ``max_episode_steps`` the env's horizon everywhere it is used: the config, the
         safety penalties of the reward and the rendering's trace (``gym.make`` calls this with
-        the limit of its ``TimeLimit``). Between episodes only; ``ValueError`` for a limit
-        outside ``config.NUMBER_RANGES``."""
+        the limit of its ``TimeLimit``: :func:`rehabbot.envs.time_limit.adopt_time_limit`).
+        Between episodes only; ``ValueError`` for a limit outside ``config.NUMBER_RANGES``."""
         low, high, _integer = NUMBER_RANGES["max_episode_steps"]
         limit = check_number("max_episode_steps", max_episode_steps, low, high, integer=True)
         if limit == self.max_episode_steps:
@@ -107,13 +107,6 @@ class RehabEnvBase(MakeTimeLimit, gym.Env):
         self._reward.max_episode_steps = limit
         self._rendering.trace = np.zeros((limit + 1, 3))
         self._rendering.trace_len = 0
-
-    def __getattr__(self, name: str) -> Any:
-        # The config's settings read as attributes (env.limb, env.target_tolerance_rad, ...).
-        config = self.__dict__.get("config")
-        if config is not None and name in kwarg_names(self.config_class):
-            return config.flat(name)
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     # ------------------------------------------------------------------------------------------
     # Helpers

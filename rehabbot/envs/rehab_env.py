@@ -181,11 +181,11 @@ applied on top; ``RehabEnv(config)`` takes a whole config instead.
 | ``effort_weight`` | reward | 0.0 | weight of ``reward_effort`` |
 | ``terminate_on_safety`` | safety | True | end the episode (with the penalty) when a safety rule fires; if False the rule is only reported |
 | ``safety_penalty`` | reward | ``"hold"`` | ``"hold"`` (every reward: the gap to the best hold of the episode, one step more and a margin of 1.0, so a stop never pays) or, paper reward only, ``"worst_case"`` (steps left x worst per-step loss); :mod:`rehabbot.tasks.reward` |
-| ``safety_penalty_steps`` | reward | None | charge at most this many steps at the current hold cost instead (0.2.0's default was 100; with a cap a stop can pay) |
+| ``safety_penalty_steps`` | reward | None | charge at most this many steps at the current hold cost instead (with a cap a stop can pay) |
 | ``rom_tolerance_deg`` | safety | 2.0 | range-of-motion rule: allowed excess beyond the anatomical range, in [0, 10] deg (10: the knee hyperextension a CPM device allows, the Artromot K1's -10 deg; ``docs/envs.md``, Safety terminations) |
 | ``cuff_force_limit_n`` | safety | None | cuff force rule: limit in N for every cuff, in [1, 880] N (880 = 4 x the largest ISO/TS 15066 quasi-static limit, thighs 220 N); None = the quasi-static limit of the region each cuff holds |
 | ``contact_tolerance_m`` | safety | 0.002 | contact rule: penetration that counts as contact, in [0, 0.01] m (2 x the deepest limb compression at an ISO/TS 15066 quasi-static limit, upper arm 150 N / 30 N/mm = 5 mm) |
-| ``max_episode_steps`` | task | 1000 | horizon used by the safety penalty, in [1, 10**6] (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` sets both: the env takes its TimeLimit's ``m`` as its horizon; ``m <= 0`` (Gymnasium's ``-1`` = no time limit included) is refused (:mod:`rehabbot.envs.registration`). A ``RehabEnv`` built directly never truncates: wrap it as ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` |
+| ``max_episode_steps`` | task | 1000 | horizon used by the safety penalty, in [1, 10**6] (the registration's TimeLimit uses the same). ``gym.make(id, max_episode_steps=m)`` sets both: the env takes its TimeLimit's ``m`` as its horizon; ``m <= 0`` (Gymnasium's ``-1`` = no time limit included) is refused (:mod:`rehabbot.envs.time_limit`). A ``RehabEnv`` built directly never truncates: wrap it as ``TimeLimit(RehabEnv(..., max_episode_steps=m), m)`` |
 | ``segment_s`` | task | 3.0 | trajectory: duration of each min-jerk segment between key poses |
 | ``waypoint_dt_s`` | task | 0.1 | trajectory: sampling period of the min-jerk path |
 | ``min_waypoint_spacing_rad`` | task | 0.1 | trajectory: minimum distance (inf-norm, robot joints) between waypoints |

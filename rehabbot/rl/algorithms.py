@@ -45,20 +45,20 @@ class BackendUnavailableError(UsageError):
     """The library an algorithm needs on the chosen backend is not installed."""
 
 
-# The modules of rehabbot's own policy classes (the tracking-error networks), removed with
-# issue 26 after commit 51d9d71: settings and models that name one are refused by name.
+# The modules of the tracking-error policy classes, which rehabbot does not define: settings and
+# models that name one are refused by name.
 REMOVED_POLICY_MODULES = ("rehabbot.rl.features", "rehabbot.rl.features_jax")
 
 
-# The last commit of rehabbot whose rl/features*.py defined the removed policy classes.
+# The commit of rehabbot whose rl/features*.py defines the refused policy classes.
 LAST_CUSTOM_NETWORK_COMMIT = "51d9d71"
 
 
 def removed_policy(name: str) -> str:
-    """Why the policy class ``name`` (a dotted name in a removed module) does not load."""
-    return (f"the policy class {name} was removed from rehabbot with issue 26 (the -v2 ids "
+    """Why the policy class ``name`` (a dotted name in a refused module) does not load."""
+    return (f"the policy class {name} is refused: rehabbot does not define it (the -v2 ids "
             "observe what an agent needs, and the libraries' own MlpPolicy learns them); "
-            f"rehabbot at commit {LAST_CUSTOM_NETWORK_COMMIT}, the last with it, loads it")
+            f"rehabbot at commit {LAST_CUSTOM_NETWORK_COMMIT} defines and loads it")
 
 
 def saved_policy_class(data: dict[str, Any]) -> tuple[str, str]:
@@ -113,7 +113,7 @@ def read_model_data(path: Path) -> dict[str, Any]:
     """The ``data`` entry of a Stable-Baselines3 / SBX model zip.
 
     Raises:
-        PolicyError: an unreadable zip, or one saved with a policy class that was removed
+        PolicyError: an unreadable zip, or one saved with a policy class that rehabbot refuses
             (:data:`REMOVED_POLICY_MODULES`; the message names it).
     """
     try:

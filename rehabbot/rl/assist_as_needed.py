@@ -59,9 +59,9 @@ class AssistAsNeeded:
         if not isinstance(getattr(base, "config", None), RehabEnvConfig):
             raise ValueError("AssistAsNeeded needs a single RehabEnv or PopulationEnv (or a "
                              "wrapper of one): it reads the env's current setpoints")
-        if base.control_mode != "joint_delta":
+        if base.config.control.control_mode != "joint_delta":
             raise ValueError(f"AssistAsNeeded supports control_mode='joint_delta', not "
-                             f"{base.control_mode!r}")
+                             f"{base.config.control.control_mode!r}")
         self.env = env
         self.forgetting = forgetting
         self.error_gain = error_gain

@@ -127,8 +127,8 @@ def tracking_error_features(obs: np.ndarray, center: np.ndarray, half_range: np.
     """``[(obs - center) / half_range, (theta* - theta) / 0.5 rad, (p* - p) / 0.1 m]``, plus
     ``tanh((theta* - theta) / fine_scale_rad)`` when given, for a float32 batch of the paper's
     observation layout (:func:`rehabbot.tasks.observation.tracking_slices`): the features that
-    the networks of the ``-v1`` agents read (rehabbot's ``TrackingErrorFeatures``, removed
-    with issue 26 after commit 51d9d71), in float32 and in their order of operations, so
+    the networks of the ``-v1`` agents read (``TrackingErrorFeatures`` of rehabbot at commit
+    51d9d71), in float32 and in their order of operations, so
     that the shipped agents act as they were trained."""
     theta_star, p_star, theta, p = tracking_slices(obs.shape[1])
     joint_error = (obs[:, theta_star] - obs[:, theta]) / 0.5

@@ -4,7 +4,8 @@ The rule: an env with ``randomization="transfer"`` (:data:`PRESETS`) draws, at e
 from the env's own ``np_random``, every quantity of :class:`RandomizationPreset` below, writes
 the drawn model parameters into the ``MjModel`` (always from the values the env was built with,
 so nothing accumulates over episodes), re-balances the home state for them, and keeps the draw
-(:class:`RandomizationDraw`: ``info["randomization"]`` at reset, ``env.unwrapped.randomization``).
+(:class:`RandomizationDraw`: ``info["randomization"]`` at reset,
+``env.unwrapped.randomization_draw``).
 ``randomization=None`` (every id but the ``-randomized-`` variants) draws nothing and changes
 nothing. What the preset cannot draw in place, the patient's segment lengths (they need a new
 scene), comes from the variant's population: each episode seats a body of a cohort drawn across

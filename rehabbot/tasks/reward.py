@@ -27,7 +27,7 @@ term                value
                     would have, by ``c + STOP_MARGIN`` at least (tracked in O(1) a step:
                     :func:`next_hold_gap`). ``"worst_case"``: ``-(steps left + 1) x`` the
                     worst per-step loss the bounds allow. ``safety_penalty_steps=K`` instead
-                    charges ``K`` steps at ``c`` at most (0.2.0's default, 100): smaller, and a
+                    charges ``K`` steps at ``c`` at most (e.g. 100): smaller, and a
                     stop can then pay
 ``smoothness``      ``-smoothness_weight x mean(((a_t - a_{t-1}) / (high - low))^2)`` (0 by default)
 ``effort``          ``-effort_weight x mean((tau / tau_limit)^2)`` (0 by default)
@@ -92,10 +92,10 @@ import numpy as np
 
 SAFETY_PENALTIES = ("hold", "worst_case")
 # Steps the safety penalty counts by default: None = every step left to the time limit, the
-# only count with which a stop never pays better than holding still (0.2.0 capped it at 100).
+# only count with which a stop never pays better than holding still.
 SAFETY_PENALTY_STEPS: int | None = None
 # What a stop costs beyond the best hold of its episode (reward units, on top of one step's
-# hold cost): the margin by which a stop never pays (issue 25; 20 x the -v1 time cost).
+# hold cost): the margin by which a stop never pays (20 x the -v1 time cost).
 STOP_MARGIN = 1.0
 PROGRESS_WEIGHT_PER_RAD = 10.0
 TIME_COST_PER_STEP = 0.05
@@ -346,7 +346,7 @@ class ProgressReward(Reward):
         smoothness, effort = self.optional_terms(outcome)
         if outcome.safety_stop:
             per_step = self.time_cost + self.smoothness_weight + self.effort_weight
-            if self.safety_penalty_steps is not None:  # 0.2.0's capped count: a stop can pay
+            if self.safety_penalty_steps is not None:  # a capped count: a stop can pay
                 gained = max(before - after, 0.0)
                 safety = -(self.progress_weight * gained
                            + self.steps_charged(outcome) * per_step)
@@ -413,7 +413,7 @@ class BilateralReward(ProgressReward):
         terms = super().terms(outcome)
         if outcome.safety_stop:
             gap = max(gap, gap_before)
-            if self.safety_penalty_steps is not None:  # 0.2.0's capped count
+            if self.safety_penalty_steps is not None:  # a capped count
                 terms["reward_safety"] -= self.steps_charged(outcome) * self.sync_weight * gap
             else:  # G already holds the sync costs; one step's more
                 terms["reward_safety"] -= self.sync_weight * gap

@@ -190,7 +190,7 @@ def stop_cases(env_id: str, control_mode: str = "joint_delta", seed: int = 0,
         expert_env.close()
 
 
-# -- a stop never pays (issue 25): push a joint into a stop, then hold from earlier states ----
+# -- a stop never pays: push a joint into a stop, then hold from earlier states --------------
 AUDIT_GAMMAS: tuple[float | None, ...] = (None, 0.95, 0.99, 0.999)  # None: undiscounted
 # Holding still in torque mode: a PD at this fraction of the robot's impedance gains, the
 # largest of 1, 0.3, 0.2, 0.1 with which every id holds its limb at rest for 1000 steps.
@@ -248,7 +248,7 @@ def push_action(env: gym.Env, joint: int, sign: int, fraction: float) -> np.ndar
     joint_position mode, the current setpoints with that joint moved by the delta bound."""
     base = env.unwrapped
     space = env.action_space
-    if base.control_mode == "joint_position":
+    if base.config.control.control_mode == "joint_position":
         action = np.asarray(base.controller.setpoint_rad, float).copy()
         action[joint] += sign * fraction * PAPER_DELTA_RAD
         return np.clip(action, space.low, space.high).astype(space.dtype)
@@ -264,7 +264,7 @@ def hold_action(env: gym.Env, held_rad: np.ndarray, servo: bool) -> np.ndarray:
     ``held_rad`` (at 50 Hz decisions the full gains are unstable)."""
     base = env.unwrapped
     space = env.action_space
-    mode = base.control_mode
+    mode = base.config.control.control_mode
     theta = base.data.qpos[base._qpos_adr]
     if mode == "torque":
         handles = getattr(base, "handles", None) or (base.handle,)
