@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from rehabbot.batch.tables import EnvTables
+from rehabbot.laws.work import accumulate_work, cuff_work_j
 
 CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
                        int(mujoco.mjtConstraint.mjCNSTR_CONTACT_PYRAMIDAL),
@@ -56,17 +57,18 @@ class CuffReadings:
                 "robot_work_j": zero, "robot_positive_work_j": zero}
 
     def meter_after_step(self, meter: dict, data: Any) -> dict[str, jax.Array]:
-        """``WorkMeter.after_step`` of each cuff: the force of the physics step before times
-        the cuff site's displacement since (the force on the limb is minus the constraint
-        force); the robots' work is the cuffs' sum."""
+        """``WorkMeter.after_step`` of each cuff (:func:`rehabbot.laws.work.cuff_work_j`): the
+        force of the physics step before times the cuff site's displacement since; the robots'
+        work and positive work are the cuffs' sums."""
         pos = data.site_xpos[self._cuff_sites]
-        works = jp.where(meter["meter_has_force"],
-                         jp.sum(meter["meter_force"] * (meter["meter_pos"] - pos), axis=1), 0.0)
+        works = jp.where(meter["meter_has_force"], cuff_work_j(
+            jp.unstack(meter["meter_force"], axis=-1), jp.unstack(meter["meter_pos"], axis=-1),
+            jp.unstack(pos, axis=-1)), 0.0)
+        works, positive = accumulate_work(jp, 0.0, 0.0, works)  # each cuff's meter
         force, has_force = self.rows_force(data)
         return {"meter_pos": pos, "meter_force": force, "meter_has_force": has_force,
                 "robot_work_j": meter["robot_work_j"] + jp.sum(works),
-                "robot_positive_work_j": meter["robot_positive_work_j"]
-                + jp.sum(jp.maximum(works, 0.0))}
+                "robot_positive_work_j": meter["robot_positive_work_j"] + jp.sum(positive)}
 
     def forces(self, data: Any) -> jax.Array:
         """Each cuff's force [N] (arms,): 0 while the cuffs' constraints are not active, as

@@ -42,6 +42,7 @@ from rehabbot.batch.patient_tables import read_patient_tables
 from rehabbot.batch.patients import PatientStack, stack_patients
 from rehabbot.batch.state import State
 from rehabbot.batch.tables import POPULATION_IDS, RULE_CODES, EnvTables, check_id, read_tables
+from rehabbot.laws.work import assistance_ratio
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
 # A non-finite cuff force reads as this in the agent observation (as the CPU env does).
@@ -189,7 +190,7 @@ class BatchedRehabEnv:
                     "assistance_ratio": jp.ones((), jp.float32),
                     "patient_torque_nm": jp.zeros(self.tables.phi_adr.shape[0], jp.float32)}
         robot, patient = meter["robot_positive_work_j"], meter["patient_positive_work_j"]
-        ratio = jp.where(patient > 0.0, robot / jp.maximum(robot + patient, 1e-30), 1.0)
+        ratio = assistance_ratio(jp, robot, patient)
         return {"robot_work_j": meter["robot_work_j"], "patient_work_j": meter["patient_work_j"],
                 "assistance_ratio": ratio,
                 "patient_torque_nm": self.patient.exercised_torque(meter)}

@@ -1,11 +1,12 @@
 """The rigid patient's joint torques in the batched env, every physics step: JAX's
 :class:`rehabbot.sim.patient_drive.PatientDrive`, from the CPU drive's own tables
-(:mod:`rehabbot.batch.patient_tables`).
+(:mod:`rehabbot.batch.patient_tables`) and with its laws (:mod:`rehabbot.laws.patient`, the
+work: :mod:`rehabbot.laws.work`).
 
 Per physics step, on the compliant exercised joints (written into ``qfrc_applied`` before the
 step, as the CPU drive does):
 
-* the **stretch reflex** of spasticity (:func:`rehabbot.sim.conditions.reflex_torque_nm`), fed
+* the **stretch reflex** of spasticity (:func:`rehabbot.laws.patient.reflex_torque_nm`), fed
   by the joint velocity of the reflex latency ago (a delay line of physics steps);
 * **voluntary effort**: the active patient's PD pull towards the goal it noticed
   ``reaction_delay_s`` ago, with the limb's own weight carried (``qfrc_bias`` as MuJoCo left
@@ -24,7 +25,6 @@ the keys of :meth:`BatchedPatientDrive.start`.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -34,11 +34,9 @@ import numpy as np
 
 from rehabbot.batch.padding import stack_padded
 from rehabbot.batch.patient_tables import PatientTables
-from rehabbot.sim.conditions import CATCH_RAMP, CATCH_SHIFT_PER_RAD_S, RELEASE_WIDTH
-from rehabbot.sim.patient_drive import ACTIVE_DAMPING_S, RESIST_VELOCITY_RAD_S
-from rehabbot.sim.tremor import TREMOR_CORRELATION_S, TREMOR_DRIFT_HZ, TREMOR_MODULATION
-
-TWO_PI = 2.0 * math.pi
+from rehabbot.laws import patient as laws
+from rehabbot.laws.patient import TWO_PI
+from rehabbot.laws.work import accumulate_work, joint_work_j
 
 
 def _f32(array: Any) -> jax.Array:
@@ -95,7 +93,6 @@ class BatchedPatientDrive:
             return _f32(np.stack([np.asarray(v, dtype=float) for v in values]))
 
         self._low, self._high = stack([t.low_rad for t in rows]), stack([t.high_rad for t in rows])
-        self._span = stack([t.high_rad - t.low_rad for t in rows])
         self._gain = stack([t.reflex_gain_nms_per_rad for t in rows])
         reflexes = [t.reflex for t in rows]
         # A patient without spasticity: gain 0 (its reflex torque is 0 wherever it fires).
@@ -115,9 +112,7 @@ class BatchedPatientDrive:
         self._goals = stack([stack_padded(list(t.goals_rad), count) for t in rows])
         self._tremor_hz = stack([t.tremor_hz for t in rows])
         self._tremor_nm = stack([t.tremor_amplitude_nm for t in rows])
-        control_dt_s = first.frame_skip * first.dt_s
-        self._decay = math.exp(-control_dt_s / TREMOR_CORRELATION_S)
-        self._noise = math.sqrt(1.0 - self._decay * self._decay)
+        self._decay, self._noise = laws.tremor_decay(first.frame_skip * first.dt_s)
 
     @property
     def joints(self) -> int:
@@ -136,10 +131,9 @@ class BatchedPatientDrive:
         if self.has_tremor:
             phase_key, drift_key, modulation_key = jax.random.split(rng, 3)
             state["tremor_phase"] = jax.random.uniform(phase_key, (m,), jp.float32, 0.0, TWO_PI)
-            state["tremor_drift_hz"] = TREMOR_DRIFT_HZ * jax.random.normal(drift_key, (),
-                                                                           jp.float32)
-            state["tremor_modulation"] = jp.clip(
-                jax.random.normal(modulation_key, (), jp.float32), -1.0, 1.0)
+            state["tremor_drift_hz"], state["tremor_modulation"] = laws.tremor_start(
+                jp, jax.random.normal(drift_key, (), jp.float32),
+                jax.random.normal(modulation_key, (), jp.float32))
         return state
 
     def begin_step(self, state: dict, patient: jax.Array, exercise: jax.Array,
@@ -152,10 +146,9 @@ class BatchedPatientDrive:
         state = {**state, "patient_goal_index": line}
         if self.has_tremor:
             z_drift, z_modulation = jax.random.normal(rng, (2,), jp.float32)
-            state["tremor_drift_hz"] = self._decay * state["tremor_drift_hz"] \
-                + self._noise * TREMOR_DRIFT_HZ * z_drift
-            state["tremor_modulation"] = jp.clip(
-                self._decay * state["tremor_modulation"] + self._noise * z_modulation, -1.0, 1.0)
+            state["tremor_drift_hz"], state["tremor_modulation"] = laws.tremor_processes(
+                jp, state["tremor_drift_hz"], state["tremor_modulation"], z_drift, z_modulation,
+                self._decay, self._noise)
         noticed = line[self.goal_lag - self._goal_lag[patient]]
         return state, self._goals[patient, exercise, noticed]
 
@@ -171,14 +164,12 @@ class BatchedPatientDrive:
         torque = self._reflex(patient, delayed, q) + self._effort(
             patient, q, v, goal, data.qfrc_bias[self._dof])
         if self.has_tremor:
-            amplitude = self._tremor_nm[patient] * (
-                1.0 + TREMOR_MODULATION * state["tremor_modulation"])
-            phase = state["tremor_phase"]
-            torque = torque + amplitude * jp.sin(phase)
-            step = TWO_PI * (self._tremor_hz[patient] + state["tremor_drift_hz"]) \
-                * self.tables.dt_s
-            state["tremor_phase"] = jp.mod(phase + step, TWO_PI)
-        torque = jp.clip(torque, -self._peak_neg[patient], self._peak_pos[patient])
+            tremor, state["tremor_phase"] = laws.tremor_torque_nm(
+                jp, self._tremor_nm[patient], state["tremor_modulation"],
+                self._tremor_hz[patient], state["tremor_drift_hz"], state["tremor_phase"],
+                self.tables.dt_s, wrap=True)
+            torque = torque + tremor
+        torque = laws.saturate_nm(jp, torque, self._peak_pos[patient], self._peak_neg[patient])
         state["patient_torque_nm"] = torque
         data = data.replace(qfrc_applied=data.qfrc_applied.at[self._dof].set(torque))
         return state, data, q
@@ -192,52 +183,40 @@ class BatchedPatientDrive:
 
     def count_work(self, state: dict, data: Any, q_before: jax.Array) -> dict:
         """The patient's work in the physics step just taken (``WorkMeter.add_patient``)."""
-        work = jp.dot(state["patient_torque_nm"], data.qpos[self._qpos] - q_before)
-        return {**state, "patient_work_j": state["patient_work_j"] + work,
-                "patient_positive_work_j": state["patient_positive_work_j"]
-                + jp.maximum(work, 0.0)}
+        work = joint_work_j(state["patient_torque_nm"], q_before, data.qpos[self._qpos])
+        total, positive = accumulate_work(jp, state["patient_work_j"],
+                                          state["patient_positive_work_j"], work)
+        return {**state, "patient_work_j": total, "patient_positive_work_j": positive}
 
     # -- the torque laws -------------------------------------------------------------------
     def _reflex(self, patient: jax.Array, velocity: jax.Array, q: jax.Array) -> jax.Array:
-        """:func:`rehabbot.sim.conditions.reflex_torque_nm` on every joint (``velocity``
+        """:func:`rehabbot.laws.patient.reflex_torque_nm` on every joint (``velocity``
         already delayed)."""
         if not self.has_reflex:
             return jp.zeros_like(q)
-        speed = jp.abs(velocity)
-        excess = speed - self._threshold[patient]
-        lengthening = velocity > 0
-        stretch = jp.where(lengthening, q - self._low[patient],
-                           self._high[patient] - q) / self._span[patient]
-        past = stretch - (self._catch[patient] - CATCH_SHIFT_PER_RAD_S * speed)
-        build_up = jp.minimum(past / CATCH_RAMP, 1.0)
-        release_to = self._release_to[patient]
-        release = release_to + (1.0 - release_to) * jp.exp(
-            -jp.maximum(past - CATCH_RAMP, 0.0) / RELEASE_WIDTH)
-        magnitude = self._reflex_scale[patient] * self._gain[patient] * excess * build_up \
-            * release
-        fires = (excess > 0.0) & (past > 0.0)
-        return jp.where(fires, jp.where(lengthening, -magnitude, magnitude), 0.0)
+        return laws.reflex_torque_nm(
+            jp, velocity, q, self._low[patient], self._high[patient],
+            self._reflex_scale[patient] * self._gain[patient], self._threshold[patient],
+            self._catch[patient], self._release_to[patient])
 
     def _effort(self, patient: jax.Array, q: jax.Array, v: jax.Array, goal: jax.Array,
                 bias: jax.Array) -> jax.Array:
         """The voluntary torque of the patient's effort mode."""
-        laws = {"passive": lambda: jp.zeros_like(q)}
+        by_mode = {"passive": lambda: jp.zeros_like(q)}
         if "active_assisted" in self.modes:
             def pull() -> jax.Array:
-                kp = self._kp[patient]
-                torque = bias + kp * (goal - q) - ACTIVE_DAMPING_S * kp * v
-                return jp.clip(torque, -self._available_neg[patient],
-                               self._available_pos[patient])
-            laws["active_assisted"] = pull
+                return laws.active_pull_nm(jp, q, v, goal, bias, self._kp[patient],
+                                           self._available_pos[patient],
+                                           self._available_neg[patient])
+            by_mode["active_assisted"] = pull
         if "resistive" in self.modes:
             def push() -> jax.Array:
-                direction = jp.tanh(v / RESIST_VELOCITY_RAD_S)
-                return -direction * jp.where(direction > 0, self._available_neg[patient],
-                                             self._available_pos[patient])
-            laws["resistive"] = push
+                return laws.resistive_push_nm(jp, v, self._available_pos[patient],
+                                              self._available_neg[patient])
+            by_mode["resistive"] = push
         if len(self.modes) == 1:
-            return laws[self.modes[0]]()
-        torques = [laws[mode]() for mode in self.modes]
+            return by_mode[self.modes[0]]()
+        torques = [by_mode[mode]() for mode in self.modes]
         codes = [_MODES.index(mode) for mode in self.modes]
         return jp.select([self._mode[patient] == c for c in codes[:-1]], torques[:-1],
                          torques[-1])

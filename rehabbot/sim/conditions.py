@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from rehabbot.common.checks import as_dataclass, check_choice, check_number, is_real
+from rehabbot.laws import patient as laws
+from rehabbot.laws import scalar
 
 # Modified Ashworth Scale grades (Bohannon & Smith 1987).
 MAS_GRADES: tuple[str, ...] = ("0", "1", "1+", "2", "3", "4")
@@ -45,9 +47,10 @@ class SpasticReflex:
     ``gain_scale`` multiplies each joint's reference reflex gain [N·m per rad/s above the
     threshold]; ``threshold_deg_s`` is the stretch velocity below which no reflex fires;
     ``catch_at_rest`` is the stretch position (fraction of the range, 0 at its start) where
-    the reflex catches at zero speed, moving earlier by ``CATCH_SHIFT_PER_RAD_S`` per rad/s of
-    stretch speed (the lambda model's lambda* = lambda - mu omega); ``release_to`` is the
-    fraction of the reflex left after the catch releases (1: no release).
+    the reflex catches at zero speed, moving earlier by
+    ``rehabbot.laws.patient.CATCH_SHIFT_PER_RAD_S`` per rad/s of stretch speed (the lambda
+    model's lambda* = lambda - mu omega); ``release_to`` is the fraction of the reflex left
+    after the catch releases (1: no release).
     """
 
     gain_scale: float
@@ -56,9 +59,6 @@ class SpasticReflex:
     release_to: float
 
 
-CATCH_SHIFT_PER_RAD_S = 0.2  # mu: the catch moves this fraction of the range per rad/s
-CATCH_RAMP = 0.03  # the catch builds up over this fraction of the range
-RELEASE_WIDTH = 0.05  # the release decays over this fraction of the range
 # Stretch-reflex latency: SpasticMyoElbow (Yu et al. 2024, arXiv:2412.04700).
 REFLEX_LATENCY_S = 0.03
 
@@ -244,32 +244,17 @@ def as_condition(value: Any) -> PatientCondition:
     return as_dataclass(PatientCondition, value, "condition")
 
 
-def catch_position(reflex: SpasticReflex, speed_rad_s: float) -> float:
-    """Where in the range (fraction from its start) the reflex catches at ``speed_rad_s``."""
-    return reflex.catch_at_rest - CATCH_SHIFT_PER_RAD_S * speed_rad_s
-
-
 def reflex_torque_nm(reflex: SpasticReflex | None, gain_nms_per_rad: float,
                      velocity_rad_s: float, position_rad: float, low_rad: float,
                      high_rad: float) -> float:
     """The stretch-reflex torque [N·m] of one joint moving at ``velocity_rad_s`` (already
-    delayed by the reflex latency) at ``position_rad`` in its range ``[low_rad, high_rad]``;
-    it opposes the motion. Zero below the grade's velocity threshold and before the catch.
+    delayed by the reflex latency) at ``position_rad`` in its range ``[low_rad, high_rad]``
+    (:func:`rehabbot.laws.patient.reflex_torque_nm` with the grade's parameters; 0.0 without
+    spasticity); it opposes the motion.
     """
     if reflex is None:
         return 0.0
-    speed = abs(velocity_rad_s)
-    excess = speed - math.radians(reflex.threshold_deg_s)
-    if excess <= 0.0:
-        return 0.0
-    span = high_rad - low_rad
-    stretch = (position_rad - low_rad) / span if velocity_rad_s > 0 else \
-        (high_rad - position_rad) / span
-    past = stretch - catch_position(reflex, speed)
-    if past <= 0.0:
-        return 0.0
-    build_up = min(past / CATCH_RAMP, 1.0)
-    release = reflex.release_to + (1.0 - reflex.release_to) * math.exp(
-        -max(past - CATCH_RAMP, 0.0) / RELEASE_WIDTH)
-    magnitude = reflex.gain_scale * gain_nms_per_rad * excess * build_up * release
-    return -magnitude if velocity_rad_s > 0 else magnitude
+    return laws.reflex_torque_nm(
+        scalar, velocity_rad_s, position_rad, low_rad, high_rad,
+        reflex.gain_scale * gain_nms_per_rad, math.radians(reflex.threshold_deg_s),
+        reflex.catch_at_rest, reflex.release_to)

@@ -48,23 +48,18 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from rehabbot.laws import patient as patient_laws
+from rehabbot.laws import scalar
+from rehabbot.laws.patient import CATCH_RAMP, CATCH_SHIFT_PER_RAD_S, RELEASE_WIDTH
 from rehabbot.sim import statics
 from rehabbot.sim.conditions import (
-    CATCH_RAMP,
-    CATCH_SHIFT_PER_RAD_S,
     REFLEX_GAIN_NMS_PER_RAD,
     REFLEX_LATENCY_S,
-    RELEASE_WIDTH,
     PatientCondition,
     healthy_strength_nm,
 )
 from rehabbot.sim.fatigue import GENERAL_3CCR, KNEE_3CCR, ThreeCompartmentFatigue
 from rehabbot.sim.muscles import FORCE_INDEX, PassiveForce, limb_muscles, moment_arms_m
-from rehabbot.sim.patient_drive import (
-    ACTIVE_DAMPING_S,
-    ACTIVE_SATURATION_RAD,
-    RESIST_VELOCITY_RAD_S,
-)
 from rehabbot.sim.scene import Scene
 from rehabbot.sim.tremor import Tremor
 
@@ -127,7 +122,8 @@ class MuscleDrive:
         strength = [healthy_strength_nm(b, profile.mass_kg, profile.sex) for b in bases]
         self.available_nm = [(share * pos, share * neg) for pos, neg in strength]
         self._mode = condition.effort if share > 0 else "passive"
-        self._kp = [max(pos, neg) / ACTIVE_SATURATION_RAD for pos, neg in self.available_nm]
+        self._kp = [patient_laws.active_gain_nm_per_rad(scalar, pos, neg)
+                    for pos, neg in self.available_nm]
         self._tremor = Tremor(condition.tremor_hz, condition.tremor_amplitude_nm, len(dofs),
                               self.dt_s) if condition.has_tremor else None
         # Whether the patient wishes joint torques (effort, tremor) that muscles must give.
@@ -290,14 +286,11 @@ class MuscleDrive:
         if self._mode != "passive":
             for j, (adr, dof) in enumerate(zip(self._qadr, self._dofs, strict=True)):
                 q, v = qpos[adr], qvel[dof]
-                pos, neg = self.available_nm[j]
                 if self._mode == "active_assisted":
-                    kp = self._kp[j]
-                    wish = bias[dof] + kp * (goal[j] - q) - ACTIVE_DAMPING_S * kp * v
-                    wishes[j] = min(max(wish, -neg), pos)
+                    wishes[j] = patient_laws.active_pull_nm(scalar, q, v, goal[j], bias[dof],
+                                                            self._kp[j], *self.available_nm[j])
                 else:
-                    push = math.tanh(v / RESIST_VELOCITY_RAD_S)
-                    wishes[j] = -push * (neg if push > 0 else pos)
+                    wishes[j] = patient_laws.resistive_push_nm(scalar, v, *self.available_nm[j])
         if self._tremor is not None:
             self._tremor.add_torques(wishes)
         return wishes

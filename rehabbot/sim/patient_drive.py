@@ -4,7 +4,7 @@
 :class:`PatientDrive` steps the physics one step at a time and, before each step, writes the
 patient's torques on the compliant exercised joints into ``data.qfrc_applied``:
 
-* the **stretch reflex** of spasticity (:func:`rehabbot.sim.conditions.reflex_torque_nm`), fed
+* the **stretch reflex** of spasticity (:func:`rehabbot.laws.patient.reflex_torque_nm`), fed
   by the joint velocity of ``REFLEX_LATENCY_S`` ago;
 * **tremor** (:class:`rehabbot.sim.tremor.Tremor`): ``A (1 + 0.25 m(t)) sin(phase_j(t))``,
   its frequency and amplitude drifting, drawn from the env's ``np_random``;
@@ -22,6 +22,10 @@ with the stretch speed without limit (2,372 N·m with the safety stops off).
 :meth:`PatientDrive.run` is the physics loop of a control step with these torques; the env
 calls it through :class:`rehabbot.sim.physics.LimbPhysics`, which passes the
 :class:`~rehabbot.sim.physics.WorkMeter` that counts the work.
+
+The laws are those of :mod:`rehabbot.laws.patient`, evaluated joint by joint on floats (the
+scalar namespace, :mod:`rehabbot.laws.scalar`); this class keeps their state (the delay
+lines, the tremor) and their per-joint parameters.
 """
 
 from __future__ import annotations
@@ -32,19 +36,22 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from rehabbot.laws import patient as laws
+from rehabbot.laws import scalar
+from rehabbot.laws.patient import (  # noqa: F401  (re-exported)
+    ACTIVE_DAMPING_S,
+    ACTIVE_SATURATION_RAD,
+    RESIST_VELOCITY_RAD_S,
+)
+from rehabbot.laws.work import joint_work_j
 from rehabbot.sim.conditions import (
     REFLEX_GAIN_NMS_PER_RAD,
     REFLEX_LATENCY_S,
     PatientCondition,
     healthy_strength_nm,
-    reflex_torque_nm,
 )
 from rehabbot.sim.scene import Scene
 from rehabbot.sim.tremor import Tremor
-
-RESIST_VELOCITY_RAD_S = 0.1  # the resistive patient reaches full push at this speed
-ACTIVE_SATURATION_RAD = 0.35  # the active patient pulls with full strength beyond this error
-ACTIVE_DAMPING_S = 0.3  # Kd = this x Kp
 
 
 class PatientDrive:
@@ -69,13 +76,19 @@ class PatientDrive:
         profile = scene.profile
         self._reflex = condition.reflex
         self._gain = [REFLEX_GAIN_NMS_PER_RAD[b] for b in bases]
+        # The reflex law's parameters: the grade's gain per joint, its threshold in rad/s.
+        self._reflex_law = None if self._reflex is None else (
+            [self._reflex.gain_scale * g for g in self._gain],
+            math.radians(self._reflex.threshold_deg_s), self._reflex.catch_at_rest,
+            self._reflex.release_to)
         share = condition.strength_fraction * condition.effort_fraction
         strength = [healthy_strength_nm(b, profile.mass_kg, profile.sex) for b in bases]
         self.available_nm = [(share * pos, share * neg) for pos, neg in strength]
         # The physiological bound of the summed torques: [-healthy negative, +healthy positive].
         self.peak_nm = [(pos, neg) for pos, neg in strength]
         self._mode = condition.effort if share > 0 else "passive"
-        self._kp = [max(pos, neg) / ACTIVE_SATURATION_RAD for pos, neg in self.available_nm]
+        self._kp = [laws.active_gain_nm_per_rad(scalar, pos, neg)
+                    for pos, neg in self.available_nm]
         self._lag = max(1, round(REFLEX_LATENCY_S / self.dt_s))
         self._velocity_history = [[0.0] * len(dofs) for _ in range(self._lag)]
         self._goal_lag = round(condition.reaction_delay_s / (frame_skip * self.dt_s))
@@ -160,16 +173,22 @@ class PatientDrive:
             self._tremor.advance(rng, self.frame_skip * self.dt_s)
         qpos, qvel, applied, bias = data.qpos, data.qvel, data.qfrc_applied, data.qfrc_bias
         dofs, qadr = self._dofs, self._qadr
+        # What the laws read: velocities for the reflex and the effort, the bias for the pull.
+        moves = self._reflex_law is not None or self._mode != "passive"
+        pulls = self._mode == "active_assisted"
+        v = b = q = [qpos.item(a) for a in qadr]
         for _ in range(self.frame_skip):
-            q = [qpos[a] for a in qadr]
-            v = [qvel[d] for d in dofs]
-            torque = self._torques(q, v, goal, [bias[d] for d in dofs])
+            if moves:
+                v = [qvel.item(d) for d in dofs]
+            if pulls:
+                b = [bias.item(d) for d in dofs]
+            torque = self._torques(q, v, goal, b)
             for d, t in zip(dofs, torque, strict=True):
                 applied[d] = t
             mujoco.mj_step(model, data)
-            work = 0.0
-            for a, t, before in zip(qadr, torque, q, strict=True):
-                work += t * (qpos[a] - before)
+            after = [qpos.item(a) for a in qadr]
+            work = joint_work_j(torque, q, after)
+            q = after
             meter.add_patient(work)
             meter.after_step(data)
         for i, t in zip(self.exercised_index, torque, strict=True):
@@ -178,32 +197,31 @@ class PatientDrive:
     # -- the torque laws -------------------------------------------------------------------
     def _torques(self, q: list[float], v: list[float], goal: list[float],
                  bias: list[float]) -> list[float]:
+        """This physics step's torques on the compliant joints (:mod:`rehabbot.laws.patient`):
+        reflex + voluntary + tremor, saturated at the healthy peak."""
         history = self._velocity_history
         slot = self._step_index % self._lag
         delayed = history[slot]  # the velocity of `lag` physics steps ago
         history[slot] = v
         self._step_index += 1
-        torque = [0.0] * len(q)
-        reflex, mode = self._reflex, self._mode
+        reflex_law, mode, tremor = self._reflex_law, self._mode, self._tremor
+        tremor_nm = tremor.torques_nm() if tremor is not None else None
+        low, high, kp, available, peak = self._low, self._high, self._kp, self.available_nm, \
+            self.peak_nm
+        if reflex_law is not None:
+            gains, threshold, catch, release_to = reflex_law
+        torque = []
         for j in range(len(q)):
             t = 0.0
-            if reflex is not None:
-                t += reflex_torque_nm(reflex, self._gain[j], delayed[j], q[j], self._low[j],
-                                      self._high[j])
+            if reflex_law is not None:
+                t = laws.reflex_torque_nm(scalar, delayed[j], q[j], low[j], high[j], gains[j],
+                                          threshold, catch, release_to)
             if mode == "active_assisted":
-                kp = self._kp[j]
-                pull = bias[j] + kp * (goal[j] - q[j]) - ACTIVE_DAMPING_S * kp * v[j]
-                pos, neg = self.available_nm[j]
-                t += min(max(pull, -neg), pos)
+                t += laws.active_pull_nm(scalar, q[j], v[j], goal[j], bias[j], kp[j],
+                                         *available[j])
             elif mode == "resistive":
-                pos, neg = self.available_nm[j]
-                push = math.tanh(v[j] / RESIST_VELOCITY_RAD_S)
-                t -= push * (neg if push > 0 else pos)
-            torque[j] = t
-        if self._tremor is not None:
-            self._tremor.add_torques(torque)
-        peak = self.peak_nm
-        for j in range(len(q)):
-            pos, neg = peak[j]
-            torque[j] = min(max(torque[j], -neg), pos)
+                t += laws.resistive_push_nm(scalar, v[j], *available[j])
+            if tremor_nm is not None:
+                t += tremor_nm[j]
+            torque.append(laws.saturate_nm(scalar, t, *peak[j]))
         return torque

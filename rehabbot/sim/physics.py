@@ -41,6 +41,8 @@ import numpy as np
 from mujoco import mju_dot
 
 from rehabbot.common.arrays import as_index
+from rehabbot.laws import scalar
+from rehabbot.laws.work import accumulate_work, assistance_ratio, cuff_work_j
 from rehabbot.sim.conditions import PatientCondition
 from rehabbot.sim.muscle_drive import MuscleDrive
 from rehabbot.sim.muscles import MuscleMeter, limb_muscles
@@ -309,7 +311,7 @@ class WorkMeter:
         self.patient_j = 0.0
         self.patient_positive_j = 0.0
         self._force: list[float] | None = None
-        self._pos: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self._pos: list[float] = [0.0, 0.0, 0.0]
 
     def bind(self, data: mujoco.MjData) -> None:
         """Cache a view of the patient's cuff site position (again after a pickle round trip)."""
@@ -319,37 +321,35 @@ class WorkMeter:
         """Start counting from the state in ``data`` (after ``mj_forward``)."""
         self.reset_counts()
         self.bind(data)
-        self._pos = tuple(self._site_pos.tolist())
+        self._pos = self._site_pos.tolist()
 
     def after_step(self, data: mujoco.MjData) -> None:
         """Account for the robot's work up to the state ``data`` held at the start of the last
         physics step (``mj_step`` leaves its positions and constraint forces there): the force
-        of the step before times the displacement since."""
-        x, y, z = self._site_pos.tolist()
+        of the step before times the displacement since, as
+        :func:`rehabbot.laws.work.cuff_work_j` counts it."""
+        pos = self._site_pos.tolist()
         force = self._force
         if force is not None:
-            px, py, pz = self._pos
-            fx, fy, fz = force
-            work = fx * (px - x) + fy * (py - y) + fz * (pz - z)  # the force on the limb is -f
-            self.robot_j += work
-            if work > 0.0:
-                self.robot_positive_j += work
-        self._pos = (x, y, z)
+            work = cuff_work_j(force, self._pos, pos)
+            self.robot_j, self.robot_positive_j = accumulate_work(
+                scalar, self.robot_j, self.robot_positive_j, work)
+        self._pos = pos
         row = self._row
         efc = data.efc_force
         self._force = efc[row:row + 3].tolist() if len(efc) >= row + 3 else None
 
     def add_patient(self, work_j: float) -> None:
-        self.patient_j += work_j
-        if work_j > 0.0:
-            self.patient_positive_j += work_j
+        """Add the patient's work of one physics step."""
+        self.patient_j, self.patient_positive_j = accumulate_work(
+            scalar, self.patient_j, self.patient_positive_j, work_j)
 
     @property
     def assistance_ratio(self) -> float:
         """Robot's positive work / all positive work on the limb; 1.0 until the patient has
-        done positive work (the robot carries the limb)."""
-        total = self.robot_positive_j + self.patient_positive_j
-        return self.robot_positive_j / total if self.patient_positive_j > 0.0 else 1.0
+        done positive work (the robot carries the limb):
+        :func:`rehabbot.laws.work.assistance_ratio`."""
+        return assistance_ratio(scalar, self.robot_positive_j, self.patient_positive_j)
 
 
 class LimbPhysics:
@@ -443,8 +443,7 @@ class LimbPhysics:
         meters = self.meters
         patient_positive = sum(m.patient_positive_j for m in meters)
         robot_positive = sum(m.robot_positive_j for m in meters)
-        ratio = robot_positive / (robot_positive + patient_positive) \
-            if patient_positive > 0.0 else 1.0
+        ratio = assistance_ratio(scalar, robot_positive, patient_positive)
         return {"patient_torque_nm": self.torque_nm.copy(),
                 "patient_work_j": sum(m.patient_j for m in meters),
                 "robot_work_j": sum(m.robot_j for m in meters), "assistance_ratio": ratio}

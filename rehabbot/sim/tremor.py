@@ -1,5 +1,6 @@
 """The patient's tremor: a torque on each compliant exercised joint,
-``A (1 + 0.25 m(t)) sin(phase_j(t))``, the phase advancing at ``tremor_hz + df(t)``.
+``A (1 + 0.25 m(t)) sin(phase_j(t))``, the phase advancing at ``tremor_hz + df(t)``
+(the laws: :mod:`rehabbot.laws.patient`).
 
 ``df`` (0.2 Hz standard deviation) and ``m`` (clipped to +-1) are Ornstein-Uhlenbeck processes
 with a 2 s time constant, drawn from the env's ``np_random`` at each control step; each joint
@@ -10,13 +11,16 @@ excitations of the muscles that pull each way (:class:`~rehabbot.sim.muscle_driv
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-TREMOR_DRIFT_HZ = 0.2  # standard deviation of the tremor frequency's drift
-TREMOR_MODULATION = 0.25  # amplitude modulation depth
-TREMOR_CORRELATION_S = 2.0  # time constant of the drift and modulation
+from rehabbot.laws import patient as laws
+from rehabbot.laws import scalar
+from rehabbot.laws.patient import (  # noqa: F401  (re-exported)
+    TREMOR_CORRELATION_S,
+    TREMOR_DRIFT_HZ,
+    TREMOR_MODULATION,
+    TWO_PI,
+)
 
 
 class Tremor:
@@ -35,24 +39,31 @@ class Tremor:
 
     def reset(self, rng: np.random.Generator) -> None:
         """Draw each joint's phase and the processes' start from ``rng``."""
-        self.phase = rng.uniform(0.0, 2.0 * math.pi, len(self.phase)).tolist()
-        self.drift_hz = float(rng.normal(0.0, TREMOR_DRIFT_HZ))
-        self.modulation = float(np.clip(rng.normal(0.0, 1.0), -1.0, 1.0))
+        self.phase = rng.uniform(0.0, TWO_PI, len(self.phase)).tolist()
+        z_drift = float(rng.normal(0.0, 1.0))
+        z_modulation = float(rng.normal(0.0, 1.0))
+        self.drift_hz, self.modulation = laws.tremor_start(scalar, z_drift, z_modulation)
 
     def advance(self, rng: np.random.Generator, control_dt_s: float) -> None:
         """One control step of the drift and modulation (exact Ornstein-Uhlenbeck update)."""
-        decay = math.exp(-control_dt_s / TREMOR_CORRELATION_S)
-        noise = math.sqrt(1.0 - decay * decay)
+        decay, noise = laws.tremor_decay(control_dt_s)
         z_drift, z_mod = rng.normal(0.0, 1.0, 2).tolist()
-        self.drift_hz = decay * self.drift_hz + noise * TREMOR_DRIFT_HZ * z_drift
-        self.modulation = min(max(decay * self.modulation + noise * z_mod, -1.0), 1.0)
+        self.drift_hz, self.modulation = laws.tremor_processes(
+            scalar, self.drift_hz, self.modulation, z_drift, z_mod, decay, noise)
+
+    def torques_nm(self) -> list[float]:
+        """This physics step's tremor torque on each joint [N m]; the phases advance."""
+        amplitude, modulation = self.amplitude_nm, self.modulation
+        frequency, drift, dt, law = self.frequency_hz, self.drift_hz, self.dt_s, \
+            laws.tremor_torque_nm
+        phase = self.phase
+        torque = [0.0] * len(phase)
+        for j, p in enumerate(phase):
+            torque[j], phase[j] = law(scalar, amplitude, modulation, frequency, drift, p, dt)
+        return torque
 
     def add_torques(self, torque: list[float]) -> None:
         """Add this physics step's tremor torque to each joint's ``torque`` [N m] and advance
         the phases."""
-        amplitude = self.amplitude_nm * (1.0 + TREMOR_MODULATION * self.modulation)
-        step = 2.0 * math.pi * (self.frequency_hz + self.drift_hz) * self.dt_s
-        phase = self.phase
-        for j in range(len(torque)):
-            torque[j] += amplitude * math.sin(phase[j])
-            phase[j] += step
+        for j, t in enumerate(self.torques_nm()):
+            torque[j] += t
