@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from rehabbot.batch.tables import EnvTables
+from rehabbot.laws.safety import force_magnitude_n, unintended_contact
 from rehabbot.laws.work import accumulate_work, cuff_work_j
 
 CONTACT_CONSTRAINTS = (int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS),
@@ -75,7 +76,7 @@ class CuffReadings:
         the CPU reads them."""
         impl = data._impl
         rows = self._tables.cuff_rows.tolist()
-        forces = jp.stack([jp.linalg.norm(impl.efc__force[row:row + 3]) for row in rows])
+        forces = force_magnitude_n(jp.stack([impl.efc__force[row:row + 3] for row in rows]))
         return jp.where(jp.reshape(impl.ne, ()) >= max(rows) + 3, forces, 0.0)
 
     def touch(self, data: Any) -> jax.Array:
@@ -86,10 +87,7 @@ class CuffReadings:
         contact_row = rows & jp.isin(impl.efc__type, self._contact_types)
         cid = jp.clip(impl.efc__id, 0, impl.contact__geom.shape[0] - 1)
         geom = impl.contact__geom[cid]
-        robot, other = self._is_robot[geom], self._is_other[geom]
-        hit = (robot[:, 0] & other[:, 1]) | (robot[:, 1] & other[:, 0])
-        if self._tables.robots_collide:  # two robots' geoms touching
-            owner = self._robot_of[geom]
-            hit = hit | ((owner[:, 0] >= 0) & (owner[:, 1] >= 0) & (owner[:, 0] != owner[:, 1]))
-        deep = impl.contact__dist[cid] < -self._tables.contact_tolerance_m
-        return jp.any(contact_row & hit & deep)
+        owner = self._robot_of[geom] if self._tables.robots_collide else None
+        return unintended_contact(self._is_robot[geom], self._is_other[geom],
+                                  impl.contact__dist[cid], self._tables.contact_tolerance_m,
+                                  owner, counted=contact_row)

@@ -42,6 +42,14 @@ from rehabbot.batch.patient_tables import read_patient_tables
 from rehabbot.batch.patients import PatientStack, stack_patients
 from rehabbot.batch.state import State
 from rehabbot.batch.tables import POPULATION_IDS, RULE_CODES, EnvTables, check_id, read_tables
+from rehabbot.laws.control import SETPOINT_LAWS, clip_to_box, motor_torque_nm, native_action
+from rehabbot.laws.safety import (
+    beyond_range,
+    blown_up,
+    first_rule,
+    outside_box,
+    over_force_limit,
+)
 from rehabbot.laws.work import assistance_ratio
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
@@ -476,21 +484,16 @@ class BatchedRehabEnv:
         patient = info["patient"]
         w = self._of(patient)
         action = jp.asarray(action, jp.float32)
-        finite = jp.isfinite(action)
-        clipped = jp.sum(~finite | (jp.abs(action) > 1.0)).astype(jp.int32)
-        unit = jp.clip(jp.where(finite, action, 0.0), -1.0, 1.0)
-        native = self._center + self._half * unit
+        unit, clipped = clip_to_box(action, -1.0, 1.0)  # a NaN or an inf counts as clipped
+        unit = jp.where(jp.isfinite(action), unit, 0.0)  # ... and acts as 0
+        clipped = clipped.astype(jp.int32)
+        native = native_action(unit, self._center, self._half)
+        setpoint = SETPOINT_LAWS[t.control_mode](info["setpoint"], native, w["low"], w["high"],
+                                                 t.controller_dt_s)
         if t.control_mode == "torque":  # motor torques; the servos are off
-            setpoint = info["setpoint"]
-            ctrl = state.data.ctrl.at[self._motor].set(self._torque_limit * native)
-        else:  # the servos follow setpoints, clipped to the setpoint bounds
-            if t.control_mode == "joint_position":  # the action is the setpoint
-                wanted = native
-            elif t.control_mode == "joint_velocity":  # setpoint speeds over one control step
-                wanted = info["setpoint"] + t.controller_dt_s * native
-            else:  # joint_delta: setpoint increments
-                wanted = info["setpoint"] + native
-            setpoint = jp.clip(wanted, w["low"], w["high"])
+            ctrl = state.data.ctrl.at[self._motor].set(
+                motor_torque_nm(native, self._torque_limit))
+        else:  # the servos follow the setpoints
             ctrl = state.data.ctrl.at[self._servo].set(setpoint)
         data = state.data.replace(ctrl=ctrl)
 
@@ -515,21 +518,16 @@ class BatchedRehabEnv:
         # Safety rules, in the CPU env's order.
         forces = self.cuffs.forces(data)
         force = jp.max(forces)
-        speed = jp.max(jp.abs(data.qvel))
-        unstable = (~jp.all(jp.isfinite(data.qpos)) | ~(force <= t.blowup_force_n)
-                    | ~(speed <= t.blowup_speed_rad_s))
         theta, dynamic = self._dynamic(w, data)
         before = self._paper(w, exercise, index, dynamic, level)
-        outside = ~jp.all((before >= w["box_low"]) & (before <= w["box_high"]))
-        unstable = unstable | outside
-        q = data.qpos[self._patient_qpos]
-        rom = jp.any((q < w["rom_low"]) | (q > w["rom_high"]))
-        cuff = jp.any(forces > self._cuff_limits)
-        touch = self.cuffs.touch(data)
-        violation = jp.select([unstable, rom, cuff, touch],
-                              [RULE_CODES["instability"], RULE_CODES["range_of_motion"],
-                               RULE_CODES["cuff_force"], RULE_CODES["unintended_contact"]],
-                              0).astype(jp.int32)
+        # MuJoCo Warp neither warns nor resets: a non-finite state is judged from the values.
+        unstable = (~jp.all(jp.isfinite(data.qpos)) | blown_up(data.qvel, force)
+                    | outside_box(before, w["box_low"], w["box_high"]))
+        violation = first_rule(
+            unstable,
+            beyond_range(data.qpos[self._patient_qpos], w["rom_low"], w["rom_high"]),
+            over_force_limit(forces, self._cuff_limits),
+            self.cuffs.touch(data)).astype(jp.int32)
         theta = jp.where(unstable, info["theta"], theta)
         dynamic = jp.where(unstable, info["healthy"], dynamic)
         force = jp.where(jp.isfinite(force), force, 0.0)

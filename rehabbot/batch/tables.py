@@ -22,8 +22,9 @@ from rehabbot.envs.registration import (
     POPULATION_VARIANTS,
     V2_IDS,
 )
+from rehabbot.laws.safety import RULE_CODES  # noqa: F401 (the codes in the batched state)
 from rehabbot.sim.patient_drive import PatientDrive
-from rehabbot.sim.physics import BLOWUP_FORCE_N, BLOWUP_SPEED_RAD_S, RULES
+from rehabbot.sim.physics import BLOWUP_FORCE_N, BLOWUP_SPEED_RAD_S
 from rehabbot.sim.scene import WEIGHT_LEVELS
 from rehabbot.tasks.reward import STOP_MARGIN
 
@@ -56,8 +57,6 @@ CONTROL_MODES: tuple[str, ...] = ("joint_delta", "joint_position", "joint_veloci
 # The control modes the two-arm env is batched in (parity-tested).
 TWO_ARM_CONTROL_MODES: tuple[str, ...] = ("joint_delta", "joint_position", "joint_velocity",
                                           "torque")
-# The safety rules' codes in the batched state: 0 for none, then RULES in order (1-based).
-RULE_CODES: dict[str, int] = {rule: k + 1 for k, rule in enumerate(RULES)}
 
 
 @dataclass(frozen=True)

@@ -23,12 +23,13 @@ workspace (the paper's Table 3 ranges in robot joint space,
 outside them is clipped to them and counted in ``info["action_clipped"]``
 (:attr:`Controller.clip_low` / :attr:`Controller.clip_high`).
 
-An action reaches the controller checked: a float32 array of the right shape inside the box
-takes the controller's fast path (:meth:`Controller.apply_fast`); anything else is checked by
-:func:`checked_action` (clipped and counted, or refused with a ``ValueError`` that names the
-problem). On the ``-v2`` ids (``action_scale="unit"``) the action is ``Box(-1, 1)``, mapped
-linearly onto the controller's box first (:class:`UnitActions`). Two robots
-(:class:`ControllerPair`) act as one controller on both halves of the action.
+What each mode does with an action is its law in :mod:`rehabbot.laws.control` (the same
+functions the batched env calls); a controller holds the setpoint state and writes
+``data.ctrl``. An action reaches the controller checked by :func:`checked_action` (clipped and
+counted, or refused with a ``ValueError`` that names the problem). On the ``-v2`` ids
+(``action_scale="unit"``) the action is ``Box(-1, 1)``, mapped linearly onto the controller's
+box first (:class:`UnitActions`). Two robots (:class:`ControllerPair`) act as one controller
+on both halves of the action.
 """
 
 from __future__ import annotations
@@ -41,6 +42,14 @@ from gymnasium import spaces
 
 from rehabbot.common.arrays import as_index
 from rehabbot.envs.config import CONTROL_MODES
+from rehabbot.laws.control import (
+    SETPOINT_LAWS,
+    clip_setpoint,
+    clip_to_box,
+    motor_torque_nm,
+    native_action,
+    unit_box,
+)
 from rehabbot.sim.handles import RobotHandle
 
 PAPER_DELTA_RAD = math.pi / 400
@@ -61,7 +70,8 @@ TORQUE_HOLD_BRAKE_S = 0.05
 
 
 class Controller:
-    """Base class: holds the setpoint state and writes ``data.ctrl``."""
+    """Base class: holds the setpoint state, moves it by the mode's law
+    (:data:`rehabbot.laws.control.SETPOINT_LAWS`) and writes ``data.ctrl``."""
 
     mode = ""
 
@@ -82,6 +92,7 @@ class Controller:
         self._servo = as_index(handle.servo_ids)
         self._motor = as_index(handle.motor_ids)
         self._ctrl = np.zeros(0)
+        self._law = SETPOINT_LAWS[self.mode]
 
     def _make_space(self) -> spaces.Box:
         raise NotImplementedError
@@ -103,25 +114,26 @@ class Controller:
     def reset(self, data: mujoco.MjData, home_setpoint_rad: np.ndarray) -> None:
         """Start an episode from the home setpoints (already written into ``data.ctrl``)."""
         self.bind(data)
-        setpoint = np.clip(home_setpoint_rad, self.low_rad, self.high_rad)
-        self.setpoint_rad[:] = setpoint
-        self._ctrl[self._servo] = setpoint
+        self._set(clip_setpoint(np.asarray(home_setpoint_rad, dtype=float), self.low_rad,
+                                self.high_rad))
         self._ctrl[self._motor] = 0.0
 
     def apply(self, action: np.ndarray, data: mujoco.MjData) -> None:
-        """Write the controls for ``action`` (already checked and clipped to the space)."""
-        raise NotImplementedError
+        """Write the controls for ``action`` (already checked and clipped to the space): the
+        setpoints of the mode's law."""
+        self._set(self.setpoint_for(action))
 
     def setpoint_for(self, action: np.ndarray) -> np.ndarray:
         """The servo setpoints :meth:`apply` would set for ``action`` (checked and clipped to
         the space), the same floats, without setting them. A mode without setpoints raises
         ``ValueError``."""
-        raise ValueError(f"control mode {self.mode!r} commands no joint setpoints")
+        return self._law(self.setpoint_rad, action, self.low_rad, self.high_rad, self.dt_s)
 
     def command_setpoint(self, setpoint_rad: np.ndarray) -> None:
         """Make ``setpoint_rad`` (clipped to the setpoint bounds) the servo setpoints, as if an
         action had moved them there (a robot commanded joint positions directly)."""
-        self._set(np.asarray(setpoint_rad, dtype=float), None)
+        self._set(clip_setpoint(np.asarray(setpoint_rad, dtype=float), self.low_rad,
+                                self.high_rad))
 
     def hold_travel_rad(self, theta_rad: list[float], speed_rad_s: float) -> float:
         """How far [rad] the joints at ``theta_rad`` (moving at ``speed_rad_s``, the norm of
@@ -133,16 +145,11 @@ class Controller:
             travel += (setpoint - angle) * (setpoint - angle)
         return math.sqrt(travel)
 
-    def apply_fast(self, action: object) -> bool:
-        """Apply ``action`` if it is a float32 array of the right shape inside the box
-        (:attr:`clip_low`, :attr:`clip_high`), checked and applied in one pass; return False,
-        having applied nothing, for any other action (the env then checks it in full)."""
-        return False
-
-    def _set(self, setpoint: np.ndarray, data: mujoco.MjData) -> None:
-        np.clip(setpoint, self.low_rad, self.high_rad, out=self.setpoint_rad)
+    def _set(self, setpoint_rad: np.ndarray) -> None:
+        """Make ``setpoint_rad`` (inside the bounds) the servo setpoints."""
+        self.setpoint_rad[:] = setpoint_rad
         if type(self._servo) is not slice:  # setpoint_rad is a copy, not a view
-            self._ctrl[self._servo] = self.setpoint_rad
+            self._ctrl[self._servo] = setpoint_rad
 
 
 class JointDeltaController(Controller):
@@ -153,54 +160,9 @@ class JointDeltaController(Controller):
     def __init__(self, handle, low_rad, high_rad, dt_s, delta_max_rad: float = PAPER_DELTA_RAD):
         self.delta_max_rad = delta_max_rad
         super().__init__(handle, low_rad, high_rad, dt_s)
-        self._bounds = tuple(zip(self.low_rad.tolist(), self.high_rad.tolist(), strict=True))
-        self._action_bounds = tuple(zip(self.clip_low.tolist(), self.clip_high.tolist(),
-                                        strict=True))
-        self._setpoint = self.setpoint_rad.tolist()  # the setpoints as floats (fast path)
 
     def _make_space(self) -> spaces.Box:
         return spaces.Box(-self.delta_max_rad, self.delta_max_rad, (self.n_joints,), np.float32)
-
-    def reset(self, data, home_setpoint_rad):
-        super().reset(data, home_setpoint_rad)
-        self._setpoint = self.setpoint_rad.tolist()
-
-    def apply_fast(self, action):
-        if type(action) is not np.ndarray or action.dtype is not FLOAT32 \
-                or action.shape != self.action_space.shape:
-            return False
-        setpoint = []
-        for s, a, (a_low, a_high), (low, high) in zip(self._setpoint, action.tolist(),
-                                                      self._action_bounds, self._bounds,
-                                                      strict=True):
-            if not a_low <= a <= a_high:  # also NaN
-                return False
-            value = s + a
-            setpoint.append(low if value < low else high if value > high else value)
-        self._setpoint = setpoint
-        self._ctrl[self._servo] = setpoint
-        if type(self._servo) is not slice:  # setpoint_rad is a copy, not a view
-            self.setpoint_rad[:] = setpoint
-        return True
-
-    def _next_setpoint(self, action: np.ndarray) -> list[float]:
-        # Six numbers: plain Python arithmetic is several times faster than NumPy calls.
-        return [low if value < low else high if value > high else value
-                for value, (low, high) in zip(map(float.__add__, self._setpoint, action.tolist()),
-                                              self._bounds, strict=True)]
-
-    def setpoint_for(self, action):
-        return np.array(self._next_setpoint(action))
-
-    def command_setpoint(self, setpoint_rad):
-        super().command_setpoint(setpoint_rad)
-        self._setpoint = self.setpoint_rad.tolist()
-
-    def apply(self, action, data):
-        setpoint = self._setpoint = self._next_setpoint(action)
-        self._ctrl[self._servo] = setpoint
-        if type(self._servo) is not slice:  # setpoint_rad is a copy, not a view
-            self.setpoint_rad[:] = setpoint
 
 
 class JointPositionController(Controller):
@@ -220,12 +182,6 @@ class JointPositionController(Controller):
         return spaces.Box(low.astype(np.float32), high.astype(np.float32), (self.n_joints,),
                           np.float32)
 
-    def setpoint_for(self, action):
-        return np.clip(np.asarray(action, dtype=float), self.low_rad, self.high_rad)
-
-    def apply(self, action, data):
-        self._set(np.asarray(action, dtype=float), data)
-
 
 class JointVelocityController(Controller):
     """Setpoint velocities [rad/s], at most ``max_speed_rad_s``."""
@@ -239,13 +195,6 @@ class JointVelocityController(Controller):
     def _make_space(self) -> spaces.Box:
         return spaces.Box(-self.max_speed_rad_s, self.max_speed_rad_s, (self.n_joints,),
                           np.float32)
-
-    def setpoint_for(self, action):
-        return np.clip(self.setpoint_rad + self.dt_s * np.asarray(action, dtype=float),
-                       self.low_rad, self.high_rad)
-
-    def apply(self, action, data):
-        self._set(self.setpoint_rad + self.dt_s * np.asarray(action, dtype=float), data)
 
 
 class TorqueController(Controller):
@@ -264,7 +213,10 @@ class TorqueController(Controller):
         model.opt.disableactuator = 1 << self.robot.servo_group
 
     def apply(self, action, data):
-        self._ctrl[self._motor] = self._torque_limit_nm * np.asarray(action, dtype=float)
+        self._ctrl[self._motor] = motor_torque_nm(action, self._torque_limit_nm)
+
+    def setpoint_for(self, action):
+        raise ValueError(f"control mode {self.mode!r} commands no joint setpoints")
 
     def hold_travel_rad(self, theta_rad, speed_rad_s):
         """No setpoint holds the joints: :data:`TORQUE_HOLD_SAG_RAD` plus the speed times
@@ -273,45 +225,44 @@ class TorqueController(Controller):
         return TORQUE_HOLD_SAG_RAD + TORQUE_HOLD_BRAKE_S * speed_rad_s
 
 
-def checked_action(action, space: spaces.Box, clip_low: np.ndarray, clip_high: np.ndarray,
-                   clip_bounds: tuple[tuple[float, float], ...]) -> tuple[np.ndarray, int]:
+def checked_action(action, space: spaces.Box, clip_low: np.ndarray,
+                   clip_high: np.ndarray) -> tuple[np.ndarray, int]:
     """``action`` as an array inside ``[clip_low, clip_high]`` and how many values were
-    clipped. ``ValueError`` names the problem for anything that cannot be an action:
-    NaN/inf (with their indices), a wrong shape, a dtype that is not a real number (bool,
-    complex, str, object)."""
+    clipped (:func:`rehabbot.laws.control.clip_to_box`); a float32 array of the space's shape
+    inside the box is returned as it is. ``ValueError`` names the problem for anything that
+    cannot be an action: NaN/inf (with their indices), a wrong shape, a dtype that is not a
+    real number (bool, complex, str, object)."""
     if type(action) is np.ndarray and action.dtype is FLOAT32 and action.shape == space.shape:
-        for value, (low, high) in zip(action.tolist(), clip_bounds, strict=True):
-            if not low <= value <= high:  # also for NaN
-                break
-        else:
-            return action, 0  # the common case: float32, inside the box
-    try:
-        a = np.asarray(action)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"action {action!r} cannot be read as {space.shape} floats: "
-                         f"{err}") from None
-    if a.dtype.kind not in "iuf":  # no silent casts of bool, complex, str or objects
-        raise ValueError(f"action {action!r} has dtype {a.dtype}; expected {space.shape} real "
-                         "numbers (float32 preferred)")
-    a = a.astype(float)
-    if a.shape != space.shape:
-        raise ValueError(f"action has shape {a.shape}; expected {space.shape}")
-    bad = ~np.isfinite(a)
+        a = action
+    else:
+        try:
+            a = np.asarray(action)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"action {action!r} cannot be read as {space.shape} floats: "
+                             f"{err}") from None
+        if a.dtype.kind not in "iuf":  # no silent casts of bool, complex, str or objects
+            raise ValueError(f"action {action!r} has dtype {a.dtype}; expected {space.shape} "
+                             "real numbers (float32 preferred)")
+        a = a.astype(float)
+        if a.shape != space.shape:
+            raise ValueError(f"action has shape {a.shape}; expected {space.shape}")
+    inside, clipped = clip_to_box(a, clip_low, clip_high)
+    if not clipped:
+        return a, 0
+    bad = ~np.isfinite(a)  # NaN and inf count as clipped: refuse them
     if bad.any():
         raise ValueError(f"action has non-finite values at indices "
-                         f"{np.flatnonzero(bad).tolist()}: {a.tolist()}")
-    clipped = int(np.count_nonzero((a < clip_low) | (a > clip_high)))
-    if clipped:
-        a = np.clip(a, clip_low, clip_high)
-    return a, clipped
+                         f"{np.flatnonzero(bad).tolist()}: {a.astype(float).tolist()}")
+    return inside, int(clipped)
 
 
 class UnitActions:
     """Actions in ``Box(-1, 1)`` (the ``-v2`` ids, ``action_scale="unit"``), mapped linearly
-    onto the controller's box ``[clip_low, clip_high]``: -1 is the lower and +1 the upper
-    bound of each joint's action (``-pi/400 .. pi/400`` rad in ``joint_delta`` mode; the
-    patient's setpoint bounds in ``joint_position`` mode). The checks and the clipping count of
-    :func:`checked_action` apply to the unit action."""
+    onto the controller's box ``[clip_low, clip_high]`` (:func:`rehabbot.laws.control.
+    native_action`): -1 is the lower and +1 the upper bound of each joint's action
+    (``-pi/400 .. pi/400`` rad in ``joint_delta`` mode; the patient's setpoint bounds in
+    ``joint_position`` mode). The checks and the clipping count of :func:`checked_action`
+    apply to the unit action."""
 
     def __init__(self, clip_low: np.ndarray, clip_high: np.ndarray) -> None:
         low = np.asarray(clip_low, dtype=np.float64)
@@ -319,9 +270,10 @@ class UnitActions:
         if low.shape != high.shape or not np.all(high > low):
             raise ValueError(f"a unit action needs a bounded box, got {low} .. {high}")
         self.space = spaces.Box(-1.0, 1.0, low.shape, np.float32)
-        self._center, self._half = (high + low) / 2, (high - low) / 2
-        self._ones = np.ones(low.shape)
-        self._bounds = ((-1.0, 1.0),) * low.size
+        self._center, self._half = unit_box(low, high)
+        # float32 like the actions they clip (no cast in the clip; the same floats)
+        self._ones = np.ones(low.shape, np.float32)
+        self._minus_ones = -self._ones
 
     @property
     def center(self) -> np.ndarray:
@@ -336,12 +288,11 @@ class UnitActions:
     def native(self, action) -> tuple[np.ndarray, int]:
         """``(the controller's action (float32, inside its box), how many values were
         clipped to [-1, 1])``; ``ValueError`` as :func:`checked_action`."""
-        unit, clipped = checked_action(action, self.space, -self._ones, self._ones,
-                                       self._bounds)
-        # +-1 maps onto the bounds up to float64 rounding, far below float32's step: the cast
-        # lands on the float32 bounds (the controller's check would clip and count anything
-        # outside them).
-        return (self._center + self._half * unit).astype(np.float32), clipped
+        unit, clipped = checked_action(action, self.space, self._minus_ones, self._ones)
+        # +-1 maps onto the bounds up to float64 rounding, far below float32's step, and the
+        # map is monotone: the cast lands inside the float32 bounds, so the native action
+        # needs no second check.
+        return native_action(unit, self._center, self._half).astype(np.float32), clipped
 
 
 class ControllerPair:
@@ -367,10 +318,6 @@ class ControllerPair:
 
     def configure(self, model: mujoco.MjModel) -> None:
         self.controllers[0].configure(model)
-
-    def apply_fast(self, action: object) -> bool:
-        """No fast path: the env checks every action (:func:`checked_action`)."""
-        return False
 
     def bind(self, data: mujoco.MjData) -> None:
         for controller in self.controllers:

@@ -76,10 +76,8 @@ class RehabEnvCore(RehabEnvBase):
             raise AssertionError("the layout must keep theta, p and phi side by side")
         self._dynamic = slice(theta.start, phi.stop)  # written in one piece every step
         controller = self.controller
-        self._clip_low = controller.clip_low.astype(float)
-        self._clip_high = controller.clip_high.astype(float)
-        self._clip_bounds = tuple(zip(controller.clip_low.tolist(),
-                                      controller.clip_high.tolist(), strict=True))
+        self._clip_low = controller.clip_low.astype(np.float32)  # as the actions it clips
+        self._clip_high = controller.clip_high.astype(np.float32)
         self._qpos_adr = as_index(np.concatenate([h.qpos_adr for h in self.handles]))
         self._dof_adr = as_index(np.concatenate([h.dof_adr for h in self.handles]))
         # Per arm: its controller, its dofs and its joints in theta.
@@ -194,12 +192,10 @@ class RehabEnvCore(RehabEnvBase):
         else:
             if self._unit_actions is not None:  # -v2: Box(-1, 1) onto the controller's box
                 action, clipped = self._unit_actions.native(action)
-            if not self.controller.apply_fast(action):  # a float32 array inside the box
-                action, native_clipped = checked_action(action, self.controller.action_space,
-                                                        self._clip_low, self._clip_high,
-                                                        self._clip_bounds)
-                clipped += native_clipped
-                self.controller.apply(action, data)
+            else:
+                action, clipped = checked_action(action, self.controller.action_space,
+                                                 self._clip_low, self._clip_high)
+            self.controller.apply(action, data)
         violation, force_n = self._physics.step(self.model, data, self._goal, self.np_random)
         self._steps += 1
 
@@ -274,7 +270,7 @@ class RehabEnvCore(RehabEnvBase):
         if self._unit_actions is not None:
             action, _ = self._unit_actions.native(action)
         action, _ = checked_action(action, self.controller.action_space, self._clip_low,
-                                   self._clip_high, self._clip_bounds)
+                                   self._clip_high)
         return self.controller.setpoint_for(action)
 
     # ------------------------------------------------------------------------------------------
@@ -486,8 +482,7 @@ class RehabEnvCore(RehabEnvBase):
         if self._unit_actions is not None:
             action, clipped = self._unit_actions.native(action)
         action, native_clipped = checked_action(action, self.controller.action_space,
-                                                self._clip_low, self._clip_high,
-                                                self._clip_bounds)
+                                                self._clip_low, self._clip_high)
         assert self._randomizer is not None
         arrived = self._randomizer.delay.push(action)
         if arrived is None:

@@ -28,7 +28,9 @@ rule (``info`` name)       fires when
                            ``contact_tolerance_m``
 =========================  ====================================================================
 
-Rules are checked in this order; the first that fires is reported.
+Rules are checked in this order; the first that fires is reported. Each rule's test and the
+order are the laws of :mod:`rehabbot.laws.safety` (the batched env's too); the monitor reads
+their readings from MuJoCo's data.
 """
 
 from __future__ import annotations
@@ -38,10 +40,21 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from mujoco import mju_dot
 
 from rehabbot.common.arrays import as_index
 from rehabbot.laws import scalar
+from rehabbot.laws.safety import (  # noqa: F401 (the rules and bounds, re-exported)
+    BLOWUP_FORCE_N,
+    BLOWUP_SPEED_RAD_S,
+    RULE_NAMES,
+    RULES,
+    beyond_range,
+    blown_up,
+    first_rule,
+    force_magnitude_n,
+    over_force_limit,
+    unintended_contact,
+)
 from rehabbot.laws.work import accumulate_work, assistance_ratio, cuff_work_j
 from rehabbot.sim.conditions import PatientCondition
 from rehabbot.sim.muscle_drive import MuscleDrive
@@ -49,15 +62,9 @@ from rehabbot.sim.muscles import MuscleMeter, limb_muscles
 from rehabbot.sim.patient_drive import PatientDrive
 from rehabbot.sim.scene import Scene
 
-RULES = ("instability", "range_of_motion", "cuff_force", "unintended_contact")
-
 # MuJoCo's warnings for a diverging simulation; on each it resets the state to the model's.
 UNSTABLE_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                      mujoco.mjtWarning.mjWARN_BADQACC)
-# Speeds and forces no motion of these scenes reaches: random torques at the UR5e limits with
-# the safety rules switched off peak at about 64 rad/s and 6.4 kN (benchmarks/performance/soak.py).
-BLOWUP_SPEED_RAD_S = 1000.0
-BLOWUP_FORCE_N = 1.0e5
 
 # ISO/TS 15066 Table A.2, quasi-static contact force limits [N].
 ISO_TS_15066_QUASI_STATIC_N: dict[str, float] = {
@@ -110,7 +117,8 @@ def _equality_rows(model: mujoco.MjModel, eq_id: int) -> int:
 
 
 class SafetyMonitor:
-    """Checks the rules on a ``MjData`` after each control step (ids resolved once).
+    """Reads the safety rules' readings from a ``MjData`` after each control step and decides
+    with the rules' laws (:mod:`rehabbot.laws.safety`); ids resolved once.
 
     Every cuff is checked against its own limit: the force of cuff ``k`` is the magnitude of
     the first three rows (the force) of its equality constraint, which MuJoCo puts first in
@@ -142,9 +150,12 @@ class SafetyMonitor:
         first_row = np.cumsum([0, *(_equality_rows(model, e) for e in range(model.neq))])
         self._cuff_rows = tuple(int(first_row[h.equality_id]) for h in scene.robots)
         self._cuff_rows_needed = max(self._cuff_rows) + 3
+        # The cuffs' force rows in data.efc_force, (cuffs, 3): a view for one cuff.
+        row = self._cuff_rows[0]
+        self._force_rows: tuple | np.ndarray = (None, slice(row, row + 3)) \
+            if len(self._cuff_rows) == 1 else np.add.outer(self._cuff_rows, np.arange(3))
+        self._no_forces_n = np.zeros(len(self._cuff_rows))
         self._single_cuff = len(self._cuff_rows) == 1
-        self._force_limit_n = float(self.force_limits_n[0])
-        self._forces_n = np.zeros(len(self._cuff_rows))
         warnings = sorted(int(w) for w in UNSTABLE_WARNINGS)
         first, last = warnings[0], warnings[-1]
         if warnings != list(range(first, last + 1)):
@@ -152,19 +163,8 @@ class SafetyMonitor:
         self._warning_slice = slice(first, last + 1)
         self._warning_numbers = np.zeros(last - first + 1, dtype=int)
         self._warnings0 = 0
-        self._blowup_speed2 = BLOWUP_SPEED_RAD_S**2
-        self._speed2 = 0.0
-        # Range of motion without reading every joint: when no joint limit was active at the
-        # start of the last physics step (MuJoCo's data.nl == 0: every joint inside its
-        # range) and no joint moves more than half the tolerance in one physics step
-        # (|qvel| * timestep), no joint can be beyond its range by more than the tolerance.
-        limited = model.jnt_limited[jnt].astype(bool)
-        no_margin = model.jnt_margin[jnt] == 0
-        self._rom_shortcut = bool(tol > 0 and limited.all() and no_margin.all())
-        self._rom_speed2 = (0.5 * tol / model.opt.timestep) ** 2
         self._qpos = np.zeros(model.nq)
         self._qvel = np.zeros(model.nv)
-        self._speed = np.zeros(model.nv)
 
     @property
     def rom_bounds_rad(self) -> tuple[np.ndarray, np.ndarray]:
@@ -215,78 +215,58 @@ class SafetyMonitor:
         self._warnings0 = sum(self._warning_numbers.tolist())
 
     def cuff_forces_n(self, data: mujoco.MjData) -> np.ndarray:
-        """Magnitude of each cuff's constraint force [N] (0 when the cuffs are not active);
-        the returned array is reused by the next call."""
-        forces = self._forces_n
+        """Magnitude of each cuff's constraint force [N] (0 when the cuffs are not active;
+        :func:`~rehabbot.laws.safety.force_magnitude_n`)."""
         if data.ne < self._cuff_rows_needed:
-            forces[:] = 0.0
-            return forces
-        efc_force = data.efc_force
-        for k, row in enumerate(self._cuff_rows):
-            x, y, z = efc_force[row:row + 3].tolist()
-            forces[k] = math.sqrt(x * x + y * y + z * z)
-        return forces
+            return self._no_forces_n.copy()
+        return force_magnitude_n(data.efc_force[self._force_rows])
 
     def cuff_force_n(self, data: mujoco.MjData) -> float:
         """The largest cuff force [N] (the cuff's force, with one robot)."""
-        if self._single_cuff:
-            if data.ne < self._cuff_rows_needed:
-                return 0.0
-            row = self._cuff_rows[0]  # 0 unless the patient has equalities (MyoLeg's knee)
-            x, y, z = data.efc_force[row:row + 3].tolist()
-            return math.sqrt(x * x + y * y + z * z)
-        return float(self.cuff_forces_n(data).max())
+        return self._largest_n(self.cuff_forces_n(data))
+
+    def _largest_n(self, forces_n: np.ndarray) -> float:
+        return forces_n.item() if self._single_cuff else float(forces_n.max())
 
     def unstable(self, data: mujoco.MjData, force_n: float) -> bool:
         """Whether the simulation diverged since :meth:`reset`: MuJoCo warned of a bad
-        qpos/qvel/qacc (and reset the state), a joint speed or the cuff force ``force_n`` is
-        non-finite or beyond its blow-up bound. Out-of-bounds observations are checked by the
-        env."""
-        if sum(self._warning_numbers.tolist()) != self._warnings0:
-            return True
-        if not force_n <= BLOWUP_FORCE_N:  # also true for NaN
-            return True
-        qvel = self._qvel
-        speed2 = self._speed2 = mju_dot(qvel, qvel)  # a C loop: no BLAS call per step
-        if speed2 <= self._blowup_speed2:  # no |v| can exceed the bound (NaN fails)
-            return False
-        speed = np.abs(qvel, out=self._speed)
-        return not float(speed.max()) <= BLOWUP_SPEED_RAD_S
+        qpos/qvel/qacc (and reset the state), or a joint speed or the cuff force ``force_n``
+        blew up (:func:`~rehabbot.laws.safety.blown_up`). Out-of-bounds observations are
+        checked by the env."""
+        return sum(self._warning_numbers.tolist()) != self._warnings0 \
+            or bool(blown_up(self._qvel, force_n))
 
     def check_step(self, data: mujoco.MjData) -> tuple[str | None, float]:
         """The first rule that fires after a step and the largest cuff force [N]: the same as
         :meth:`cuff_force_n` then :meth:`check`, in one call (the env's per-step path)."""
-        force_n = self.cuff_force_n(data)
-        return self.check(data, force_n), force_n
+        forces_n = self.cuff_forces_n(data)
+        force_n = self._largest_n(forces_n)
+        return self._decide(data, forces_n, force_n), force_n
 
     def check(self, data: mujoco.MjData, force_n: float) -> str | None:
         """The first rule that fires for ``data`` (its largest cuff force ``force_n``, from
-        :meth:`cuff_force_n`), or None. ``data`` must hold the state after ``mj_step`` or
-        ``mj_forward``: the range-of-motion rule reads which joint limits MuJoCo found active
-        (``data.nl``) before it reads the joints."""
-        if self.unstable(data, force_n):
-            return "instability"
-        if not (self._rom_shortcut and data.nl == 0 and self._speed2 <= self._rom_speed2):
-            q = self._qpos[self._patient_qpos_adr]
-            if np.logical_or.reduce((q < self._rom_low) | (q > self._rom_high)):
-                return "range_of_motion"
-        if self._single_cuff:
-            if force_n > self._force_limit_n:
-                return "cuff_force"
-        elif (self.cuff_forces_n(data) > self.force_limits_n).any():
-            return "cuff_force"
-        if data.ncon:
-            contact = data.contact
-            geom = contact.geom
-            robot = self._is_robot[geom]
-            other = self._is_other[geom]
-            hit = (robot[:, 0] & other[:, 1]) | (robot[:, 1] & other[:, 0])
-            if self._robots_collide:
-                owner = self._robot_of[geom]
-                hit |= (owner[:, 0] >= 0) & (owner[:, 1] >= 0) & (owner[:, 0] != owner[:, 1])
-            if hit.any() and (contact.dist[hit] < -self.thresholds.contact_tolerance_m).any():
-                return "unintended_contact"
-        return None
+        :meth:`cuff_force_n`, judged by the instability rule; the cuff rule reads each
+        cuff's force), or None. ``data`` must hold the state after ``mj_step`` or
+        ``mj_forward``."""
+        return self._decide(data, self.cuff_forces_n(data), force_n)
+
+    def _decide(self, data: mujoco.MjData, forces_n: np.ndarray, force_n: float) -> str | None:
+        """The readings of ``data`` decided by :func:`~rehabbot.laws.safety.first_rule`."""
+        code = first_rule(
+            self.unstable(data, force_n),
+            bool(beyond_range(self._qpos[self._patient_qpos_adr], self._rom_low,
+                              self._rom_high)),
+            bool(over_force_limit(forces_n, self.force_limits_n)),
+            data.ncon > 0 and bool(self._contact(data)))
+        return RULE_NAMES[code]
+
+    def _contact(self, data: mujoco.MjData) -> np.bool_:
+        """The unintended-contact rule on ``data``'s contacts."""
+        contact = data.contact
+        geom = contact.geom
+        return unintended_contact(self._is_robot[geom], self._is_other[geom], contact.dist,
+                                  self.thresholds.contact_tolerance_m,
+                                  self._robot_of[geom] if self._robots_collide else None)
 
     def violated_rom_joints(self, data: mujoco.MjData) -> list[str]:
         """Names of the patient joints beyond range (for diagnostics)."""
