@@ -17,7 +17,8 @@ Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
    than the blow-up speed, a non-finite or blow-up cuff force, or a paper observation
    outside the healthy box), range of motion, cuff force, unintended contact;
 4. the progress reward with the ``"hold"`` safety penalty (its hold gap in the state) and its
-   optional smoothness and effort terms, and the target switch;
+   optional smoothness and effort terms, and the target switch: the laws of
+   :mod:`rehabbot.laws.reward` and :mod:`rehabbot.laws.targets`, as on the CPU;
 5. the agent observation: ``tanh`` or a clip of the CPU env's affine map.
 
 The cuffs' forces, the work meters and the contact rule are read by
@@ -42,6 +43,7 @@ from rehabbot.batch.patient_tables import read_patient_tables
 from rehabbot.batch.patients import PatientStack, stack_patients
 from rehabbot.batch.state import State
 from rehabbot.batch.tables import POPULATION_IDS, RULE_CODES, EnvTables, check_id, read_tables
+from rehabbot.laws import reward as laws
 from rehabbot.laws.control import SETPOINT_LAWS, clip_to_box, motor_torque_nm, native_action
 from rehabbot.laws.safety import (
     beyond_range,
@@ -50,6 +52,7 @@ from rehabbot.laws.safety import (
     outside_box,
     over_force_limit,
 )
+from rehabbot.laws.targets import largest_error_rad, switch_target
 from rehabbot.laws.work import assistance_ratio
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
@@ -142,8 +145,6 @@ class BatchedRehabEnv:
         self._bounded_low, self._bounded_high = _f32(t.bounded_low), _f32(t.bounded_high)
         self._action_range = _f32(t.reward_action_range)
         self._reward_torque_limit = _f32(t.reward_torque_limit_nm)
-        # A step's hold cost: the time cost and the optional terms' largest losses.
-        self._hold_step = t.time_cost + t.smoothness_weight + t.effort_weight
         # Per patient (leading axis): the tables a profile or a condition changes.
         a = self.patients.arrays
         home_ctrl = np.zeros((*a["home_setpoints_rad"].shape[:2], self.mj_model.nu))
@@ -205,20 +206,13 @@ class BatchedRehabEnv:
 
     def _optional_terms(self, native: jax.Array, previous: jax.Array,
                         data: Any) -> tuple[jax.Array, jax.Array]:
-        """The reward's ``smoothness`` and ``effort`` terms (``Reward.optional_terms``; 0 where
-        the weight is 0): the native action's change since the last step over the
-        controller's range, and the robot's actuator torques over their limits (0 when one is
-        not finite)."""
+        """The reward's ``smoothness`` and ``effort`` terms (0 where the weight is 0)."""
         t = self.tables
         zero = jp.zeros((), jp.float32)
-        smoothness = effort = zero
-        if t.smoothness_weight:
-            change = (native - previous) / self._action_range
-            smoothness = -t.smoothness_weight * jp.mean(change * change)
-        if t.effort_weight:
-            torque = data.qfrc_actuator[self._dof] / self._reward_torque_limit
-            effort = jp.where(jp.all(jp.isfinite(torque)),
-                              -t.effort_weight * jp.mean(torque * torque), 0.0)
+        smoothness = laws.smoothness_term(native, previous, self._action_range,
+                                          t.smoothness_weight) if t.smoothness_weight else zero
+        effort = laws.effort_term(data.qfrc_actuator[self._dof], self._reward_torque_limit,
+                                  t.effort_weight) if t.effort_weight else zero
         return smoothness, effort
 
     def _per_arm(self, values: jax.Array) -> jax.Array:
@@ -241,28 +235,28 @@ class BatchedRehabEnv:
 
     def _in_segment(self, w: dict, exercise: jax.Array, target: jax.Array,
                     distances: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """``BilateralReward._in_segment``: each arm's share of target ``target``'s segment
-        done (arms,) and the arms' sync gap (0 unless both arms move in the segment)."""
+        """Each arm's share of target ``target``'s segment done (arms,) and the arms' sync
+        gap."""
         t = self.tables
         lengths = w["segments"][exercise, target]
-        fractions = jp.where(lengths <= 0.0, 1.0,
-                             jp.clip(1.0 - distances / jp.where(lengths > 0, lengths, 1.0),
-                                     0.0, 1.0))
-        moving = jp.all(lengths > t.target_tolerance_rad)
-        gap = jp.where(moving, jp.maximum(jp.abs(fractions[0] - fractions[1])
-                                          - t.sync_tolerance, 0.0), 0.0)
-        return fractions, gap
+        fractions = laws.segment_fraction(distances, lengths)
+        moving = laws.moves_in_segment(lengths, t.target_tolerance_rad)
+        return fractions, laws.sync_gap(fractions[0], fractions[1], moving[0], moving[1],
+                                        t.sync_tolerance)
 
-    def _sync_hold(self, w: dict, exercise: jax.Array, target: jax.Array, gap: jax.Array,
-                   leads: jax.Array) -> jax.Array:
-        """``BilateralReward.hold_cost``'s sync share per step: the largest gap the arms can
-        reach while each travels its lead, when both move in target ``target``'s segment."""
+    def _hold_cost(self, w: dict, exercise: jax.Array, target: jax.Array, steps: Any,
+                   leads: jax.Array, sync_gap: jax.Array | None) -> jax.Array:
+        """``B(s)``: the most that holding still for ``steps`` steps from a state whose active
+        target is ``target`` costs (with the sync term when the arms' ``sync_gap`` is given)."""
         t = self.tables
+        hold = laws.progress_hold_cost(steps, leads, t.time_cost, t.smoothness_weight,
+                                       t.effort_weight, t.progress_weight)
+        if sync_gap is None:
+            return hold
         lengths = w["segments"][exercise, target]
-        moving = jp.all(lengths > t.target_tolerance_rad)
-        safe = jp.where(lengths > 0, lengths, 1.0)
-        return jp.where(moving, jp.minimum(gap + jp.sum(leads / safe), 1.0), 0.0) \
-            * t.sync_weight
+        reach = laws.sync_hold_gap(sync_gap, leads[0], leads[1], lengths[0], lengths[1],
+                                   t.target_tolerance_rad)
+        return laws.bilateral_hold_cost(hold, steps, reach, t.sync_weight)
 
     def _paper(self, w: dict, exercise: jax.Array, index: jax.Array, dynamic: jax.Array,
                level: jax.Array) -> jax.Array:
@@ -342,19 +336,16 @@ class BatchedRehabEnv:
         zero = jp.zeros((), jp.float32)
         distances = self._arm_distances(theta, w["targets"][exercise, 0])
         leads = self._leads(setpoint, theta, data.qvel[self._dof])
-        hold_gap = jp.float32(t.max_episode_steps * self._hold_step) \
-            + t.progress_weight * jp.sum(leads)
-        sync = {}
+        sync, gap = {}, None
         if self.has_sync:
             fractions, gap = self._in_segment(w, exercise, index, distances)
-            hold_gap = hold_gap + t.max_episode_steps * self._sync_hold(w, exercise, index, gap,
-                                                                        leads)
             sync = {"sync_gap": gap}
+        hold_gap = self._hold_cost(w, exercise, index, t.max_episode_steps, leads, gap)
         info = {
             "setpoint": setpoint, "target_index": index, "exercise": exercise,
             "weight_level": level, "patient": jp.asarray(patient, jp.int32),
             "steps": jp.int32(0), "theta": theta, "healthy": dynamic,
-            "path_left": jp.sum(distances) + w["rests"][exercise, 0],
+            "path_left": laws.path_left_rad(distances, w["rests"][exercise, 0]),
             "hold_gap": hold_gap, **sync,
             "previous_action": jp.zeros(self._action_range.shape[0], jp.float32),
             "rng": rng, "truncation": zero, **self.cuffs.meter_start(data),
@@ -532,52 +523,47 @@ class BatchedRehabEnv:
         dynamic = jp.where(unstable, info["healthy"], dynamic)
         force = jp.where(jp.isfinite(force), force, 0.0)
 
-        # Reward (progress, "hold" penalty) and the target switch.
+        # Reward (progress, "hold" penalty) and the target switch: the laws, as on the CPU.
         steps = info["steps"] + 1
         targets, rests = w["targets"], w["rests"]
-        error = theta - targets[exercise, index]
-        distances, largest = self._arm_distances(theta, targets[exercise, index]), \
-            jp.max(jp.abs(error))
-        count = w["count"][exercise]
-        last = index == count - 1
+        distances = self._arm_distances(theta, targets[exercise, index])
         stop = (violation > 0) & (t.terminate_on_safety | (violation == INSTABILITY))
-        reached = (largest < t.target_tolerance_rad) & ~stop
-        switching = reached & ~last
+        switch = switch_target(largest_error_rad(theta, targets[exercise, index]), index,
+                               w["count"][exercise], stop, t.target_tolerance_rad)
+        new_index = switch.index
+        switching = new_index != index
         following = jp.minimum(index + 1, targets.shape[1] - 1)
         next_distances = jp.where(
             switching, self._arm_distances(theta, targets[exercise, following]), distances)
-        new_index = jp.where(switching, index + 1, index)
-        after = jp.sum(next_distances) + rests[exercise, new_index]
-        progress = t.progress_weight * (info["path_left"] - after)
+        after = laws.path_left_rad(next_distances, rests[exercise, new_index])
+        progress = laws.progress_term(info["path_left"], after, t.progress_weight)
         gap = info["hold_gap"]
         smoothness, effort = self._optional_terms(native, info["previous_action"], data)
-        others = progress - t.time_cost
-        if t.smoothness_weight or t.effort_weight:
-            others = others + smoothness + effort
-        safety = jp.where(stop, -(jp.maximum(gap + others, 0.0) + self._hold_step
-                                  + t.stop_margin), 0.0)
-        bonus = jp.where(reached, jp.where(last, t.final_bonus, t.intermediate_bonus), 0.0)
-        reward = progress + bonus - t.time_cost + safety
-        if t.smoothness_weight or t.effort_weight:
-            reward = reward + smoothness + effort
+        safety = laws.progress_safety(
+            stop, info["path_left"], after, gap, 0, progress, t.time_cost, smoothness, effort,
+            progress_weight=t.progress_weight, smoothness_weight=t.smoothness_weight,
+            effort_weight=t.effort_weight, margin=t.stop_margin)
+        bonus = laws.target_bonus(switch.reached, switch.last, t.intermediate_bonus,
+                                  t.final_bonus)
+        time = jp.full((), -t.time_cost, jp.float32)
         leads = self._leads(setpoint, theta, data.qvel[self._dof])
-        steps_left = jp.maximum(t.max_episode_steps - steps, 0)
-        hold = steps_left * self._hold_step + t.progress_weight * jp.sum(leads)
-        sync_info, sync_metrics = {}, {}
+        steps_left = laws.steps_left(t.max_episode_steps, steps)
+        sync_info, sync_metrics, state_gap, sync_terms = {}, {}, None, []
         if self.has_sync:  # BilateralReward: the arms' sync term, in the stop and the hold
             fractions, step_gap = self._in_segment(w, exercise, index, distances)
             state_gap = jp.where(switching, self._in_segment(w, exercise, following,
                                                              next_distances)[1], step_gap)
-            stop_sync = t.sync_weight * jp.maximum(step_gap, info["sync_gap"])
-            safety = jp.where(stop, safety - stop_sync, safety)
-            reward_sync = jp.where(stop, 0.0, -t.sync_weight * step_gap)
-            reward = reward - jp.where(stop, stop_sync, 0.0) + reward_sync
-            hold = hold + steps_left * self._sync_hold(w, exercise, new_index, state_gap, leads)
+            safety = jp.where(stop, safety - laws.sync_stop_charge(
+                step_gap, info["sync_gap"], t.sync_weight), safety)
+            reward_sync = laws.sync_term(step_gap, stop, t.sync_weight)
+            sync_terms = [reward_sync]
             sync_info = {"sync_gap": state_gap}
             sync_metrics = {"reward_sync": reward_sync, "segment_fraction": fractions,
                             "sync_gap": step_gap}
-        gap = jp.where(stop, gap, jp.maximum(gap + reward, hold))
-        terminated = stop | (reached & last)
+        reward = laws.total([progress, bonus, time, safety, smoothness, effort, *sync_terms])
+        hold = self._hold_cost(w, exercise, new_index, steps_left, leads, state_gap)
+        gap = jp.where(stop, gap, laws.next_hold_gap(gap, reward, hold))
+        terminated = stop | switch.success
         truncated = (steps >= t.max_episode_steps) & ~terminated
 
         paper = self._paper(w, exercise, new_index, dynamic, level)
@@ -591,12 +577,12 @@ class BatchedRehabEnv:
                     "truncation": truncated.astype(f32)}
         metrics = {"interaction_force_n": force, "cost": (violation > 0).astype(f32),
                    "safety_violation": violation,
-                   "is_success": (reached & last).astype(f32),
+                   "is_success": switch.success.astype(f32),
                    "target_index": new_index, "action_clipped": clipped,
                    **self._readings(data, patient, exercise, level),
                    **self._work_metrics({**meter, **drive}),
                    "reward_progress": progress, "reward_bonus": bonus,
-                   "reward_time": jp.full((), -t.time_cost, f32), "reward_safety": safety,
+                   "reward_time": time, "reward_safety": safety,
                    "reward_smoothness": smoothness, "reward_effort": effort, **sync_metrics}
         if t.arms > 1:
             metrics["cuff_forces_n"] = jp.where(jp.isfinite(forces), forces, 0.0)

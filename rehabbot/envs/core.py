@@ -39,6 +39,8 @@ from rehabbot.envs.build import EnvParts
 from rehabbot.envs.control import UnitActions, checked_action
 from rehabbot.envs.env_base import RehabEnvBase
 from rehabbot.envs.env_rendering import EnvRendering
+from rehabbot.laws import scalar
+from rehabbot.laws.targets import switch_target
 from rehabbot.sim.randomization import RandomizationDraw, Randomizer, check_preset
 from rehabbot.tasks.agent_observation import AgentObservation
 from rehabbot.tasks.reward import StepOutcome
@@ -223,17 +225,18 @@ class RehabEnvCore(RehabEnvBase):
             if abs(error) > largest:
                 largest = abs(error)
         index = self._target_index
-        last = index == self._num_targets - 1
         safety_stop = violation is not None and (self._terminate_on_safety
                                                  or violation == "instability")
-        reached = largest < self._tolerance and not safety_stop
+        switch = switch_target(largest, index, self._num_targets, safety_stop,
+                               self._tolerance, xp=scalar)
+        reached = switch.reached
         outcome = self._outcome
         distance = outcome.distance_rad = math.sqrt(squared)
         outcome.arm_distances_rad = [distance] if self._arms == 1 else \
             self._arm_distances(self._target)
-        if reached and not last:  # holding still now costs the distance to the next target
+        if switch.index != index:  # holding still now costs the distance to the next target
             outcome.next_distance_rad, outcome.next_arm_distances_rad = self._distances(
-                self._sequence.robot_rad[index + 1].tolist())
+                self._sequence.robot_rad[switch.index].tolist())
         else:
             outcome.next_distance_rad = outcome.distance_rad
             outcome.next_arm_distances_rad = outcome.arm_distances_rad
@@ -241,7 +244,7 @@ class RehabEnvCore(RehabEnvBase):
             outcome.lead_rad = self._leads()
         outcome.target_index = index
         outcome.reached = reached
-        outcome.last_target = last
+        outcome.last_target = switch.last
         outcome.safety_stop = safety_stop
         outcome.steps_done = self._steps
         outcome.action = action
@@ -249,13 +252,11 @@ class RehabEnvCore(RehabEnvBase):
             outcome.torque_nm = self._qfrc_actuator[self._dof_adr]
         reward, terms = self._reward.step(outcome)
 
-        terminated, is_success = safety_stop, False
-        if reached:
-            if last:
-                terminated = is_success = True
-            else:
-                self._target_index += 1
-                self._write_target()  # the observation shows the next target
+        is_success = switch.success
+        terminated = safety_stop or is_success
+        if switch.index != index:
+            self._target_index = switch.index
+            self._write_target()  # the observation shows the next target
         self._needs_reset = terminated
         info = self._info(violation, is_success, force_n, terms, clipped)
         if self.render_mode == "human":

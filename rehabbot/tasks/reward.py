@@ -90,17 +90,28 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rehabbot.laws import reward as laws
+from rehabbot.laws import scalar
+from rehabbot.laws import targets as target_laws
+from rehabbot.laws.reward import (  # noqa: F401  (the designs' settings, and laws users call)
+    FINAL_BONUS,
+    INTERMEDIATE_BONUS,
+    PROGRESS_WEIGHT_PER_RAD,
+    STOP_MARGIN,
+    SYNC_TOLERANCE,
+    SYNC_WEIGHT,
+    TIME_COST_PER_STEP,
+    next_hold_gap,
+    segment_fraction,
+    stop_penalty,
+    sync_gap,
+)
+from rehabbot.laws.targets import TARGET_TOLERANCE_RAD
+
 SAFETY_PENALTIES = ("hold", "worst_case")
 # Steps the safety penalty counts by default: None = every step left to the time limit, the
 # only count with which a stop never pays better than holding still.
 SAFETY_PENALTY_STEPS: int | None = None
-# What a stop costs beyond the best hold of its episode (reward units, on top of one step's
-# hold cost): the margin by which a stop never pays (20 x the -v1 time cost).
-STOP_MARGIN = 1.0
-PROGRESS_WEIGHT_PER_RAD = 10.0
-TIME_COST_PER_STEP = 0.05
-SYNC_WEIGHT = 0.5  # per step, at a whole segment's lag (beyond the tolerance)
-SYNC_TOLERANCE = 0.1  # a lag of this share of the segment is free
 
 
 @dataclass
@@ -127,26 +138,8 @@ class StepOutcome:
 
 
 def total(terms: dict[str, float]) -> float:
-    """The reward: the terms added in their order."""
-    values = iter(terms.values())
-    reward = next(values)
-    for value in values:
-        reward += value
-    return reward
-
-
-def stop_penalty(hold_gap: float, other_terms: float, hold_step: float) -> float:
-    """The ``"hold"`` safety penalty of a stopping step: the gap ``G`` to the best hold of the
-    episode (with this step's ``other_terms`` added, never below 0), one step's hold cost
-    ``hold_step`` more and :data:`STOP_MARGIN`, negated."""
-    return -(max(hold_gap + other_terms, 0.0) + hold_step + STOP_MARGIN)
-
-
-def next_hold_gap(hold_gap: float, reward: float, hold_bound: float) -> float:
-    """``G`` after a step that did not stop: the holds of the earlier states fell behind by
-    the step's ``reward``; holding from the new state may cost ``hold_bound`` (its
-    ``hold_cost``)."""
-    return max(hold_gap + reward, hold_bound)
+    """The reward: the terms added in their order (:func:`rehabbot.laws.reward.total`)."""
+    return laws.total(terms.values())
 
 
 def info_keys(names: tuple[str, ...]) -> tuple[str, ...]:
@@ -154,29 +147,10 @@ def info_keys(names: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(f"reward_{name}" for name in names)
 
 
-def remaining_path_rad(targets_rad: np.ndarray) -> np.ndarray:
+def remaining_path_rad(targets_rad: Sequence[Sequence[float]] | np.ndarray) -> np.ndarray:
     """``rest[i]``: the joint-space length from target ``i`` through every later target
-    (``rest[-1] = 0``); ``targets_rad`` is ``(N, n_joints)``."""
-    steps = np.linalg.norm(np.diff(np.asarray(targets_rad, float), axis=0), axis=1)
-    rest = np.zeros(len(targets_rad))
-    rest[:-1] = np.cumsum(steps[::-1])[::-1]
-    return rest
-
-
-def segment_fraction(distance_rad: float, length_rad: float) -> float:
-    """How far through its segment an arm is: ``clip(1 - distance / length, 0, 1)`` (1.0 for an
-    arm that holds still, ``length`` 0)."""
-    if length_rad <= 0.0:
-        return 1.0
-    return min(max(1.0 - distance_rad / length_rad, 0.0), 1.0)
-
-
-def sync_gap(fraction_right: float, fraction_left: float, moving_right: bool,
-             moving_left: bool, tolerance: float) -> float:
-    """``max(|f_right - f_left| - tolerance, 0)`` when both arms move in the segment, else 0."""
-    if not (moving_right and moving_left):
-        return 0.0
-    return max(abs(fraction_right - fraction_left) - tolerance, 0.0)
+    (:func:`rehabbot.laws.targets.remaining_path_rad`); ``targets_rad`` is ``(N, n_joints)``."""
+    return target_laws.remaining_path_rad(np.asarray(targets_rad, float))
 
 
 @dataclass
@@ -184,11 +158,12 @@ class Reward:
     """What every design shares: the bonuses, the optional smoothness and effort terms (scaled
     by ``action_range`` and ``torque_limit_nm``), the safety penalty's settings and the hold
     gap ``G``. A subclass sets :attr:`names` and implements :meth:`terms`, :meth:`hold_cost`
-    and, for state of its own, :meth:`reset`."""
+    and, for state of its own, :meth:`reset`. The rules are :mod:`rehabbot.laws.reward`'s,
+    run on this episode's Python floats (:mod:`rehabbot.laws.scalar`)."""
 
-    target_tolerance_rad: float = 0.05
-    intermediate_bonus: float = 10.0
-    final_bonus: float = 100.0
+    target_tolerance_rad: float = TARGET_TOLERANCE_RAD
+    intermediate_bonus: float = INTERMEDIATE_BONUS
+    final_bonus: float = FINAL_BONUS
     smoothness_weight: float = 0.0
     effort_weight: float = 0.0
     safety_penalty_steps: int | None = SAFETY_PENALTY_STEPS
@@ -223,10 +198,11 @@ class Reward:
     def step(self, outcome: StepOutcome) -> tuple[float, dict[str, float]]:
         """The reward of one step and its terms; moves the episode's state on."""
         terms = self.terms(outcome)
-        reward = total(terms)
+        reward = laws.total(terms.values())
         if self.uses_hold_gap and not outcome.safety_stop:
-            self.hold_gap = next_hold_gap(self.hold_gap, reward, self.hold_cost(
-                outcome, max(self.max_episode_steps - outcome.steps_done, 0)))
+            self.hold_gap = laws.next_hold_gap(self.hold_gap, reward, self.hold_cost(
+                outcome, laws.steps_left(self.max_episode_steps, outcome.steps_done,
+                                         xp=scalar)), xp=scalar)
         if self.smoothness_weight:
             self._previous_action[:] = outcome.action
         return reward, terms
@@ -245,29 +221,26 @@ class Reward:
 
     def bonus(self, outcome: StepOutcome) -> float:
         """The target bonus of a step that reached its target (0 otherwise)."""
-        if not outcome.reached:
-            return 0.0
-        return self.final_bonus if outcome.last_target else self.intermediate_bonus
+        return laws.target_bonus(outcome.reached, outcome.last_target, self.intermediate_bonus,
+                                 self.final_bonus, xp=scalar)
 
     def optional_terms(self, outcome: StepOutcome) -> tuple[float, float]:
         """The ``smoothness`` and ``effort`` terms (0.0 where the weight is 0)."""
         smoothness = effort = 0.0
         if self.smoothness_weight:
-            change = (outcome.action - self._previous_action) / self.action_range
-            smoothness = -self.smoothness_weight * float(change @ change) / len(change)
+            smoothness = float(laws.smoothness_term(outcome.action, self._previous_action,
+                                                    self.action_range, self.smoothness_weight,
+                                                    xp=np))
         if self.effort_weight:
-            torque = outcome.torque_nm / self.torque_limit_nm
-            if np.all(np.isfinite(torque)):
-                effort = -self.effort_weight * float(torque @ torque) / len(torque)
+            effort = float(laws.effort_term(outcome.torque_nm, self.torque_limit_nm,
+                                            self.effort_weight, xp=np))
         return smoothness, effort
 
     def steps_charged(self, outcome: StepOutcome) -> int:
         """The steps a stop is charged for: every step left and this one, at most
         ``safety_penalty_steps``."""
-        steps_left = max(self.max_episode_steps - outcome.steps_done, 0) + 1
-        if self.safety_penalty_steps is not None:
-            steps_left = min(steps_left, self.safety_penalty_steps)
-        return steps_left
+        return laws.steps_charged(self.max_episode_steps, outcome.steps_done,
+                                  self.safety_penalty_steps, xp=scalar)
 
 
 @dataclass
@@ -292,29 +265,27 @@ class PaperReward(Reward):
 
     def terms(self, outcome: StepOutcome) -> dict[str, float]:
         distance = -outcome.distance_rad
-        safety = bonus = 0.0
         smoothness, effort = self.optional_terms(outcome)
-        if outcome.safety_stop:
-            steps_left = self.steps_charged(outcome)
-            extras = self.smoothness_weight + self.effort_weight
-            hold = max(outcome.distance_rad, self.hold_distance_rad) + extras
-            if self.safety_penalty == "worst_case":
-                safety = steps_left * self.worst_step_reward
-            elif self.safety_penalty_steps is not None:
-                safety = -steps_left * hold
-            else:  # the gap to the best hold of the episode, one step more and the margin
-                safety = stop_penalty(self.hold_gap, distance + smoothness + effort, hold)
-        else:
-            bonus = self.bonus(outcome)
+        stop = outcome.safety_stop
+        safety = 0.0
+        if stop:
+            hold = laws.paper_hold_step(outcome.distance_rad, self.hold_distance_rad,
+                                        self.smoothness_weight, self.effort_weight, xp=scalar)
+            safety = laws.paper_safety(
+                stop, distance, hold, self.hold_gap, self.steps_charged(outcome), smoothness,
+                effort, penalty=self.safety_penalty,
+                capped=self.safety_penalty_steps is not None,
+                worst_step_reward=self.worst_step_reward, xp=scalar)
         self.hold_distance_rad = outcome.next_distance_rad
-        return {"reward_distance": distance, "reward_bonus": bonus, "reward_safety": safety,
-                "reward_smoothness": smoothness, "reward_effort": effort}
+        return {"reward_distance": distance, "reward_bonus": self.bonus(outcome),
+                "reward_safety": safety, "reward_smoothness": smoothness,
+                "reward_effort": effort}
 
     def hold_cost(self, state: StepOutcome, steps_left: int) -> float:
         """Each step of the hold at most the distance to the active target plus the lead
         (holding the setpoints takes the joints there) plus the extra terms' maxima."""
-        return steps_left * (state.next_distance_rad + sum(state.lead_rad)
-                             + self.smoothness_weight + self.effort_weight)
+        return laws.paper_hold_cost(steps_left, state.next_distance_rad, state.lead_rad,
+                                    self.smoothness_weight, self.effort_weight, xp=scalar)
 
 
 @dataclass
@@ -333,37 +304,37 @@ class ProgressReward(Reward):
 
     def reset(self, exercise: int, state: StepOutcome) -> None:
         self._rest = self.rests_rad[exercise]
-        self.path_left_rad = sum(state.next_arm_distances_rad) + self._rest[0]
+        self.path_left_rad = laws.path_left_rad(state.next_arm_distances_rad, self._rest[0],
+                                                xp=scalar)
         super().reset(exercise, state)
 
     def terms(self, outcome: StepOutcome) -> dict[str, float]:
         before = self.path_left_rad
         switching = outcome.reached and not outcome.last_target
-        after = self.path_left_rad = sum(outcome.next_arm_distances_rad) + self._rest[
-            outcome.target_index + 1 if switching else outcome.target_index]
-        progress = self.progress_weight * (before - after)
-        safety = bonus = 0.0
+        after = self.path_left_rad = laws.path_left_rad(
+            outcome.next_arm_distances_rad,
+            self._rest[outcome.target_index + 1 if switching else outcome.target_index],
+            xp=scalar)
+        progress = laws.progress_term(before, after, self.progress_weight)
         smoothness, effort = self.optional_terms(outcome)
-        if outcome.safety_stop:
-            per_step = self.time_cost + self.smoothness_weight + self.effort_weight
-            if self.safety_penalty_steps is not None:  # a capped count: a stop can pay
-                gained = max(before - after, 0.0)
-                safety = -(self.progress_weight * gained
-                           + self.steps_charged(outcome) * per_step)
-            else:
-                safety = stop_penalty(self.hold_gap,
-                                      progress - self.time_cost + smoothness + effort, per_step)
-        else:
-            bonus = self.bonus(outcome)
-        return {"reward_progress": progress, "reward_bonus": bonus,
+        stop = outcome.safety_stop
+        safety = 0.0
+        if stop:
+            safety = laws.progress_safety(
+                stop, before, after, self.hold_gap, self.steps_charged(outcome), progress,
+                self.time_cost, smoothness, effort, progress_weight=self.progress_weight,
+                smoothness_weight=self.smoothness_weight, effort_weight=self.effort_weight,
+                capped=self.safety_penalty_steps is not None, xp=scalar)
+        return {"reward_progress": progress, "reward_bonus": self.bonus(outcome),
                 "reward_time": -self.time_cost, "reward_safety": safety,
                 "reward_smoothness": smoothness, "reward_effort": effort}
 
     def hold_cost(self, state: StepOutcome, steps_left: int) -> float:
         """Holding still makes no progress: the time cost a step, and the lead can undo that
         much progress."""
-        return (steps_left * (self.time_cost + self.smoothness_weight + self.effort_weight)
-                + self.progress_weight * sum(state.lead_rad))
+        return laws.progress_hold_cost(steps_left, state.lead_rad, self.time_cost,
+                                       self.smoothness_weight, self.effort_weight,
+                                       self.progress_weight, xp=scalar)
 
 
 @dataclass
@@ -394,12 +365,13 @@ class BilateralReward(ProgressReward):
     def _in_segment(self, distances: Sequence[float],
                     target: int) -> tuple[list[float], float]:
         """Each arm's share of target ``target``'s segment done, and the arms' sync gap."""
-        lengths = self._segments[target]
-        fractions = [segment_fraction(d, length) for d, length in zip(distances, lengths,
-                                                                        strict=True)]
+        (right, left), (length_right, length_left) = distances, self._segments[target]
+        fractions = [laws.segment_fraction(right, length_right, xp=scalar),
+                     laws.segment_fraction(left, length_left, xp=scalar)]
         tolerance = self.target_tolerance_rad
-        return fractions, sync_gap(fractions[0], fractions[1], lengths[0] > tolerance,
-                                   lengths[1] > tolerance, self.sync_tolerance)
+        return fractions, laws.sync_gap(
+            fractions[0], fractions[1], laws.moves_in_segment(length_right, tolerance),
+            laws.moves_in_segment(length_left, tolerance), self.sync_tolerance, xp=scalar)
 
     def terms(self, outcome: StepOutcome) -> dict[str, float]:
         index = outcome.target_index
@@ -411,27 +383,24 @@ class BilateralReward(ProgressReward):
             self._target = index + 1
             self._gap = self._in_segment(outcome.next_arm_distances_rad, index + 1)[1]
         terms = super().terms(outcome)
-        if outcome.safety_stop:
-            gap = max(gap, gap_before)
-            if self.safety_penalty_steps is not None:  # a capped count
-                terms["reward_safety"] -= self.steps_charged(outcome) * self.sync_weight * gap
-            else:  # G already holds the sync costs; one step's more
-                terms["reward_safety"] -= self.sync_weight * gap
-            terms["reward_sync"] = 0.0
-        else:
-            terms["reward_sync"] = -self.sync_weight * gap if gap else 0.0
+        stop = outcome.safety_stop
+        if stop:  # G holds the sync costs of a hold; the stop pays one step's more
+            capped = self.safety_penalty_steps is not None
+            terms["reward_safety"] -= laws.sync_stop_charge(
+                gap, gap_before, self.sync_weight,
+                self.steps_charged(outcome) if capped else None, xp=scalar)
+        terms["reward_sync"] = laws.sync_term(gap, stop, self.sync_weight, xp=scalar)
         return terms
 
     def hold_cost(self, state: StepOutcome, steps_left: int) -> float:
         """:class:`ProgressReward`'s bound plus the sync term of every step at the largest gap
         the arms can reach while each travels its lead (when both move in the segment)."""
-        lengths = self._segments[self._target]
-        tolerance = self.target_tolerance_rad
-        gap = 0.0
-        if lengths[0] > tolerance and lengths[1] > tolerance:
-            lead = state.lead_rad
-            gap = min(self._gap + (lead[0] / lengths[0] + lead[1] / lengths[1]), 1.0)
-        return super().hold_cost(state, steps_left) + steps_left * self.sync_weight * gap
+        (length_right, length_left), (lead_right, lead_left) = \
+            self._segments[self._target], state.lead_rad
+        gap = laws.sync_hold_gap(self._gap, lead_right, lead_left, length_right, length_left,
+                                 self.target_tolerance_rad, xp=scalar)
+        return laws.bilateral_hold_cost(super().hold_cost(state, steps_left), steps_left, gap,
+                                        self.sync_weight)
 
     def info(self) -> dict[str, object]:
         """The bilateral entries of ``info``: each arm's progress through the last step's
