@@ -22,7 +22,7 @@ from __future__ import annotations
 import builtins
 import math
 from collections.abc import Iterable
-from typing import Any, TypeVar
+from typing import TypeVar
 
 T = TypeVar("T")
 
@@ -66,5 +66,5 @@ def logical_not(a: bool) -> bool:
     return not a
 
 
-__all__: list[Any] = ["abs", "exp", "logical_and", "logical_not", "logical_or", "maximum",
-                      "minimum", "mod", "sin", "sqrt", "sum", "tanh", "where"]
+__all__ = ["abs", "exp", "logical_and", "logical_not", "logical_or", "maximum",
+           "minimum", "mod", "sin", "sqrt", "sum", "tanh", "where"]
