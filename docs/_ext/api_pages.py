@@ -23,6 +23,7 @@ LAYERS: tuple[tuple[str, str], ...] = (
     ("rehabbot.envs", "`rehabbot.envs`: the Gymnasium envs, their config and ids"),
     ("rehabbot.tasks", "`rehabbot.tasks`: exercises, targets, observations, rewards"),
     ("rehabbot.sim", "`rehabbot.sim`: robots, patient, conditions, scenes, physics"),
+    ("rehabbot.laws", "`rehabbot.laws`: the task's laws over NumPy or jax.numpy"),
     ("rehabbot.common", "`rehabbot.common`: errors, checks, files, provenance"),
 )
 SKIP = {"rehabbot.__main__"}
