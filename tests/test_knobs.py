@@ -246,18 +246,11 @@ def test_the_bilateral_id_takes_the_limit_too():
     env.close()
 
 
-@pytest.mark.parametrize("limit", [-1, True, 10**6 + 1], ids=repr)
+@pytest.mark.parametrize("limit", [-1, 0, -5, True, 2.5, 10**6 + 1], ids=repr)
 def test_a_non_positive_time_limit_is_refused(limit):
     # Gymnasium's -1 would silently remove the TimeLimit: refused, the stop penalty needs a
     # horizon.
     with pytest.raises(ValueError, match=_named("max_episode_steps", limit)):
-        gym.make(REACH, max_episode_steps=limit)
-
-
-@pytest.mark.parametrize("limit", [0, -5, 2.5], ids=repr)
-def test_gymnasiums_time_limit_refuses_a_limit_that_is_no_positive_integer(limit):
-    # Gymnasium's TimeLimit checks these before the env sees them.
-    with pytest.raises((ValueError, TypeError), match="max_episode_steps"):
         gym.make(REACH, max_episode_steps=limit)
 
 
@@ -306,8 +299,7 @@ def test_a_condition_variant_accepts_its_own_condition():
 # ----------------------------------------------------------------------------- patient torques
 @pytest.fixture(scope="module")
 def rigid_arm():
-    """A grade-4 spastic arm with the safety stops off: only the patient's strength bounds
-    its reflex."""
+    """A grade-4 spastic arm with the safety stops off (where the reflex was unbounded)."""
     env = gym.make(REACH, condition={"spasticity_mas": "4", "tremor_hz": 5.0,
                                      "tremor_amplitude_nm": 10.0},
                    terminate_on_safety=False, control_mode="torque")

@@ -15,6 +15,7 @@ import numpy as np
 
 from rehabbot.common.checks import check_number, check_options
 from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES
+from rehabbot.envs.time_limit import MakeTimeLimit
 from rehabbot.sim.scene import WEIGHT_LEVELS, check_weight_level
 from rehabbot.tasks import feasibility
 from rehabbot.tasks.targets import TargetSequence
@@ -22,7 +23,7 @@ from rehabbot.tasks.targets import TargetSequence
 RESET_OPTIONS = ("exercise", "weight_level")
 
 
-class RehabEnvBase(gym.Env):
+class RehabEnvBase(MakeTimeLimit, gym.Env):
     """The shared plumbing of the RehabBot envs. A subclass sets :attr:`config_class` and, in
     its constructor, ``config``, calls :meth:`_adopt_parts` on its built parts, and sets
     ``_rendering``, ``_healthy_low`` and ``_healthy_high``; ``reset`` and ``step`` keep
@@ -93,7 +94,7 @@ class RehabEnvBase(gym.Env):
     def set_time_limit(self, max_episode_steps: int) -> None:
         """Make ``max_episode_steps`` the env's horizon everywhere it is used: the config, the
         safety penalties of the reward and the rendering's trace (``gym.make`` calls this with
-        the limit of its ``TimeLimit``: :func:`rehabbot.envs.time_limit.adopt_time_limit`).
+        the limit of its ``TimeLimit``: :class:`rehabbot.envs.time_limit.MakeTimeLimit`).
         Between episodes only; ``ValueError`` for a limit outside ``config.NUMBER_RANGES``."""
         low, high, _integer = NUMBER_RANGES["max_episode_steps"]
         limit = check_number("max_episode_steps", max_episode_steps, low, high, integer=True)

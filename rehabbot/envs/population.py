@@ -67,12 +67,13 @@ from rehabbot.common.checks import check_number, check_options
 from rehabbot.envs.config import NUMBER_RANGES, RENDER_MODES, RehabEnvConfig
 from rehabbot.envs.env_base import RESET_OPTIONS
 from rehabbot.envs.rehab_env import RehabEnv
+from rehabbot.envs.time_limit import MakeTimeLimit
 from rehabbot.sim.populations import PatientPopulation, as_population
 
 POPULATION_RESET_OPTIONS = (*RESET_OPTIONS, "patient")
 
 
-class PopulationEnv(gym.Env):
+class PopulationEnv(MakeTimeLimit, gym.Env):
     """A patient drawn from ``patients`` every episode (see the module docstring)."""
 
     metadata: ClassVar[dict] = {"render_modes": list(RENDER_MODES), "render_fps": 50}

@@ -10,17 +10,19 @@ env whose first ``reset()`` raised (the next ``step()`` failed with ``TypeError:
 non-iterable NoneType object``). ``gym.make(id, disable_env_checker=False)`` or
 ``order_enforce=True`` add them back.
 
-The env knows its time limit: its horizon is the config's ``max_episode_steps``, registered
-per id as a keyword argument with the same value as the id's ``TimeLimit``.
-``gym.make(id, max_episode_steps=m)`` gives ``m`` to the ``TimeLimit`` wrapper only (it never
-reaches the env's constructor), so every id also registers an ``additional_wrappers`` entry,
-:func:`rehabbot.envs.time_limit.adopt_time_limit`, that ``gym.make`` calls after the
-``TimeLimit``: it hands ``m`` to the env, which uses it wherever it uses
-``max_episode_steps``: the safety penalties' steps left, ``config`` and the rendering's trace.
-A non-positive ``m`` is refused (``ValueError``), and so is Gymnasium's ``m=-1`` ("no
-``TimeLimit``"): the safety penalty needs a horizon. A spec without that entry
-(``gym.make(env.unwrapped.spec)``, as Gymnasium's env checker and vector envs do) builds the
-env with the horizon of its keyword arguments.
+The env knows its time limit. ``gym.make(id, max_episode_steps=m)`` gives ``m`` to the
+``TimeLimit`` wrapper only (it never reaches the env's constructor), so the env reads it back
+when ``gym.make`` hands it its spec (:func:`time_limit_from_make`) and uses ``m`` wherever
+it uses ``max_episode_steps``: the safety penalties' steps left, ``config`` and the rendering's
+trace. A non-positive ``m`` is refused (``ValueError`` naming it), and so is Gymnasium's
+``m=-1`` ("no ``TimeLimit``"): the safety penalty needs a horizon. A spec without a time limit
+(``gym.make(spec)`` of a spec whose ``max_episode_steps`` is None, as ``env.unwrapped.spec``
+is: Gymnasium's env checker and vector envs make envs again from it) keeps the env's own
+horizon (its ``max_episode_steps=`` keyword, 1000 by default), and nothing truncates the
+episodes. Gymnasium offers no hook for this: the env's ``spec`` setter
+reads ``max_episode_steps``, ``env_spec`` and ``kwargs`` from the frame of
+``gymnasium.make`` that sets it (Gymnasium 1.x; ``tests/test_knobs.py`` fails if a new
+version moves them).
 
 A condition variant (:data:`CONDITION_VARIANTS`) is its base id with a condition: ``gym.make``
 of a variant id refuses a ``condition=`` that would replace it (``condition=None`` would
@@ -29,41 +31,36 @@ silently give a healthy patient); use the base id with ``condition=`` instead.
 
 from __future__ import annotations
 
+import types
+from typing import Any
+
 import gymnasium as gym
-from gymnasium.envs.registration import WrapperSpec
+import gymnasium.envs.registration as gym_registration
 
 from rehabbot.common.errors import UsageError
 
 NAMESPACE = "rehabbot"
 ENTRY_POINT = "rehabbot.envs.rehab_env:RehabEnv"
 MAX_EPISODE_STEPS = 1000
-# The additional_wrappers entry of every id (rehabbot.envs.time_limit imports this module).
-TIME_LIMIT_HOOK = "rehabbot.envs.time_limit:adopt_time_limit"
-TIME_LIMIT_HOOK_NAME = "RehabBotTimeLimit"
 
-# id -> (kwargs, one-line description). Every id's kwargs hold its horizon (max_episode_steps:
-# the env's own and its TimeLimit's). The -v0 ids are the paper's Table 2 with eq. (5); the
+# id -> (kwargs, one-line description). The -v0 ids are the paper's Table 2 with eq. (5); the
 # -v1 ids are the same tasks and spaces with the learnable progress reward
 # (rehabbot.tasks.reward).
 ENV_SPECS: dict[str, tuple[dict, str]] = {
     "rehabbot/rehab-reach-v0": (
-        {"limb": "arm", "side": "right", "task_type": "reaching",
-         "max_episode_steps": MAX_EPISODE_STEPS},
+        {"limb": "arm", "side": "right", "task_type": "reaching"},
         "right arm, seated: reach 6 shoulder or elbow key poses in order",
     ),
     "rehabbot/rehab-reach-l-v0": (
-        {"limb": "arm", "side": "left", "task_type": "trajectory",
-         "max_episode_steps": MAX_EPISODE_STEPS},
+        {"limb": "arm", "side": "left", "task_type": "trajectory"},
         "left arm, seated: follow dense waypoints of a minimum-jerk shoulder or elbow path",
     ),
     "rehabbot/rehab-hip-v0": (
-        {"limb": "hip", "side": "right", "task_type": "reaching",
-         "max_episode_steps": MAX_EPISODE_STEPS},
+        {"limb": "hip", "side": "right", "task_type": "reaching"},
         "right leg, supine: reach 6 hip flexion/extension key poses in order",
     ),
     "rehabbot/rehab-knee-v0": (
-        {"limb": "knee", "side": "right", "task_type": "trajectory",
-         "max_episode_steps": MAX_EPISODE_STEPS},
+        {"limb": "knee", "side": "right", "task_type": "trajectory"},
         "right leg, seated: follow dense waypoints of a minimum-jerk knee flexion/extension path",
     ),
 }
@@ -209,24 +206,73 @@ def entry_point_of(env_id: str) -> str:
     return POPULATION_ENTRY_POINT if "patients" in ENV_SPECS[env_id][0] else ENTRY_POINT
 
 
-def horizon_of(env_id: str) -> int:
-    """The registered horizon of ``env_id``: its ``max_episode_steps`` keyword argument and its
-    ``TimeLimit``."""
-    return int(ENV_SPECS[env_id][0]["max_episode_steps"])
+def _made_by_gym(caller: types.FrameType | None) -> bool:
+    return caller is not None and caller.f_code is gym_registration.make.__code__
+
+
+def check_variant_condition(spec: Any, caller: types.FrameType | None) -> None:
+    """Refuse (``ValueError``) a ``condition=`` given to ``gym.make`` of a condition variant id
+    that differs from the variant's own condition (``caller``: as in
+    :func:`time_limit_from_make`)."""
+    env_id = getattr(spec, "id", None)
+    if env_id not in CONDITION_VARIANTS or not _made_by_gym(caller):
+        return
+    given = caller.f_locals.get("kwargs") or {}
+    if "condition" not in given:
+        return
+    from rehabbot.sim.conditions import as_condition  # the env module imports this one
+
+    base_id, own, _description = CONDITION_VARIANTS[env_id]
+    if as_condition(given["condition"]) != as_condition(own):
+        raise ValueError(
+            f"condition={given['condition']!r} would replace the condition of {env_id} "
+            f"({own}); make the base id with a condition instead: "
+            f"gym.make({base_id!r}, condition=...)")
+
+
+def time_limit_from_make(spec: Any, caller: types.FrameType | None) -> int | None:
+    """The time limit of an env whose ``spec`` is being set by ``caller`` (the frame that sets
+    ``env.unwrapped.spec``): ``None`` to keep the env's own.
+
+    When ``caller`` is ``gymnasium.make`` (which sets a spec without the time limit, then
+    wraps the env in ``TimeLimit``), the limit is the ``max_episode_steps`` given to ``make``,
+    else the registered one; otherwise the spec's ``max_episode_steps`` when it has one.
+
+    Raises:
+        ValueError: a ``max_episode_steps`` that is not a positive integer (``-1``, Gymnasium's
+            "no time limit", included).
+    """
+    if _made_by_gym(caller):
+        given = caller.f_locals.get("max_episode_steps")
+        registered = getattr(caller.f_locals.get("env_spec"), "max_episode_steps", None)
+        if given is not None:
+            if isinstance(given, bool) or not isinstance(given, int) or given <= 0:
+                raise ValueError(
+                    f"max_episode_steps={given!r} must be a positive integer (the episode's "
+                    "time limit; -1, Gymnasium's 'no time limit', is refused: the safety "
+                    "penalty counts the steps left to the limit)")
+            return given
+        return registered  # None: no TimeLimit; the env keeps its own horizon
+    limit = getattr(spec, "max_episode_steps", None)
+    if isinstance(limit, int) and not isinstance(limit, bool) and limit > 0:
+        return limit
+    return None
+
+
+def check_make(spec: Any, caller: types.FrameType | None) -> int | None:
+    """What an env checks when ``caller`` sets its ``spec``: :func:`check_variant_condition`,
+    then the time limit it takes (:func:`time_limit_from_make`)."""
+    check_variant_condition(spec, caller)
+    return time_limit_from_make(spec, caller)
 
 
 def register_envs() -> None:
-    """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent): its keyword
-    arguments with the horizon (``max_episode_steps``), a ``TimeLimit`` of that horizon and
-    the ``additional_wrappers`` entry through which the env adopts the limit ``gym.make`` gives
-    (:func:`rehabbot.envs.time_limit.adopt_time_limit`)."""
-    adopt = WrapperSpec(name=TIME_LIMIT_HOOK_NAME, entry_point=TIME_LIMIT_HOOK, kwargs={})
+    """Register every id of :data:`ENV_SPECS` with Gymnasium (idempotent)."""
     for env_id, (kwargs, _description) in ENV_SPECS.items():
         if env_id in gym.registry:
             continue
-        horizon = horizon_of(env_id)
         gym.register(id=env_id, entry_point=entry_point_of(env_id), kwargs=dict(kwargs),
-                     max_episode_steps=horizon, additional_wrappers=(adopt,),
+                     max_episode_steps=kwargs.get("max_episode_steps", MAX_EPISODE_STEPS),
                      order_enforce=False, disable_env_checker=True)
 
 
