@@ -91,6 +91,7 @@ def test_snapshot_writes_png_of_requested_size(tmp_path: Path, capsys) -> None:
     assert len(np.unique(image[..., :3].reshape(-1, 3), axis=0)) > 50
 
 
+@pytest.mark.slow
 def test_snapshot_cameras_differ(tmp_path: Path) -> None:
     from rehabbot.sim import build_scene
 

@@ -234,6 +234,7 @@ def test_evaluate_refuses_an_earlier_evaluation_without_overwrite(tmp_path, caps
 
 
 # ------------------------------------------------------------------ 6. render's progress, help
+@pytest.mark.slow
 def test_render_prints_progress_to_stderr(tmp_path, capsys) -> None:
     pytest.importorskip("imageio")
     code = main(["render", "expert", "--env", ENV, "--out", str(tmp_path / "a.gif"),

@@ -601,6 +601,7 @@ def test_deploy_an_onnx_policy(tmp_path):
 
 
 # --------------------------------------------------------------------------- the figure
+@pytest.mark.slow
 def test_the_session_figure_marks_what_the_filter_did(tmp_path):
     pytest.importorskip("matplotlib")
     from rehabbot.analysis.session_figures import (

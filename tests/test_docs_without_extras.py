@@ -53,6 +53,7 @@ print(json.dumps({"listed": listed, "mocked": mocked, "state_fields": state_fiel
 """
 
 
+@pytest.mark.slow
 def test_the_api_modules_import_for_autodoc_with_the_gpu_and_myo_libraries_missing():
     pytest.importorskip("sphinx", reason="the docs extra is not installed")
     result = subprocess.run([sys.executable, "-c", SCRIPT, ",".join(BLOCKED)], cwd=ROOT,

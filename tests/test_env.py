@@ -325,6 +325,7 @@ def test_reset_options_and_constructor_kwargs_fix_the_draws(envs):
     assert mass3 / mass0 == pytest.approx(1.75)
 
 
+@pytest.mark.slow
 def test_every_variant_is_reachable_by_kwargs():
     for limb in ex.LIMBS:
         for side in ("right", "left"):

@@ -179,6 +179,7 @@ print(_episode_digest(sys.argv[1], int(sys.argv[2]))[0])
 @pytest.mark.parametrize("env_id", ["rehabbot/rehab-reach-v0",
                                     pytest.param("rehabbot/rehab-knee-v0",
                                                  marks=pytest.mark.slow)])
+@pytest.mark.slow
 def test_same_seed_same_actions_give_bit_identical_episodes_in_and_across_processes(env_id):
     first, _draws = _episode_digest(env_id, seed=7)
     second, _ = _episode_digest(env_id, seed=7)

@@ -308,6 +308,7 @@ def test_active_target_marker_is_drawn_where_the_target_projects(expert_run,
     assert without_marker <= 2
 
 
+@pytest.mark.slow
 def test_cameras_give_different_images() -> None:
     images = {}
     for camera in CAMERAS:

@@ -42,6 +42,7 @@ def test_the_plan_covers_every_cell_with_seeds_counting_up() -> None:
     assert {p.seed: p for p in plan}.items() >= {p.seed: p for p in few}.items()
 
 
+@pytest.mark.slow
 def test_every_controller_plays_the_same_episodes_and_refused_patients_skip_seeds() -> None:
     """The expert and a zoo agent play the same seeds; a patient the scene refuses has no
     episodes, is listed with the scene's reason, and the patient after it keeps the seeds it
@@ -231,6 +232,7 @@ def test_a_run_folder_without_its_final_model_is_refused(tmp_path: Path, capsys)
     assert str(tmp_path / "empty") in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_validation_plays_its_own_cohort_and_gives_each_run_its_figure(tmp_path: Path) -> None:
     """--split validation: the validation bodies x conditions, seeds from 40 000; a run of the
     population id plays in its base id and its finished/of is in the data."""

@@ -30,6 +30,7 @@ def test_there_are_myo_ids():
 @pytest.mark.parametrize("env_id", [
     pytest.param(env_id, marks=[] if "knee" in env_id else [pytest.mark.slow])
     for env_id in MYO_IDS])
+@pytest.mark.slow
 def test_making_a_myo_id_leaves_no_file_and_prints_nothing(env_id, tmp_path):
     """In a fresh process (myo-sim's model is composed once per process), in an empty folder,
     with every warning shown: make, reset and step the id."""

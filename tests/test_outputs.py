@@ -155,6 +155,7 @@ def test_render_that_runs_out_of_space_keeps_the_old_video(good_video, tmp_path,
     assert out.read_bytes() == good_video and _leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_render_whose_writer_leaves_a_truncated_file_fails(good_video, tmp_path, monkeypatch,
                                                            capsys) -> None:
     """The writer reports success but the file is cut short: the frame count read back
@@ -191,6 +192,7 @@ def test_verify_video_counts_the_frames(good_video, tmp_path) -> None:
         verify_video(path, frames + 1, 5.0)
 
 
+@pytest.mark.slow
 def test_a_gif_is_read_back_too(tmp_path, monkeypatch, capsys) -> None:
     pytest.importorskip("PIL")
     out = tmp_path / "x.gif"
@@ -532,6 +534,7 @@ def _interrupt(marker: str, args: list[str], cwd: Path,
     return proc.returncode, first + out, err
 
 
+@pytest.mark.slow
 def test_ctrl_c_in_render_exits_130_with_one_line_and_no_file(tmp_path) -> None:
     pytest.importorskip("imageio_ffmpeg")
     out = tmp_path / "x.mp4"
@@ -544,6 +547,7 @@ def test_ctrl_c_in_render_exits_130_with_one_line_and_no_file(tmp_path) -> None:
     assert "Traceback" not in stdout and not out.exists() and _leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_ctrl_c_in_evaluate_exits_130_with_one_line(tmp_path) -> None:
     code, stdout, stderr = _interrupt(
         "rehabbot.analysis.evaluation:run_episode",

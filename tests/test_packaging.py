@@ -64,6 +64,7 @@ def test_no_full_model_is_tracked_in_the_zoo() -> None:
         == []
 
 
+@pytest.mark.slow
 def test_the_wheel_holds_the_actors_and_no_full_model(tmp_path: Path) -> None:
     """The wheel of a source folder where full models lie in the zoo (as after
     ``rehabbot zoo export --full``): every NumPy actor and the settings files are in it, no

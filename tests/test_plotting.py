@@ -437,6 +437,7 @@ def test_target_labels_first_and_last_kept_when_they_collide() -> None:
         figures.choose_target_labels(targets, anchors_pt[:2], 0.3)
 
 
+@pytest.mark.slow
 def test_trace_figures_written(trace_file: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     written = (figures.plot_kinematics(trace_file, out)
@@ -559,6 +560,7 @@ def test_bad_options() -> None:
 # --------------------------------------------------------------------------- CLI
 
 
+@pytest.mark.slow
 def test_cmd_plot_writes_files(experiment: Path, trace_file: Path,
                                capsys: pytest.CaptureFixture[str]) -> None:
     args = plot_parser().parse_args(["plot", str(experiment), "--smooth", "5",

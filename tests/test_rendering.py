@@ -209,6 +209,7 @@ def test_headless_glfw_backend_gives_actionable_error(box_world, monkeypatch) ->
 MIN_PIXELS = 500
 
 
+@pytest.mark.slow
 def test_default_camera_of_every_preset_sees_robot_and_patient() -> None:
     from rehabbot.sim import PRESETS, build_scene
 

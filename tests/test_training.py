@@ -107,6 +107,7 @@ def _no_temp_files(run_dir: Path) -> bool:
 
 @pytest.mark.parametrize("algo", ["ppo", pytest.param("sac", marks=pytest.mark.slow),
                                   pytest.param("td3", marks=pytest.mark.slow)])
+@pytest.mark.slow
 def test_train_writes_the_run_directory(tmp_path: Path, algo: str, capsys) -> None:
     out = tmp_path / "runs"
     assert cmd_train(_train_args(tmp_path, algo, out, "--timesteps", "2000")) == 0

@@ -415,6 +415,7 @@ def _clone_error(model_path: Path) -> tuple[float, float]:
     return errors[0], errors[1]
 
 
+@pytest.mark.slow
 def test_bc_warm_starts_sb3_ppo_close_to_the_expert(tmp_path: Path) -> None:
     manifest, model_path = _bc_run(tmp_path, "sb3", PPO_FROZEN)
     bc = manifest["bc"]
