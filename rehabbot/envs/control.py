@@ -258,11 +258,11 @@ def checked_action(action, space: spaces.Box, clip_low: np.ndarray,
 
 class UnitActions:
     """Actions in ``Box(-1, 1)`` (the ``-v2`` ids, ``action_scale="unit"``), mapped linearly
-    onto the controller's box ``[clip_low, clip_high]`` (:func:`rehabbot.laws.control.
-    native_action`): -1 is the lower and +1 the upper bound of each joint's action
-    (``-pi/400 .. pi/400`` rad in ``joint_delta`` mode; the patient's setpoint bounds in
-    ``joint_position`` mode). The checks and the clipping count of :func:`checked_action`
-    apply to the unit action."""
+    onto the controller's box ``[clip_low, clip_high]``
+    (:func:`rehabbot.laws.control.native_action`): -1 is the lower and +1 the upper bound of
+    each joint's action (``-pi/400 .. pi/400`` rad in ``joint_delta`` mode; the patient's
+    setpoint bounds in ``joint_position`` mode). The checks and the clipping count of
+    :func:`checked_action` apply to the unit action."""
 
     def __init__(self, clip_low: np.ndarray, clip_high: np.ndarray) -> None:
         low = np.asarray(clip_low, dtype=np.float64)

@@ -8,7 +8,7 @@ built-ins. A law receives it as its ``xp`` argument like NumPy or ``jax.numpy``,
 functions give the same floats as NumPy's on the same numbers (``tests/laws`` checks it):
 
 * ``maximum``, ``minimum``, ``abs``: Python's ``max``, ``min``, ``abs``; ``sqrt``, ``exp``,
-  ``tanh``, ``sin``: :mod:`math`'s (IEEE results);
+  ``tanh``, ``sin``: those of Python's ``math`` module (IEEE results);
 * ``where(condition, a, b)``: ``a if condition else b``. Unlike ``numpy.where`` it does not
   broadcast; both branches are already computed, as in NumPy, so a law keeps them finite for
   any input it accepts;
