@@ -38,11 +38,11 @@ PARALLEL := -n auto --maxprocesses 4 --dist worksteal
 # in one process, so that no other test competes with the loop for the CPU. franka-sim steps
 # its physics against the wall clock in a process of its own: a machine that stalls it for
 # milliseconds can fault a motion that real time would not, so a realtime test that fails runs
-# once more (pytest-rerunfailures), and the log names every rerun and its first failure (-rR).
+# up to twice more (pytest-rerunfailures), and the log names every rerun (-rR).
 test: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q --full $(PARALLEL) -rf --durations=30 \
 	  -m "not realtime"
-	$(PY) -m pytest -q --full -rfR -m realtime -p no:xdist --reruns 1 --reruns-delay 2
+	$(PY) -m pytest -q --full -rfRxX -m realtime -p no:xdist --reruns 2 --reruns-delay 2
 
 test-fast: $(STAMP)
 	MUJOCO_GL=$(MUJOCO_GL) $(XVFB) $(PY) -m pytest -q $(PARALLEL)
