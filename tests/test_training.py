@@ -713,3 +713,38 @@ def test_train_without_hyperparams_refuses_the_paper_observation_ids(
 
         plan = plan_seeds(env_id, algo, [0], None, out, hyperparams=f"sb3-defaults/{algo}")[0]
         assert plan.hp.entry == f"rehabbot/{env_id}" and plan.hp.policy == "MlpPolicy"
+
+
+@pytest.mark.slow
+def test_threads_train_the_same_model_as_dummy(tmp_path: Path) -> None:
+    """``--vec threads`` (the CPU vector env) changes the wall clock only: the same episodes
+    in the same monitor files and the same weights as ``--vec dummy``; a resumed run appends
+    to its monitor files."""
+    import torch
+
+    runs = {}
+    for vec in ("dummy", "threads"):
+        out = tmp_path / vec
+        assert cmd_train(_train_args(tmp_path, "ppo", out, "--timesteps", "1024", "--n-envs",
+                                     "2", "--vec", vec, freq=512)) == 0
+        runs[vec] = out / ENV / "ppo" / "seed0"
+    for i in range(2):
+        rows = {}
+        for vec, run_dir in runs.items():
+            lines = (run_dir / "monitor" / f"train_{i}.monitor.csv").read_text().splitlines()
+            rows[vec] = [{k: v for k, v in row.items() if k != "t"}
+                         for row in csv.DictReader(lines[1:])]
+        assert rows["threads"] == rows["dummy"] and len(rows["dummy"]) >= 5
+    weights = {vec: _algo_class("ppo").load(run_dir / "model.zip", device="cpu").policy
+               for vec, run_dir in runs.items()}
+    for a, b in zip(weights["dummy"].parameters(), weights["threads"].parameters(),
+                    strict=True):
+        assert torch.equal(a, b)
+    assert _manifest(runs["threads"])["vec_env"] == "threads"
+
+    _lines, before = _monitor_rows(runs["threads"])
+    assert cmd_train(_train_args(tmp_path, "ppo", tmp_path / "threads", "--timesteps", "1536",
+                                 "--n-envs", "2", "--vec", "threads", "--resume",
+                                 freq=512)) == 0
+    _lines, after = _monitor_rows(runs["threads"])
+    assert after[:len(before)] == before and len(after) > len(before)

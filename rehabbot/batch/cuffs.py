@@ -76,7 +76,8 @@ class CuffReadings:
         the CPU reads them."""
         impl = data._impl
         rows = self._tables.cuff_rows.tolist()
-        forces = force_magnitude_n(jp.stack([impl.efc__force[row:row + 3] for row in rows]))
+        xyz = jp.stack([impl.efc__force[row:row + 3] for row in rows])  # (cuffs, 3)
+        forces = force_magnitude_n((xyz[:, 0], xyz[:, 1], xyz[:, 2]), jp)
         return jp.where(jp.reshape(impl.ne, ()) >= max(rows) + 3, forces, 0.0)
 
     def touch(self, data: Any) -> jax.Array:

@@ -48,6 +48,7 @@ from rehabbot.laws.control import SETPOINT_LAWS, clip_to_box, motor_torque_nm, n
 from rehabbot.laws.safety import (
     beyond_range,
     blown_up,
+    fastest_speed_rad_s,
     first_rule,
     outside_box,
     over_force_limit,
@@ -512,12 +513,14 @@ class BatchedRehabEnv:
         theta, dynamic = self._dynamic(w, data)
         before = self._paper(w, exercise, index, dynamic, level)
         # MuJoCo Warp neither warns nor resets: a non-finite state is judged from the values.
-        unstable = (~jp.all(jp.isfinite(data.qpos)) | blown_up(data.qvel, force)
+        unstable = (~jp.all(jp.isfinite(data.qpos))
+                    | blown_up(fastest_speed_rad_s(data.qvel), force, jp)
                     | outside_box(before, w["box_low"], w["box_high"]))
+        patient_q = data.qpos[self._patient_qpos]
         violation = first_rule(
             unstable,
-            beyond_range(data.qpos[self._patient_qpos], w["rom_low"], w["rom_high"]),
-            over_force_limit(forces, self._cuff_limits),
+            beyond_range(list(patient_q), list(w["rom_low"]), list(w["rom_high"])),
+            over_force_limit(list(forces), list(self._cuff_limits)),
             self.cuffs.touch(data)).astype(jp.int32)
         theta = jp.where(unstable, info["theta"], theta)
         dynamic = jp.where(unstable, info["healthy"], dynamic)

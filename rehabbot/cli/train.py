@@ -31,6 +31,7 @@ from rehabbot.rl.planning import (
     DEFAULT_EVAL_FREQ,
     DEFAULT_TIMESTEPS,
     SHIPPED_DEMOS,
+    VEC_ENV_KINDS,
 )
 
 DEFAULT_SEEDS = (0,)
@@ -200,9 +201,11 @@ def add_train_parser(commands: argparse._SubParsersAction) -> None:
                       metavar="K",
                       help="parallel training envs (default: the file's n_envs, else 1); "
                            "with --backend rsl_rl, batched worlds (default 4096)")
-    envs.add_argument("--vec", choices=("dummy", "subproc"), default="dummy",
-                      help="vector env: in-process (dummy, default) or one process per env "
-                           "(started with 'spawn': safe after rendering or with threads)")
+    envs.add_argument("--vec", choices=VEC_ENV_KINDS, default="dummy",
+                      help="vector env: in-process (dummy, default), one process per env "
+                           "(subproc, started with 'spawn': safe after rendering or with "
+                           "threads) or in-process with the envs' physics on threads "
+                           "(threads: rehabbot.envs.vector; docs/vector-env.md)")
     envs.add_argument("--time-limit-s", type=limits.time_limit_s, metavar="S",
                       help="--backend rsl_rl: end each run, as finished, after the first "
                            "PPO iteration that ends past S seconds of wall clock (building "

@@ -186,9 +186,18 @@ class RehabEnvCore(RehabEnvBase):
         return self._observation_out(info), info
 
     def step(self, action):
+        applied = self.prepare_step(action)
+        self.advance_physics()
+        return self.finish_step(applied)
+
+    # The three parts of ``step``, in this order; a vector env runs the physics of many worlds
+    # at once between the other two (:mod:`rehabbot.envs.vector`).
+    def prepare_step(self, action) -> tuple[Any, int]:
+        """Check ``action`` and write it into the controls; return what ``finish_step`` needs
+        (the applied action in the controller's units, and how many entries were clipped)."""
         if self._needs_reset:
             self._refuse_step()
-        data, clipped = self.data, 0
+        clipped = 0
         if self._randomizer is not None:  # randomisation: the action arrives k decisions late
             action, clipped = self._delayed_control(action)
         else:
@@ -197,8 +206,19 @@ class RehabEnvCore(RehabEnvBase):
             else:
                 action, clipped = checked_action(action, self.controller.action_space,
                                                  self._clip_low, self._clip_high)
-            self.controller.apply(action, data)
-        violation, force_n = self._physics.step(self.model, data, self._goal, self.np_random)
+            self.controller.apply(action, self.data)
+        return action, clipped
+
+    def advance_physics(self) -> None:
+        """The control step's ``frame_skip`` physics steps (with the patient's torques and the
+        work meters): touches only this env's MuJoCo data and its own random stream."""
+        self._physics.advance(self.model, self.data, self._goal, self.np_random)
+
+    def finish_step(self, applied: tuple[Any, int]):
+        """The rest of ``step`` after the physics: the safety rules, the observation, the
+        reward and the target switch; returns ``step``'s five values."""
+        action, clipped = applied
+        violation, force_n = self.safety.check_step(self.data)
         self._steps += 1
 
         obs = self._obs
@@ -261,7 +281,8 @@ class RehabEnvCore(RehabEnvBase):
         info = self._info(violation, is_success, force_n, terms, clipped)
         if self.render_mode == "human":
             self.render()
-        return self._observation_out(info), reward, terminated, False, info
+        return self._observation_out(info, self.safety.step_forces_n), reward, terminated, \
+            False, info
 
     def setpoints_for(self, action) -> np.ndarray:
         """The servo setpoints [rad] ``step(action)`` would command, the same floats, without
@@ -439,7 +460,7 @@ class RehabEnvCore(RehabEnvBase):
             info.update(self._reward_info())
         return info
 
-    def _observation_out(self, info: dict) -> np.ndarray:
+    def _observation_out(self, info: dict, forces_n: np.ndarray | None = None) -> np.ndarray:
         """What ``reset`` and ``step`` return: the paper's observation, or the agent
         observation (with the paper's in ``info["paper_observation"]``): ``tanh`` or a clip
         of one affine map of the paper's observation, the next target (written at each
@@ -456,7 +477,7 @@ class RehabEnvCore(RehabEnvBase):
         if agent.has_setpoints:
             x[agent.setpoint] = self.controller.setpoint_rad
         x[agent.velocity] = self._qvel[self._dof_adr]
-        x[agent.forces] = self.safety.cuff_forces_n(self.data)
+        x[agent.forces] = self.safety.cuff_forces_n(self.data) if forces_n is None else forces_n
         if not math.isfinite(x.sum()):  # an unstable step: no NaN reaches the agent (and no
             velocity, forces = x[agent.velocity], x[agent.forces]  # NumPy warning the user)
             velocity[~np.isfinite(velocity)] = 0.0

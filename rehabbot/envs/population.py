@@ -130,6 +130,19 @@ class PopulationEnv(MakeTimeLimit, gym.Env):
         info["patient"] = self._patient
         return obs, reward, terminated, truncated, info
 
+    # ``step`` in its three parts (:meth:`rehabbot.envs.core.RehabEnvCore.prepare_step`), for
+    # a vector env: the episode's patient's.
+    def prepare_step(self, action) -> tuple[Any, int]:
+        return self.current_env.prepare_step(action)
+
+    def advance_physics(self) -> None:
+        self.current_env.advance_physics()
+
+    def finish_step(self, applied: tuple[Any, int]):
+        obs, reward, terminated, truncated, info = self.current_env.finish_step(applied)
+        info["patient"] = self._patient
+        return obs, reward, terminated, truncated, info
+
     def render(self):
         return self.current_env.render()
 

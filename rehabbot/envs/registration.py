@@ -217,8 +217,14 @@ def check_variant_condition(spec: Any, caller: types.FrameType | None) -> None:
     env_id = getattr(spec, "id", None)
     if env_id not in CONDITION_VARIANTS or not _made_by_gym(caller):
         return
-    given = caller.f_locals.get("kwargs") or {}
-    if "condition" not in given:
+    refuse_condition_override(env_id, caller.f_locals.get("kwargs") or {})
+
+
+def refuse_condition_override(env_id: str, given: dict) -> None:
+    """Refuse (``ValueError``) keyword arguments ``given`` for ``env_id`` whose
+    ``condition=`` differs from the condition variant's own (nothing to check for another
+    id, or without ``condition=``)."""
+    if env_id not in CONDITION_VARIANTS or "condition" not in given:
         return
     from rehabbot.sim.conditions import as_condition  # the env module imports this one
 
@@ -273,7 +279,15 @@ def register_envs() -> None:
             continue
         gym.register(id=env_id, entry_point=entry_point_of(env_id), kwargs=dict(kwargs),
                      max_episode_steps=kwargs.get("max_episode_steps", MAX_EPISODE_STEPS),
-                     order_enforce=False, disable_env_checker=True)
+                     order_enforce=False, disable_env_checker=True,
+                     vector_entry_point=f"rehabbot.envs.vector:{vector_creator_name(env_id)}")
+
+
+def vector_creator_name(env_id: str) -> str:
+    """The name, in :mod:`rehabbot.envs.vector`, of ``env_id``'s vector entry point (Gymnasium
+    passes it the number of worlds and the keyword arguments, not the id; it loads the
+    module when ``make_vec`` first needs it)."""
+    return "vector_" + env_short_name(env_id).replace("-", "_")
 
 
 def resolve_env_id(name: str) -> str:

@@ -17,14 +17,18 @@ rule (code)                fires when
 (4)                        deeper than the tolerance (:func:`unintended_contact`)
 =========================  ====================================================================
 
-:data:`NO_STOP` (0) is the code of a step no rule stops. Every test takes arrays with any
-leading batch axes (what it reduces over last) and returns one flag per world; it runs in
-the namespace of its readings (one cheap look, as the single CPU env calls these on every
-step).
+:data:`NO_STOP` (0) is the code of a step no rule stops. Every test returns one flag per
+world. A reading of a few entries (a force's components, the patient's joints, the cuffs) is
+passed as the sequence of its entries, each a float (one world: the CPU env's Python floats,
+at the cost of Python's own arithmetic) or an array of any batch shape (the batched env's
+columns); a reading of many entries (joint speeds, contacts) as an array whose last axis
+holds them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from types import ModuleType
 from typing import Any
 
 from rehabbot.laws.namespace import namespace_of
@@ -44,20 +48,27 @@ BLOWUP_SPEED_RAD_S = 1000.0
 BLOWUP_FORCE_N = 1.0e5
 
 
-def force_magnitude_n(force_xyz_n: Array) -> Array:
-    """The magnitude [N] of forces given by their x, y, z components on the last axis."""
-    xp = namespace_of(force_xyz_n)
-    return xp.sqrt(xp.add.reduce(force_xyz_n * force_xyz_n, axis=-1))
+def force_magnitude_n(force_xyz_n: Sequence[Array], xp: ModuleType) -> Array:
+    """The magnitude [N] of a force given by its x, y, z components (each a float, or an
+    array of any batch shape)."""
+    fx, fy, fz = force_xyz_n
+    return xp.sqrt(fx * fx + fy * fy + fz * fz)
 
 
-def blown_up(speeds_rad_s: Array, force_n: Array, speed_limit_rad_s: float = BLOWUP_SPEED_RAD_S,
-             force_limit_n: float = BLOWUP_FORCE_N) -> Array:
-    """Whether a joint's speed (last axis of ``speeds_rad_s``) or the largest cuff force
-    ``force_n`` (one per world) is non-finite or beyond its blow-up bound: a constraint or
-    integration blow-up."""
+def fastest_speed_rad_s(speeds_rad_s: Array) -> Array:
+    """The largest joint speed magnitude over the last axis (NaN if any speed is NaN)."""
     xp = namespace_of(speeds_rad_s)
-    fastest = xp.maximum.reduce(xp.abs(speeds_rad_s), axis=-1)
-    return ~((fastest <= speed_limit_rad_s) & (force_n <= force_limit_n))
+    return xp.maximum.reduce(xp.abs(speeds_rad_s), axis=-1)
+
+
+def blown_up(fastest_rad_s: Array, force_n: Array, xp: ModuleType,
+             speed_limit_rad_s: float = BLOWUP_SPEED_RAD_S,
+             force_limit_n: float = BLOWUP_FORCE_N) -> Array:
+    """Whether the fastest joint's speed (:func:`fastest_speed_rad_s`) or the largest cuff
+    force ``force_n`` is non-finite or beyond its blow-up bound: a constraint or integration
+    blow-up."""
+    return xp.logical_not(xp.logical_and(fastest_rad_s <= speed_limit_rad_s,
+                                         force_n <= force_limit_n))
 
 
 def outside_box(values: Array, low: Array, high: Array) -> Array:
@@ -66,17 +77,24 @@ def outside_box(values: Array, low: Array, high: Array) -> Array:
     return xp.logical_not(xp.logical_and.reduce((values >= low) & (values <= high), axis=-1))
 
 
-def beyond_range(q_rad: Array, low_rad: Array, high_rad: Array) -> Array:
-    """Whether a joint angle (last axis) is below ``low_rad`` or above ``high_rad`` (the
-    joints' ranges widened by the tolerance)."""
-    xp = namespace_of(q_rad)
-    return xp.logical_or.reduce((q_rad < low_rad) | (q_rad > high_rad), axis=-1)
+def beyond_range(q_rad: Sequence[Array], low_rad: Sequence[Array],
+                 high_rad: Sequence[Array]) -> Array:
+    """Whether a joint angle is below ``low_rad`` or above ``high_rad`` (the joints' ranges
+    widened by the tolerance); one entry per joint, each a float or an array of any batch
+    shape (a NaN angle is not beyond)."""
+    fired: Array = False
+    for q, low, high in zip(q_rad, low_rad, high_rad, strict=True):
+        fired = fired | (q < low) | (q > high)
+    return fired
 
 
-def over_force_limit(forces_n: Array, limits_n: Array) -> Array:
-    """Whether a cuff's force (last axis) exceeds its limit."""
-    xp = namespace_of(forces_n)
-    return xp.logical_or.reduce(forces_n > limits_n, axis=-1)
+def over_force_limit(forces_n: Sequence[Array], limits_n: Sequence[Array]) -> Array:
+    """Whether a cuff's force exceeds its limit; one entry per cuff, each a float or an
+    array of any batch shape (a NaN force does not exceed it)."""
+    fired: Array = False
+    for force, limit in zip(forces_n, limits_n, strict=True):
+        fired = fired | (force > limit)
+    return fired
 
 
 def unintended_contact(is_robot: Array, is_other: Array, dist_m: Array, tolerance_m: float,

@@ -19,7 +19,7 @@ DEFAULT_TIMESTEPS = 200_000
 DEFAULT_CHECKPOINT_FREQ = 10_000
 DEFAULT_EVAL_FREQ = 10_000
 DEFAULT_EVAL_EPISODES = 5
-VEC_ENV_KINDS = ("dummy", "subproc")
+VEC_ENV_KINDS = ("dummy", "subproc", "threads")
 DEFAULT_BC_EPISODES = 20  # expert episodes behaviour cloning fits when --demos is not given
 # Scripted-expert episodes in the replay buffer with which the shipped off-policy settings
 # (sac.yml, td3.yml, ...) were validated (docs/results/learning-v2.md): `rehabbot train` adds
@@ -180,7 +180,7 @@ def plan_run(env_id: str, algo: str, seed: int, total_timesteps: int | None,
                                   or value < minimum):
             raise TrainingUsageError(f"{name} must be an integer >= {minimum}, got {value!r}")
     if vec not in VEC_ENV_KINDS:
-        raise TrainingUsageError(f"vec must be 'dummy' or 'subproc', got {vec!r}")
+        raise TrainingUsageError(f"vec must be one of {', '.join(VEC_ENV_KINDS)}; got {vec!r}")
     choice = check_backend_choice(backend)
     episodes, bc = check_demonstrations(algo, demos, bc)
 

@@ -144,6 +144,17 @@ def _make_vec_env(plan: RunPlan, n_envs: int, seed: int, monitor_dir: Path | Non
                   vec: str = "dummy") -> Any:
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    if vec == "threads":  # one process, the worlds' physics on threads
+        from rehabbot.rl.threaded_vec_env import ThreadedVecEnv
+
+        venv = ThreadedVecEnv(
+            plan.env_id, n_envs, dict(plan.env_kwargs),
+            monitor_files=None if monitor_dir is None else [
+                str(monitor_dir / f"train_{i}.monitor.csv") for i in range(n_envs)],
+            info_keywords=MONITOR_INFO_KEYWORDS if monitor_dir is not None else (),
+            append=append, time_offsets_s=time_offsets)
+        venv.seed(seed)
+        return venv
     factories = [
         functools.partial(
             _make_env, plan.env_id, dict(plan.env_kwargs),

@@ -50,6 +50,7 @@ from rehabbot.laws.safety import (  # noqa: F401 (the rules and bounds, re-expor
     RULES,
     beyond_range,
     blown_up,
+    fastest_speed_rad_s,
     first_rule,
     force_magnitude_n,
     over_force_limit,
@@ -150,11 +151,13 @@ class SafetyMonitor:
         first_row = np.cumsum([0, *(_equality_rows(model, e) for e in range(model.neq))])
         self._cuff_rows = tuple(int(first_row[h.equality_id]) for h in scene.robots)
         self._cuff_rows_needed = max(self._cuff_rows) + 3
-        # The cuffs' force rows in data.efc_force, (cuffs, 3): a view for one cuff.
-        row = self._cuff_rows[0]
-        self._force_rows: tuple | np.ndarray = (None, slice(row, row + 3)) \
-            if len(self._cuff_rows) == 1 else np.add.outer(self._cuff_rows, np.arange(3))
+        self._force_slices = tuple(slice(row, row + 3) for row in self._cuff_rows)
         self._no_forces_n = np.zeros(len(self._cuff_rows))
+        self.step_forces_n = self._no_forces_n.copy()  # each cuff's force at the last check
+        # The laws' readings as Python floats: the ranges and the force limits.
+        self._rom_low_list = self._rom_low.tolist()
+        self._rom_high_list = self._rom_high.tolist()
+        self._force_limits_list = self.force_limits_n.tolist()
         self._single_cuff = len(self._cuff_rows) == 1
         warnings = sorted(int(w) for w in UNSTABLE_WARNINGS)
         first, last = warnings[0], warnings[-1]
@@ -219,7 +222,9 @@ class SafetyMonitor:
         :func:`~rehabbot.laws.safety.force_magnitude_n`)."""
         if data.ne < self._cuff_rows_needed:
             return self._no_forces_n.copy()
-        return force_magnitude_n(data.efc_force[self._force_rows])
+        efc = data.efc_force
+        return np.array([force_magnitude_n(efc[rows].tolist(), scalar)
+                         for rows in self._force_slices])
 
     def cuff_force_n(self, data: mujoco.MjData) -> float:
         """The largest cuff force [N] (the cuff's force, with one robot)."""
@@ -234,12 +239,12 @@ class SafetyMonitor:
         blew up (:func:`~rehabbot.laws.safety.blown_up`). Out-of-bounds observations are
         checked by the env."""
         return sum(self._warning_numbers.tolist()) != self._warnings0 \
-            or bool(blown_up(self._qvel, force_n))
+            or bool(blown_up(float(fastest_speed_rad_s(self._qvel)), force_n, scalar))
 
     def check_step(self, data: mujoco.MjData) -> tuple[str | None, float]:
         """The first rule that fires after a step and the largest cuff force [N]: the same as
         :meth:`cuff_force_n` then :meth:`check`, in one call (the env's per-step path)."""
-        forces_n = self.cuff_forces_n(data)
+        forces_n = self.step_forces_n = self.cuff_forces_n(data)
         force_n = self._largest_n(forces_n)
         return self._decide(data, forces_n, force_n), force_n
 
@@ -254,9 +259,9 @@ class SafetyMonitor:
         """The readings of ``data`` decided by :func:`~rehabbot.laws.safety.first_rule`."""
         code = first_rule(
             self.unstable(data, force_n),
-            bool(beyond_range(self._qpos[self._patient_qpos_adr], self._rom_low,
-                              self._rom_high)),
-            bool(over_force_limit(forces_n, self.force_limits_n)),
+            bool(beyond_range(self._qpos[self._patient_qpos_adr].tolist(), self._rom_low_list,
+                              self._rom_high_list)),
+            bool(over_force_limit(forces_n.tolist(), self._force_limits_list)),
             data.ncon > 0 and bool(self._contact(data)))
         return RULE_NAMES[code]
 
@@ -382,6 +387,13 @@ class LimbPhysics:
              rng: np.random.Generator) -> tuple[str | None, float]:
         """Advance one control step (``goal_rad``: what an active patient aims for) and return
         the first safety rule that fires (or None) and the largest cuff force [N]."""
+        self.advance(model, data, goal_rad, rng)
+        return self.safety.check_step(data)
+
+    def advance(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float] | None,
+                rng: np.random.Generator) -> None:
+        """The ``frame_skip`` physics steps of one control step, the patient's torques and the
+        work meters (:meth:`step` without the safety rules)."""
         if isinstance(self.drive, MuscleDrive):
             self.drive.run(model, data, goal_rad, rng, self.meter, self.muscles)
         elif self.drive is not None:
@@ -403,7 +415,6 @@ class LimbPhysics:
                 mujoco.mj_step(model, data)
                 for meter in meters:
                     meter.after_step(data)
-        return self.safety.check_step(data)
 
     def info(self, data: mujoco.MjData) -> dict:
         """The patient's entries of the env's ``info``: the patient's torques on the exercised

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from rehabbot.laws import safety
+from rehabbot.laws import safety, scalar
 from rehabbot.laws.safety import NO_STOP, RULE_CODES, first_rule, rule_name
 
 
@@ -46,35 +46,61 @@ def test_first_rule_over_a_batch_axis(xp) -> None:
     assert np.asarray(codes).tolist() == [0, 1, 2, 4]
 
 
+def _columns(xp, rows):
+    """A reading given per entry: each entry's column over a batch of worlds."""
+    array = xp.asarray(rows)
+    return [array[:, k] for k in range(array.shape[1])]
+
+
 def test_range_of_motion(xp) -> None:
-    low, high = xp.asarray([-1.0, 0.0]), xp.asarray([1.0, 2.0])
-    assert not bool(safety.beyond_range(xp.asarray([1.0, 0.0]), low, high))  # on the bounds
-    assert bool(safety.beyond_range(xp.asarray([1.001, 0.0]), low, high))
-    assert bool(safety.beyond_range(xp.asarray([0.0, -0.001]), low, high))
-    batch = safety.beyond_range(xp.asarray([[0.0, 1.0], [0.0, 2.5]]), low, high)
-    assert np.asarray(batch).tolist() == [False, True]
+    low, high = [-1.0, 0.0], [1.0, 2.0]
+    assert not bool(safety.beyond_range([1.0, 0.0], low, high))  # on the bounds
+    assert bool(safety.beyond_range([1.001, 0.0], low, high))
+    assert bool(safety.beyond_range([0.0, -0.001], low, high))
+    assert not bool(safety.beyond_range([math.nan, 0.0], low, high))
+    batch = safety.beyond_range(_columns(xp, [[0.0, 1.0], [0.0, 2.5], [-1.5, 0.0]]),
+                                xp.asarray(low), xp.asarray(high))
+    assert np.asarray(batch).tolist() == [False, True, True]
 
 
 def test_cuff_force_over_its_limit(xp) -> None:
-    limits = xp.asarray([140.0, 130.0])
-    assert not bool(safety.over_force_limit(xp.asarray([140.0, 130.0]), limits))
-    assert bool(safety.over_force_limit(xp.asarray([10.0, 130.5]), limits))
-    assert not bool(safety.over_force_limit(xp.asarray([math.nan, 0.0]), limits))
+    limits = [140.0, 130.0]
+    assert not bool(safety.over_force_limit([140.0, 130.0], limits))
+    assert bool(safety.over_force_limit([10.0, 130.5], limits))
+    assert not bool(safety.over_force_limit([math.nan, 0.0], limits))
+    batch = safety.over_force_limit(_columns(xp, [[140.0, 130.0], [141.0, 0.0]]),
+                                    xp.asarray(limits))
+    assert np.asarray(batch).tolist() == [False, True]
 
 
 def test_force_magnitude(xp) -> None:
-    forces = safety.force_magnitude_n(xp.asarray([[3.0, 4.0, 0.0], [0.0, 0.0, -2.0]]))
+    assert safety.force_magnitude_n((3.0, 4.0, 0.0), scalar) == 5.0
+    forces = safety.force_magnitude_n(_columns(xp, [[3.0, 4.0, 0.0], [0.0, 0.0, -2.0]]), xp)
     np.testing.assert_allclose(np.asarray(forces), [5.0, 2.0])
 
 
+def test_the_scalar_force_is_numpys_to_the_bit() -> None:
+    rng = np.random.default_rng(3)
+    xyz = rng.normal(scale=50.0, size=(200, 3))
+    in_floats = [safety.force_magnitude_n(row.tolist(), scalar) for row in xyz]
+    assert in_floats == safety.force_magnitude_n(_columns(np, xyz), np).tolist()
+
+
 def test_blow_up(xp) -> None:
-    calm = xp.asarray([0.0, -999.0, 10.0])
-    assert not bool(safety.blown_up(calm, 10.0))
-    assert bool(safety.blown_up(xp.asarray([0.0, -1000.5, 0.0]), 10.0))
-    assert bool(safety.blown_up(xp.asarray([0.0, math.nan, 0.0]), 10.0))
-    assert bool(safety.blown_up(calm, 2.0 * safety.BLOWUP_FORCE_N))
-    assert bool(safety.blown_up(calm, math.nan))
-    batch = safety.blown_up(xp.asarray([[0.0, 0.0], [2000.0, 0.0]]), xp.asarray([1.0, 1.0]))
+    calm = safety.fastest_speed_rad_s(xp.asarray([0.0, -999.0, 10.0]))
+    assert float(calm) == 999.0
+    assert not bool(safety.blown_up(calm, 10.0, xp))
+    assert not safety.blown_up(float(calm), 10.0, scalar)
+    fast = safety.fastest_speed_rad_s(xp.asarray([0.0, -1000.5, 0.0]))
+    assert bool(safety.blown_up(fast, 10.0, xp))
+    assert safety.blown_up(float(fast), 10.0, scalar)
+    nan = safety.fastest_speed_rad_s(xp.asarray([0.0, math.nan, 0.0]))
+    assert bool(safety.blown_up(nan, 10.0, xp)) and safety.blown_up(float(nan), 10.0, scalar)
+    assert bool(safety.blown_up(calm, 2.0 * safety.BLOWUP_FORCE_N, xp))
+    assert bool(safety.blown_up(calm, math.nan, xp))
+    assert safety.blown_up(999.0, math.nan, scalar)
+    batch = safety.blown_up(safety.fastest_speed_rad_s(xp.asarray([[0.0, 0.0], [2000.0, 0.0]])),
+                            xp.asarray([1.0, 1.0]), xp)
     assert np.asarray(batch).tolist() == [False, True]
 
 
@@ -102,6 +128,6 @@ def test_unintended_contact(xp) -> None:
 def test_a_changed_bound_fails_a_test(xp) -> None:
     """The blow-up bound is the documented one: a law with another would fail above."""
     assert safety.BLOWUP_SPEED_RAD_S == 1000.0 and safety.BLOWUP_FORCE_N == 1.0e5
-    at_bound = xp.asarray([1000.0])
-    assert not bool(safety.blown_up(at_bound, 0.0))
-    assert bool(safety.blown_up(at_bound, 0.0, speed_limit_rad_s=999.0))
+    at_bound = safety.fastest_speed_rad_s(xp.asarray([1000.0]))
+    assert not bool(safety.blown_up(at_bound, 0.0, xp))
+    assert bool(safety.blown_up(at_bound, 0.0, xp, speed_limit_rad_s=999.0))
