@@ -515,3 +515,23 @@ def test_training_speed_benchmark_prints_the_table(capsys) -> None:
     assert float(rows["td3"][4]) > 0 and float(rows["td3"][3]) >= 0
     assert training_speed.main(["--algos", "dqn"]) == 2
     assert "unknown algorithm(s) dqn" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_sbx_and_the_shipped_settings_train_on_the_threaded_vector_env(sbx,
+                                                                       tmp_path: Path) -> None:
+    """``--vec threads`` with SBX and the shipped SAC settings (their expert episodes in the
+    replay buffer): the run finishes with a monitor file per world that counts every step."""
+    out = tmp_path / "runs"
+    assert cmd_train(_parse(V2, "--algo", "sac", "--backend", "sbx", "--vec", "threads",
+                            "--n-envs", "2", "--timesteps", "400", "--out", str(out),
+                            "--eval-freq", "200", "--eval-episodes", "1", "--no-progress",
+                            "--env-kwargs", json.dumps(SHORT))) == 0
+    run_dir = out / V2 / "sac" / "seed0"
+    manifest = _manifest(run_dir)
+    assert manifest["status"] == "finished" and manifest["vec_env"] == "threads"
+    assert manifest["backend"] == "sbx" and manifest["timesteps_done"] == 400
+    for i in range(2):
+        lines = (run_dir / "monitor" / f"train_{i}.monitor.csv").read_text().splitlines()
+        lengths = [int(row.split(",")[1]) for row in lines[2:]]
+        assert lengths and all(length <= SHORT["max_episode_steps"] for length in lengths)
