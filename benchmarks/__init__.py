@@ -8,7 +8,7 @@
 * ``benchmarks/probes/``: research probes and QA (reward audits, critic and expert-agreement
   probes, the stop audit, the scene tour);
 * ``benchmarks/common/``: the one output layer they share: a results document (JSON) rendered
-  to a Markdown page (``docs/results/``) with :mod:`rehabbot.common.tables`.
+  to a Markdown page (``docs/results/``) with :mod:`rehabbot.common.text_tables`.
 
 Each script runs on its own from the repository root:
 ``python benchmarks/<kind>/<name>.py``."""

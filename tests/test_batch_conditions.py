@@ -1,4 +1,4 @@
-"""The rigid patient's conditions in the batched env (rehabbot.batch.patient) against the CPU
+"""The rigid patient's conditions in the batched env (rehabbot.batch.patient_drive) against the CPU
 env's PatientDrive, on MuJoCo Warp's CPU device: the scripted expert's episode with a spastic,
 a weak and active, and a contracted and resistive limb replayed with the same target
 switches, termination step, return and patient's work; tremor by its statistics; what stays
@@ -33,7 +33,7 @@ from benchmarks.common.batch_parity import (  # noqa: E402
     replay_expert,
     tremor_spectrum,
 )
-from rehabbot.batch.tables import CONDITION_IDS  # noqa: E402
+from rehabbot.batch.env_tables import CONDITION_IDS  # noqa: E402
 from rehabbot.sim.conditions import PatientCondition  # noqa: E402
 from rehabbot.sim.tremor import TREMOR_DRIFT_HZ, TREMOR_MODULATION  # noqa: E402
 

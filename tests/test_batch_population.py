@@ -1,4 +1,4 @@
-"""Populations in the batched env (rehabbot.batch.patients): every world draws a patient of the
+"""Populations in the batched env (rehabbot.batch.patient_stack): every world draws a patient of the
 population at each reset, with its own profile (the robot's base, the targets, the limb's
 geometry and masses as per-world MuJoCo Warp model fields) and its own condition (the drive's
 parameters indexed by the world's patient).
@@ -25,7 +25,7 @@ import gymnasium as gym  # noqa: E402
 
 import rehabbot.batch as batch  # noqa: E402
 from benchmarks.common.batch_parity import cpu_episode, replay_population  # noqa: E402
-from rehabbot.batch.tables import POPULATION_IDS  # noqa: E402
+from rehabbot.batch.env_tables import POPULATION_IDS  # noqa: E402
 
 OBS_TOL = 1e-3
 RETURN_RTOL = 1e-4

@@ -18,7 +18,7 @@ pytest.importorskip("matplotlib")
 import rehabbot  # noqa: F401
 from rehabbot.analysis import figures, patient_figures, plotting
 from rehabbot.analysis.evaluation import format_table, summarize
-from rehabbot.analysis.patients import format_patient_table
+from rehabbot.analysis.patient_records import format_patient_table
 from rehabbot.analysis.recorder import patient_limits
 from rehabbot.analysis.traces import load_trace
 
@@ -156,7 +156,7 @@ def test_each_limit_names_where_it_comes_from(env_id, kwargs, expected) -> None:
     ({"tremor_hz": 5.0, "tremor_amplitude_nm": 2.0}, "tremor 5 Hz, 2 N·m"),
 ])
 def test_conditions_read_as_a_therapist_words_them(condition, text) -> None:
-    from rehabbot.analysis.patients import condition_text
+    from rehabbot.analysis.patient_records import condition_text
     from rehabbot.sim.conditions import PatientCondition
 
     fields = None if condition is None else PatientCondition(**condition).to_dict()
@@ -318,7 +318,7 @@ def _report(label: str, fractions: list[float]) -> dict:
                  "rom_achieved_fraction": fraction,
                  "patient": {"description": MAS3, "index": k}}
                 for k, fraction in enumerate(fractions)]
-    from rehabbot.analysis.patients import per_patient_summary
+    from rehabbot.analysis.patient_records import per_patient_summary
 
     return {"policy": {"label": label}, "summary": summarize(episodes),
             "episode_seeds": [e["seed"] for e in episodes],

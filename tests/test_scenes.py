@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from rehabbot.sim import PRESETS, PatientProfile, build_scene
 from rehabbot.sim import patient as pt
 from rehabbot.sim import scene as sc
-from rehabbot.sim.sweep import run_sweep
+from rehabbot.sim.scripted_sweep import run_sweep
 
 ALL_PRESETS = tuple(PRESETS)
 # Minimum range [deg] the sweep must move each preset's exercised joints through.

@@ -1,8 +1,8 @@
-"""The one table writer (rehabbot/common/tables.py)."""
+"""The one table writer (rehabbot/common/text_tables.py)."""
 
 import pytest
 
-from rehabbot.common.tables import format_cell, markdown_table, text_table
+from rehabbot.common.text_tables import format_cell, markdown_table, text_table
 
 
 def test_markdown_table_pads_escapes_and_aligns():

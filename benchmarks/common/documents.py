@@ -41,7 +41,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from rehabbot.common.tables import Align, Cell, markdown_table, text_table
+from rehabbot.common.text_tables import Align, Cell, markdown_table, text_table
 
 SCHEMA = "rehabbot-results/1"
 ROOT = Path(__file__).resolve().parents[2]
@@ -187,7 +187,7 @@ def _blocks(document: Mapping[str, Any]) -> list[tuple[str, Mapping[str, Any]]]:
 
 
 def table_markdown(table: Mapping[str, Any]) -> str:
-    """One table of a document as Markdown (:func:`rehabbot.common.tables.markdown_table`)."""
+    """One table of a document as Markdown (:func:`rehabbot.common.text_tables.markdown_table`)."""
     return markdown_table(table["columns"], table["rows"], align=table.get("align"),
                           digits=table.get("digits"))
 

@@ -43,7 +43,7 @@ from benchmarks.common.documents import (
     write_page,
 )
 from benchmarks.common.machine import describe_machine
-from rehabbot.batch.tables import check_id
+from rehabbot.batch.env_tables import check_id
 from rehabbot.envs.registration import resolve_env_id
 
 DEFAULT_WORLDS = (1, 16, 256, 1024, 4096, 8192)

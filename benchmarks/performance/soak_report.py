@@ -18,7 +18,7 @@ import numpy as np
 
 from rehabbot.common.files import atomic_write_text
 from rehabbot.common.provenance import package_versions
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.sim.physics import RULES
 
 END_REASONS = ("success", "truncation", *RULES, "exception", "open")
@@ -275,7 +275,7 @@ def format_header(report: SoakReport) -> str:
 
 
 def format_table(report: SoakReport) -> str:
-    """Markdown table (:mod:`rehabbot.common.tables`): one row per cell and a total row."""
+    """Markdown table (:mod:`rehabbot.common.text_tables`): one row per cell and a total row."""
     header = ["env", "mode", "steps", "episodes", "success", "trunc.",
               *(RULE_HEADERS.get(rule, rule) for rule in RULES), "other", "exceptions",
               "non-finite", "obs outside", "RSS growth [MiB]", "steps/s"]

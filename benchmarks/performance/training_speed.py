@@ -45,7 +45,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 
 ALGOS = ("sac", "td3", "ppo", "tqc", "crossq")
 BACKENDS = ("sb3", "sbx")
@@ -142,7 +142,7 @@ def measure(algos: Sequence[str], backends: Sequence[str], env_id: str, steps: i
 
 
 def speed_table(rows: Sequence[Row], backends: Sequence[str]) -> str:
-    """Markdown (:mod:`rehabbot.common.tables`): one line per algorithm, the backends side by
+    """Markdown (:mod:`rehabbot.common.text_tables`): one line per algorithm, the backends side by
     side."""
     by_key = {(row.algo, row.backend): row for row in rows}
     baseline = by_key.get(BASELINE)

@@ -23,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 
 DEFAULT_IDS = ("rehabbot/rehab-reach-v1", "rehabbot/rehab-knee-v1",
                "rehabbot/rehab-reach-spastic-v1")

@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 import rehabbot  # noqa: F401  (registers the ids)
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.rl.policies import env_for, load_policy
 
 ENV_ID = "rehabbot/rehab-bilateral-v1"

@@ -22,7 +22,7 @@ from collections import defaultdict
 import gymnasium as gym
 import numpy as np
 
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.rl.policies import env_for, load_policy
 

@@ -20,7 +20,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.rl.experts import ScriptedExpert
 from rehabbot.rl.policies import env_for, load_policy
 

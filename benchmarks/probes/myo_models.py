@@ -38,7 +38,7 @@ import numpy as np
 if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from benchmarks.common.machine import describe_machine
-from rehabbot.common.tables import text_table
+from rehabbot.common.text_tables import text_table
 
 # (myo-sim model, joint) pairs whose passive torque-angle curves are measured.
 CURVES = (("myoarm_r", "elbow_flexion_r"), ("myolegs", "knee_angle_r"))

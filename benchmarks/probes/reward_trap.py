@@ -21,7 +21,7 @@ if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import rehabbot  # noqa: F401  (registers the ids)
 from benchmarks.common.reward_audit import stall_cases, stop_cases
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.envs.registration import ENV_SPECS, resolve_env_id
 
 GAMMAS = (0.95, 0.99, 0.999)

@@ -5,7 +5,7 @@ Usage::
     python benchmarks/probes/scene_tour.py --out runs/scenes
 
 For every preset in :data:`rehabbot.sim.PRESETS` this writes one PNG per camera
-(``DIR/<preset>_<camera>.png``), runs :func:`rehabbot.sim.sweep.run_sweep` and prints one
+(``DIR/<preset>_<camera>.png``), runs :func:`rehabbot.sim.scripted_sweep.run_sweep` and prints one
 line saying which patient joints the robot moved, e.g.::
 
     upper_right: elbow_flexion_r moved 92.1 deg, shoulder_flexion_r 55.0 deg; \
@@ -119,7 +119,7 @@ def run_preset(
 ) -> PresetReport:
     """Build one preset, render its cameras and run its exercise sweep."""
     from rehabbot.sim import build_scene
-    from rehabbot.sim.sweep import run_sweep
+    from rehabbot.sim.scripted_sweep import run_sweep
 
     scene = build_scene(preset)
     report = PresetReport(preset=preset)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 
 
 def read_episodes(run: Path) -> list[tuple[int, float, int, bool, bool]]:

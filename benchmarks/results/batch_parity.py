@@ -68,7 +68,7 @@ STOPS = (({}, ([1, 0, 0, 0, 0, 0], [-1, 0, 0, 0, 0, 0])),
          ({"cuff_force_limit_n": 880.0}, ([1, 0, 0, -1, -1, -1], [1, 0, -1, 1, 1, -1])))
 STOP_ID = "rehabbot/rehab-reach-v2"
 # The condition replays: the strongest stretch reflex (MAS 4) on the arm through condition=,
-# then every batched condition id (rehabbot.batch.tables.CONDITION_IDS).
+# then every batched condition id (rehabbot.batch.env_tables.CONDITION_IDS).
 MAS4_CASE = ("rehabbot/rehab-reach-v2", {"condition": {"spasticity_mas": "4"}})
 TREMOR_ID, TREMOR_STEPS, TREMOR_SEEDS = "rehabbot/rehab-reach-tremor-v2", 200, tuple(range(8))
 POPULATION_NAMES = ("train", "test")
@@ -155,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     add_page_argument(parser, "docs/results/batch-parity")
     args = parser.parse_args(argv)
     import rehabbot.batch as batch  # needs the [gpu] extra: fail here, with its message
-    from rehabbot.batch.tables import CONDITION_IDS, POPULATION_IDS
+    from rehabbot.batch.env_tables import CONDITION_IDS, POPULATION_IDS
 
     cases = (MAS4_CASE, *((env_id, {}) for env_id in CONDITION_IDS))
 

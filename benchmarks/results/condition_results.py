@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 from rehabbot.analysis.evaluation import evaluate_policies
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.envs.registration import CONDITION_VARIANTS, POPULATION_VARIANTS, env_short_name
 
 

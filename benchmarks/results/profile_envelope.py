@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 
 HEIGHTS_M = tuple(float(h) for h in np.round(np.arange(1.20, 2.2001, 0.05), 2))
 MASSES_KG = (30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 100.0, 120.0, 140.0, 160.0, 180.0, 200.0)
@@ -70,7 +70,7 @@ def lowest_supported_height(rows: list[dict], mass_cap_kg: float) -> float | Non
 
 def table(rows: list[dict]) -> str:
     """Per limb and side: the refused share, the reasons, and the lowest height from which
-    every profile up to each mass cap is accepted (Markdown, :mod:`rehabbot.common.tables`)."""
+    every profile up to each mass cap is accepted (Markdown, :mod:`rehabbot.common.text_tables`)."""
     cells = []
     for limb, side in COMBOS:
         mine = [r for r in rows if r["limb"] == limb and r["side"] == side]

@@ -31,7 +31,7 @@ if not __package__:  # run as a script: make `benchmarks` importable
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from benchmarks.common.aggregate import iqm_interval
 from rehabbot.analysis.evaluation import evaluate
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.envs.registration import env_short_name
 
 HELD_OUT_PROFILES = {

@@ -33,7 +33,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.sim import PatientProfile, build_scene
 from rehabbot.sim.robots import ROBOT_NAMES
 from rehabbot.tasks.workspace import solve_workspace, workspace_grid_deg
@@ -93,7 +93,7 @@ def measure(robots: Sequence[str], heights: Sequence[float]) -> list[dict]:
 
 
 def results_markdown(rows: Sequence[dict]) -> str:
-    """The rows as a Markdown table (:mod:`rehabbot.common.tables`); a refused scene's cells
+    """The rows as a Markdown table (:mod:`rehabbot.common.text_tables`); a refused scene's cells
     are ``-``."""
     cells: list[list[str | None]] = []
     for r in rows:

@@ -19,7 +19,7 @@ import numpy as np
 
 from rehabbot.sim import PRESETS, PatientProfile, build_scene
 from rehabbot.sim.scene import WEIGHT_LEVELS
-from rehabbot.sim.sweep import run_sweep
+from rehabbot.sim.scripted_sweep import run_sweep
 
 HEIGHTS_M = (1.45, 1.60, 1.75, 1.90, 2.05)
 MASSES_KG = (40.0, 75.0, 110.0, 150.0)

@@ -73,7 +73,7 @@ from benchmarks.results import learning_figures
 from benchmarks.results.training_curves import SOURCES as CURVE_SOURCES
 from benchmarks.results.training_curves import run_curve
 from rehabbot.common.extras import missing_module_message
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.envs.registration import POPULATION_VARIANTS, env_short_name
 from rehabbot.rl import runs
 from rehabbot.rl.policies import load_policy

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.envs.registration import POPULATION_VARIANTS, env_short_name
 from rehabbot.rl import runs, zoo
 from rehabbot.rl.zoo_export import export_policy

@@ -49,7 +49,11 @@ from rehabbot.analysis.evaluation_folders import (
     lock_run_folders,
 )
 from rehabbot.analysis.metrics import kinematic_summary
-from rehabbot.analysis.patients import format_patient_table, patient_record, per_patient_summary
+from rehabbot.analysis.patient_records import (
+    format_patient_table,
+    patient_record,
+    per_patient_summary,
+)
 from rehabbot.analysis.policy_specs import (
     CUSTOM_KIND,
     PolicySpec,
@@ -70,7 +74,7 @@ from rehabbot.analysis.traces import TRACE_NAME, load_trace, save_trace_file, tr
 from rehabbot.common.errors import DataError, OutputError, UsageError
 from rehabbot.common.files import atomic_save_all, atomic_write_text
 from rehabbot.common.provenance import package_versions
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 from rehabbot.rl import runs
 from rehabbot.rl.policies import LoadedPolicy, PolicyError, env_for
 from rehabbot.rl.rollout import Episode, run_episode
@@ -449,7 +453,7 @@ def has_several_patients(report: dict) -> bool:
 
 
 def format_patient_tables(reports: Sequence[dict]) -> str:
-    """Per policy, a heading and its per-patient table (:func:`.patients.format_patient_table`);
+    """Per policy, a heading and its per-patient table (:func:`.patient_records.format_patient_table`);
     empty when every report met one patient only."""
     parts = [f"### {r['policy']['label']}: per patient\n\n{format_patient_table(r)}"
              for r in reports if has_several_patients(r)]

@@ -33,8 +33,8 @@ with dropping_stderr_lines(NO_CUDA_DRIVER_WARNING):
     warp.init()
 
 from rehabbot.batch.env import BatchedRehabEnv  # noqa: E402
+from rehabbot.batch.env_tables import BATCHED_IDS, RULE_CODES, SUPPORTED_IDS  # noqa: E402
 from rehabbot.batch.state import State  # noqa: E402
-from rehabbot.batch.tables import BATCHED_IDS, RULE_CODES, SUPPORTED_IDS  # noqa: E402
 from rehabbot.batch.vector import BatchedVectorEnv, make_vec, register_vector_entry_points  # noqa: E402
 
 

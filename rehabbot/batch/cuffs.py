@@ -17,7 +17,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 
-from rehabbot.batch.tables import EnvTables
+from rehabbot.batch.env_tables import EnvTables
 from rehabbot.laws.safety import force_magnitude_n, unintended_contact
 from rehabbot.laws.work import accumulate_work, cuff_work_j
 

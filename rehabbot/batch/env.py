@@ -2,7 +2,7 @@
 ``impl="warp"`` (MuJoCo Warp), in MuJoCo Playground's interface: ``reset(rng) -> State`` and
 ``step(state, action) -> State``, both ``jax.jit``- and ``jax.vmap``-able.
 
-Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
+Every number comes from the CPU env (:mod:`rehabbot.batch.env_tables`,
 :mod:`rehabbot.batch.patient_tables`); one step does what
 :meth:`rehabbot.envs.core.RehabEnvCore.step` does:
 
@@ -11,7 +11,7 @@ Every number comes from the CPU env (:mod:`rehabbot.batch.tables`,
    (``joint_velocity``), which are clipped to the setpoint bounds; or motor torques
    (``torque``);
 2. ``frame_skip`` MuJoCo Warp steps (``jax.lax.scan``), each after the patient's torques of
-   its condition (:mod:`rehabbot.batch.patient`; none for a healthy patient);
+   its condition (:mod:`rehabbot.batch.patient_drive`; none for a healthy patient);
 3. the safety rules in the CPU order: instability (judged from the values, since MuJoCo
    Warp neither warns nor resets on a bad acceleration: a non-finite state, a joint faster
    than the blow-up speed, a non-finite or blow-up cuff force, or a paper observation
@@ -37,12 +37,12 @@ import numpy as np
 from mujoco import mjx
 
 from rehabbot.batch.cuffs import METER_KEYS, CuffReadings
+from rehabbot.batch.env_tables import POPULATION_IDS, RULE_CODES, EnvTables, check_id, read_tables
 from rehabbot.batch.model import physics_model
-from rehabbot.batch.patient import BatchedPatientDrive
+from rehabbot.batch.patient_drive import BatchedPatientDrive
+from rehabbot.batch.patient_stack import PatientStack, stack_patients
 from rehabbot.batch.patient_tables import read_patient_tables
-from rehabbot.batch.patients import PatientStack, stack_patients
 from rehabbot.batch.state import State
-from rehabbot.batch.tables import POPULATION_IDS, RULE_CODES, EnvTables, check_id, read_tables
 from rehabbot.laws import reward as laws
 from rehabbot.laws.control import SETPOINT_LAWS, clip_to_box, motor_torque_nm, native_action
 from rehabbot.laws.safety import (
@@ -76,8 +76,8 @@ class BatchedRehabEnv:
     """A ``-v2`` id as a functional env (module docstring); make it with
     :func:`rehabbot.batch.make`.
 
-    A population id (:data:`~rehabbot.batch.tables.POPULATION_IDS`) holds every patient of
-    its population (:mod:`rehabbot.batch.patients`): each world draws its patient at every
+    A population id (:data:`~rehabbot.batch.env_tables.POPULATION_IDS`) holds every patient of
+    its population (:mod:`rehabbot.batch.patient_stack`): each world draws its patient at every
     reset, and ``info["patient"]`` and ``metrics["patient"]`` name it (an index into
     ``cpu_env.population.patients``, as the CPU env's ``info["patient"]``).
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from rehabbot.batch.tables import EnvTables
+from rehabbot.batch.env_tables import EnvTables
 
 # MuJoCo Warp's jacobian="auto" turns sparse above this many dofs (mujoco_warp io.is_sparse).
 WARP_SPARSE_ABOVE_NV = 32

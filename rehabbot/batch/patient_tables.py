@@ -4,7 +4,8 @@ delays) and the active patient's goals, as NumPy arrays, so that the two cannot 
 
 Contracture (``stiffness_scale``) and the reduced range of motion (``rom_scale``) need no table
 here: the CPU env writes them into its model (joint stiffness, damping and ranges), its targets
-and its range-of-motion rule, which the batched env reads already (:mod:`rehabbot.batch.tables`).
+and its range-of-motion rule, which the batched env reads already
+(:mod:`rehabbot.batch.env_tables`).
 """
 
 from __future__ import annotations

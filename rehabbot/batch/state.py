@@ -27,7 +27,7 @@ class State:
             steps, the reward's path left and hold gap, the last healthy joint angles and
             observation fields, the random key, ``truncation``; with a condition that applies
             torques, the patient drive's delay lines, tremor and work:
-            :class:`rehabbot.batch.patient.BatchedPatientDrive`).
+            :class:`rehabbot.batch.patient_drive.BatchedPatientDrive`).
     """
 
     data: Any

@@ -23,13 +23,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from rehabbot.batch.env import BatchedRehabEnv
-from rehabbot.batch.tables import BATCHED_IDS
+from rehabbot.batch.env_tables import BATCHED_IDS
 
 CONTACTS_PER_WORLD = 16  # MuJoCo Warp's contact slots per world (naconmax = this x worlds)
 
 
 class BatchedVectorEnv(VectorEnv):
-    """``num_envs`` worlds of ``env_id`` (a :data:`~rehabbot.batch.tables.BATCHED_IDS` id)
+    """``num_envs`` worlds of ``env_id`` (a :data:`~rehabbot.batch.env_tables.BATCHED_IDS` id)
     on MuJoCo Warp; ``**kwargs`` are the CPU env's keyword arguments (and ``naconmax``,
     ``njmax``: :class:`~rehabbot.batch.env.BatchedRehabEnv`)."""
 

@@ -41,7 +41,7 @@ from rehabbot.common.extras import install_hint
 from rehabbot.common.files import atomic_write_json, check_writable_dir
 from rehabbot.common.provenance import now_iso
 from rehabbot.common.signals import keeping_signal_handlers
-from rehabbot.common.tables import text_table
+from rehabbot.common.text_tables import text_table
 from rehabbot.rl import batch_training, runs
 from rehabbot.rl.algorithms import BackendUnavailableError
 from rehabbot.rl.backends import DEFAULT_BACKEND
@@ -511,7 +511,7 @@ def run_sweep(config: SweepConfig, *, cpus: int | None = None, address: str | No
 
 
 def format_table(records: Sequence[Mapping[str, Any]]) -> str:
-    """The trials as a plain-text table (:func:`rehabbot.common.tables.text_table`): run
+    """The trials as a plain-text table (:func:`rehabbot.common.text_tables.text_table`): run
     folder, status, what was done, steps, wall-clock."""
     rows = []
     for record in records:

@@ -1,7 +1,7 @@
 """The simulated world, built in code with ``mujoco.MjSpec``: robots (:mod:`.robots`), the
 parametric patient (:mod:`.patient`) and the scenes that join them (:mod:`.scene`,
 :mod:`.scene_build`), with the coupled kinematics (:mod:`.ik`, :mod:`.paths`), statics
-(:mod:`.statics`) and the scripted sweep (:mod:`.sweep`).
+(:mod:`.statics`) and the scripted sweep (:mod:`.scripted_sweep`).
 
 This layer knows nothing of exercises, rewards or RL.
 """

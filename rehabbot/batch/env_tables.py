@@ -36,13 +36,13 @@ SUPPORTED_IDS: tuple[str, ...] = (
     "rehabbot/rehab-hip-v2",
     "rehabbot/rehab-knee-v2",
 )
-# The condition variants of those ids (rigid patient: rehabbot.batch.patient): spastic,
+# The condition variants of those ids (rigid patient: rehabbot.batch.patient_drive): spastic,
 # tremor, active, weak, stiff and resistive limbs.
 CONDITION_IDS: tuple[str, ...] = tuple(
     env_id for env_id, (base_id, _condition, _text) in CONDITION_VARIANTS.items()
     if env_id.endswith("-v2") and base_id in SUPPORTED_IDS)
 # The population ids batched and parity-tested (a patient of a population per world and
-# episode: rehabbot.batch.patients): the reach's and the knee's; the left arm's and the hip's
+# episode: rehabbot.batch.patient_stack): the reach's and the knee's; the left arm's and the hip's
 # population ids run on the CPU env only.
 POPULATION_IDS: tuple[str, ...] = tuple(
     env_id for env_id, base_id in POPULATION_VARIANTS.items()
@@ -224,7 +224,7 @@ def _rotation_t(frame: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
 def read_tables(env_id: str, env: Any) -> EnvTables:
     """Every table of the batched env, from the CPU env ``env`` (``gym.make(...).unwrapped``,
     freshly made: its scene at the config's weight level), but the model, which
-    :mod:`rehabbot.batch.patients` reads per patient and weight level. Refuses what is not
+    :mod:`rehabbot.batch.patient_stack` reads per patient and weight level. Refuses what is not
     built yet."""
     check_supported(env_id, env)
     if env.config.weight_level is None and env.unusable_weight_levels:

@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from rehabbot.analysis.range_of_motion import BEYOND_PRESCRIBED, beyond_prescribed
-from rehabbot.common.tables import markdown_table
+from rehabbot.common.text_tables import markdown_table
 
 # key in an episode's figures, column of the per-patient table, digits
 PATIENT_METRICS: tuple[tuple[str, str, int], ...] = (

@@ -3,7 +3,7 @@ the population for a population id (``rehab-reach-population-v2``, ``rehab-knee-
 :class:`rehabbot.envs.population.PopulationEnv`). Each world draws its patient at every
 reset, as the CPU population env draws one per episode.
 
-Every patient's tables come from its own CPU env (:func:`rehabbot.batch.tables.read_tables`).
+Every patient's tables come from its own CPU env (:func:`rehabbot.batch.env_tables.read_tables`).
 What differs between patients (the profile moves the robot's base, the targets, the home
 state, the ranges and the agent observation's scaling; the condition the joints' stiffness,
 damping and ranges) is stacked along a leading patient axis; everything else must be the same
@@ -24,8 +24,8 @@ import jax
 import mujoco
 import numpy as np
 
+from rehabbot.batch.env_tables import EnvTables
 from rehabbot.batch.padding import LAST, stack_padded
-from rehabbot.batch.tables import EnvTables
 from rehabbot.sim.scene import WEIGHT_LEVELS
 
 # The tables that differ between patients (a profile or a condition changes them): stacked
