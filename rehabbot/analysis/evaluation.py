@@ -453,8 +453,9 @@ def has_several_patients(report: dict) -> bool:
 
 
 def format_patient_tables(reports: Sequence[dict]) -> str:
-    """Per policy, a heading and its per-patient table (:func:`.patient_records.format_patient_table`);
-    empty when every report met one patient only."""
+    """Per policy, a heading and its per-patient table
+    (:func:`.patient_records.format_patient_table`); empty when every report met one patient
+    only."""
     parts = [f"### {r['policy']['label']}: per patient\n\n{format_patient_table(r)}"
              for r in reports if has_several_patients(r)]
     return "\n\n".join(parts)
