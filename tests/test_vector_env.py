@@ -12,6 +12,19 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from rehabbot.envs.vector import RehabVectorEnv, checked_actions, make_vec, merge_infos
 
 KNEE_V2 = "rehabbot/rehab-knee-v2"
+# What a third-party patch of Gymnasium's TimeLimit adds to the info of an episode's last
+# step (importing RL Zoo, rl_zoo3.gym_patches, does so for every env made in the process
+# after): SyncVectorEnv's envs have a TimeLimit, the vector env's worlds do not.
+WRAPPER_INFO_KEYS = {"TimeLimit.truncated", "_TimeLimit.truncated"}
+
+
+def _without_wrapper_keys(value):
+    if isinstance(value, dict):
+        return {k: _without_wrapper_keys(v) for k, v in value.items()
+                if k not in WRAPPER_INFO_KEYS}
+    if isinstance(value, tuple):
+        return tuple(_without_wrapper_keys(v) for v in value)
+    return value
 
 
 def _same(a, b, where: str) -> None:
@@ -50,7 +63,7 @@ def _rollout_both(env_id: str, n: int, steps: int, mode: AutoresetMode, seed: in
     ended, differs = 0, -1
     try:
         assert isinstance(vector.unwrapped, RehabVectorEnv)
-        _same(vector.reset(seed=seed), sync.reset(seed=seed), "reset")
+        _same(vector.reset(seed=seed), _without_wrapper_keys(sync.reset(seed=seed)), "reset")
         rng = np.random.default_rng(seed)
         for t in range(steps):
             actions = rng.uniform(-1.0, 1.0, vector.action_space.shape).astype(np.float32)
@@ -58,7 +71,7 @@ def _rollout_both(env_id: str, n: int, steps: int, mode: AutoresetMode, seed: in
             out = vector.step(actions)
             shifted = actions.copy()
             shifted[-1, 0] += perturb
-            expected = sync.step(shifted)
+            expected = _without_wrapper_keys(sync.step(shifted))
             try:
                 _same(out, expected, f"step {t}")
             except AssertionError:
@@ -69,7 +82,8 @@ def _rollout_both(env_id: str, n: int, steps: int, mode: AutoresetMode, seed: in
             if mode is AutoresetMode.DISABLED and (out[2] | out[3]).any():
                 mask = out[2] | out[3]
                 _same(vector.reset(options={"reset_mask": mask}),
-                      sync.reset(options={"reset_mask": mask.copy()}), f"reset at {t}")
+                      _without_wrapper_keys(sync.reset(options={"reset_mask": mask.copy()})),
+                      f"reset at {t}")
     finally:
         vector.close()
         sync.close()

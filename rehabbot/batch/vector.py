@@ -24,6 +24,7 @@ from gymnasium.vector.utils import batch_space
 
 from rehabbot.batch.env import BatchedRehabEnv
 from rehabbot.batch.env_tables import BATCHED_IDS
+from rehabbot.envs.vector import checked_actions as cpu_checked_actions
 
 CONTACTS_PER_WORLD = 16  # MuJoCo Warp's contact slots per world (naconmax = this x worlds)
 
@@ -97,35 +98,16 @@ class BatchedVectorEnv(VectorEnv):
 
 
 def checked_actions(actions: Any, shape: tuple[int, ...]) -> np.ndarray:
-    """``actions`` (one row per world) as float32, refused as the CPU env refuses one action
-    (:func:`rehabbot.envs.control.checked_action`): ``ValueError`` for a wrong shape, a dtype
-    that is not a real number (bool, complex, str, object: no silent casts), and NaN/inf,
-    naming each bad world, its indices and its action. The jitted step would read a
-    non-finite entry as 0; a finite value beyond float32's range is clipped to it (the step
-    clips to [-1, 1] anyway) rather than becoming inf."""
-    try:
-        a = np.asarray(actions)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"actions {actions!r} cannot be read as {shape} floats: "
-                         f"{err}") from None
-    if a.dtype.kind not in "iuf":
-        raise ValueError(f"actions have dtype {a.dtype}; expected {shape} real numbers "
-                         "(float32 preferred)")
-    if a.shape != shape:
-        raise ValueError(f"actions have shape {a.shape}; expected {shape}")
-    if a.dtype != np.float32:
-        a = a.astype(np.float64)
-    bad = ~np.isfinite(a)
-    if bad.any():
-        worlds = np.flatnonzero(bad.reshape(len(a), -1).any(axis=1)).tolist()
-        named = "; ".join(f"world {k} at indices {np.flatnonzero(bad[k]).tolist()}: "
-                          f"{a[k].tolist()}" for k in worlds[:4])
-        more = f"; and {len(worlds) - 4} more worlds" if len(worlds) > 4 else ""
-        raise ValueError(f"actions have non-finite values in {len(worlds)} of {len(a)} "
-                         f"worlds: {named}{more}")
+    """``actions`` (one row per world) as float32, refused as the CPU vector env refuses them
+    (:func:`rehabbot.envs.vector.checked_actions`: ``ValueError`` for a wrong shape, a dtype
+    that is not a real number and NaN/inf, naming each bad world, its indices and its
+    action). The jitted step would read a non-finite entry as 0; a finite value beyond
+    float32's range is clipped to it (the step clips to [-1, 1] anyway) rather than becoming
+    inf."""
+    a = cpu_checked_actions(actions, shape)
     if a.dtype != np.float32:
         limit = float(np.finfo(np.float32).max)
-        a = np.clip(a, -limit, limit).astype(np.float32)
+        a = np.clip(a.astype(np.float64), -limit, limit).astype(np.float32)
     return a
 
 
