@@ -278,11 +278,11 @@ class RehabEnvCore(RehabEnvBase):
             self._target_index = switch.index
             self._write_target()  # the observation shows the next target
         self._needs_reset = terminated
-        info = self._info(violation, is_success, force_n, terms, clipped)
+        forces_n = self.safety.step_forces_n
+        info = self._info(violation, is_success, force_n, terms, clipped, forces_n)
         if self.render_mode == "human":
             self.render()
-        return self._observation_out(info, self.safety.step_forces_n), reward, terminated, \
-            False, info
+        return self._observation_out(info, forces_n), reward, terminated, False, info
 
     def setpoints_for(self, action) -> np.ndarray:
         """The servo setpoints [rad] ``step(action)`` would command, the same floats, without
@@ -436,7 +436,10 @@ class RehabEnvCore(RehabEnvBase):
                 return None
         return theta
 
-    def _info(self, safety_violation, is_success, force_n, terms, clipped) -> dict:
+    def _info(self, safety_violation, is_success, force_n, terms, clipped,
+              forces_n: np.ndarray | None = None) -> dict:
+        """The step's ``info`` (``forces_n``: each cuff's force when the safety rules have
+        read them this step; read here otherwise)."""
         info = {
             "is_success": is_success,
             "target_index": self._target_index,
@@ -455,7 +458,8 @@ class RehabEnvCore(RehabEnvBase):
             "cost": 0.0 if safety_violation is None else 1.0,
         }
         if self._arms > 1:
-            info["cuff_forces_n"] = self.safety.cuff_forces_n(self.data).copy()
+            info["cuff_forces_n"] = self.safety.cuff_forces_n(self.data) if forces_n is None \
+                else forces_n.copy()
         if self._reward_info is not None:
             info.update(self._reward_info())
         return info

@@ -338,7 +338,7 @@ class WorkMeter:
 
 
 class LimbPhysics:
-    """One control step of the physics (:meth:`step`): ``frame_skip`` physics steps, the
+    """One control step of the physics (:meth:`advance`): ``frame_skip`` physics steps, the
     condition's torques when it applies any (:class:`~rehabbot.sim.patient_drive.PatientDrive`,
     one-arm scenes; on MyoSuite's legs the muscles' excitations,
     :class:`~rehabbot.sim.muscle_drive.MuscleDrive`), the work on the limb counted after every
@@ -383,17 +383,11 @@ class LimbPhysics:
         if self.muscles is not None:
             self.muscles.reset(data)
 
-    def step(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float] | None,
-             rng: np.random.Generator) -> tuple[str | None, float]:
-        """Advance one control step (``goal_rad``: what an active patient aims for) and return
-        the first safety rule that fires (or None) and the largest cuff force [N]."""
-        self.advance(model, data, goal_rad, rng)
-        return self.safety.check_step(data)
-
     def advance(self, model: mujoco.MjModel, data: mujoco.MjData, goal_rad: list[float] | None,
                 rng: np.random.Generator) -> None:
-        """The ``frame_skip`` physics steps of one control step, the patient's torques and the
-        work meters (:meth:`step` without the safety rules)."""
+        """The ``frame_skip`` physics steps of one control step (``goal_rad``: what an active
+        patient aims for), the patient's torques and the work meters; the env then judges the
+        new state with ``safety.check_step``."""
         if isinstance(self.drive, MuscleDrive):
             self.drive.run(model, data, goal_rad, rng, self.meter, self.muscles)
         elif self.drive is not None:
